@@ -1,0 +1,301 @@
+"""``BodyModel``: SMPL-format linear blend skinning as one small ``nn.Module``.
+
+Frames and units: metres, Y-up model frame; at zero pose the body stands in a T-pose facing +Z
+with its left towards +X. Joint frames are aligned with the model frame at zero pose (SMPL's
+convention), so a pose parameter means the same rotation of the same bone on the embedded
+asset as on SMPL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+from wearpose.body.asset import BodyAsset, load_asset_npz, load_default_asset, load_smpl_file
+from wearpose.body.kinematics import forward_kinematics
+from wearpose.body.skeleton import NUM_JOINTS, PARENTS
+from wearpose.errors import ShapeError, WearposeError
+from wearpose.geometry import axis_angle_to_matrix
+
+
+@dataclass
+class BodyOutput:
+    """Result of :meth:`BodyModel.forward`. ``...`` is the caller's batch shape."""
+
+    joints: torch.Tensor  #: (..., 24, 3) posed joint positions, m, model/world frame
+    global_rot: torch.Tensor  #: (..., 24, 3, 3) joint frame -> world
+    rest_joints: torch.Tensor  #: (..., 24, 3) zero-pose joints for these betas, m (no trans)
+    vertices: torch.Tensor | None = None  #: (..., V, 3) posed vertices, m
+    normals: torch.Tensor | None = None  #: (..., V, 3) unit vertex normals (area-weighted)
+
+
+@dataclass
+class SiteOutput:
+    """Poses of named skin sites (:meth:`BodyModel.sites`). ``...`` is the batch shape."""
+
+    names: tuple[str, ...]
+    positions: torch.Tensor  #: (..., K, 3) site vertex position, m
+    rotations: torch.Tensor  #: (..., K, 3, 3) columns (tangent, bitangent, normal): site frame -> world
+    joints: torch.Tensor  #: (..., 24, 3) posed joints, m
+    global_rot: torch.Tensor  #: (..., 24, 3, 3)
+
+
+def _vertex_normals(verts: torch.Tensor, faces: torch.Tensor, num_vertices: int) -> torch.Tensor:
+    """Area-weighted vertex normals. verts ``(N, V', 3)``, faces ``(F, 3)`` indexing ``V'``."""
+    v0, v1, v2 = verts[:, faces[:, 0]], verts[:, faces[:, 1]], verts[:, faces[:, 2]]
+    fn = torch.cross(v1 - v0, v2 - v0, dim=-1)  # length = 2 * area: area weighting for free
+    n = torch.zeros(verts.shape[0], num_vertices, 3, dtype=verts.dtype, device=verts.device)
+    for k in range(3):
+        n = n.index_add(1, faces[:, k], fn)
+    return n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
+class BodyModel(nn.Module):
+    """SMPL-format body: pose ``(..., 24, 3, 3)`` (or axis-angle ``(..., 72)``), betas, trans.
+
+    Args:
+        source: ``None`` or ``"default"`` for the embedded free asset; ``"smpl"`` for the
+            SMPL/SMPL-H file named by ``$WEARPOSE_SMPL_MODEL``; a path to an SMPL ``.pkl``/``.npz``
+            or to a wearpose asset ``.npz``; or a :class:`BodyAsset`.
+        num_betas: shape components used (at most what the asset has).
+        dtype: float dtype of the buffers (float32 default; float64 for gradchecks).
+
+    Example:
+        >>> body = BodyModel()
+        >>> out = body(torch.eye(3).expand(2, 24, 3, 3), torch.zeros(2, 10), torch.zeros(2, 3))
+        >>> out.vertices.shape
+        torch.Size([2, 13718, 3])
+    """
+
+    def __init__(self, source: str | Path | BodyAsset | None = None, num_betas: int = 10,
+                 dtype: torch.dtype = torch.float32) -> None:
+        super().__init__()
+        asset = self._resolve(source, num_betas)
+        if asset.num_betas < num_betas:
+            raise WearposeError(f"asset {asset.asset_id} has {asset.num_betas} shape components, {num_betas} requested")
+        self.asset_id = asset.asset_id
+        self.meta = dict(asset.meta)
+        self.num_betas = num_betas
+        self.site_names: tuple[str, ...] = asset.site_names
+        self._site_index = {n: i for i, n in enumerate(asset.site_names)}
+        self._site_vertices = np.asarray(asset.site_vertices, dtype=np.int64)
+        self._site_tangent = np.asarray(asset.site_tangent, dtype=np.int64)
+        f = lambda a: torch.as_tensor(np.ascontiguousarray(a), dtype=dtype)  # noqa: E731
+        shapedirs = asset.shapedirs[:, :, :num_betas]
+        self.register_buffer("v_template", f(asset.v_template))  # (V, 3)
+        self.register_buffer("shapedirs", f(shapedirs))  # (V, 3, S)
+        # Rows are renormalised in float64: assets store float32, and weights summing to 1 +- 1e-7
+        # would make a rigid root motion visibly non-rigid in float64 gradchecks.
+        w = asset.weights.astype(np.float64)
+        self.register_buffer("weights", f(w / w.sum(1, keepdims=True)))  # (V, 24)
+        self.register_buffer("faces", torch.as_tensor(asset.faces, dtype=torch.long))  # (F, 3)
+        # The regressor is linear in the vertices, so joints are linear in betas: precompute.
+        J_reg = asset.J_regressor.astype(np.float64)
+        self.register_buffer("J_template", f(J_reg @ asset.v_template))  # (24, 3)
+        self.register_buffer("J_shapedirs", f(np.einsum("jv,vcs->jcs", J_reg, shapedirs)))  # (24, 3, S)
+        self.register_buffer("J_regressor", f(J_reg))  # (24, V)
+        self.has_posedirs = asset.posedirs is not None
+        if asset.posedirs is not None:
+            self.register_buffer("posedirs", f(asset.posedirs))  # (207, V*3)
+        self.parents = PARENTS
+        self._vertex_faces: list[np.ndarray] | None = None
+
+    @staticmethod
+    def _resolve(source: str | Path | BodyAsset | None, num_betas: int) -> BodyAsset:
+        if isinstance(source, BodyAsset):
+            return source
+        if source is None or source == "default":
+            return load_default_asset()
+        if source == "smpl":
+            return load_smpl_file(None, num_betas=num_betas)
+        path = Path(source)
+        if path.suffix == ".npz" and path.is_file():
+            # Our own asset format is recognised by its keys; anything else is read as SMPL.
+            try:
+                with np.load(path, allow_pickle=False) as data:
+                    is_wearpose = "meta" in data.files and "kintree_table" not in data.files
+            except Exception:
+                is_wearpose = False  # load_smpl_file reports the unreadable file
+            if is_wearpose:
+                return load_asset_npz(path)
+        return load_smpl_file(path, num_betas=num_betas)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def num_vertices(self) -> int:
+        return int(self.v_template.shape[0])
+
+    @property
+    def dtype(self) -> torch.dtype:
+        return self.v_template.dtype
+
+    @property
+    def device(self) -> torch.device:
+        return self.v_template.device
+
+    # ------------------------------------------------------------------ inputs
+    def _pose_matrices(self, pose: torch.Tensor) -> torch.Tensor:
+        if pose.shape[-2:] == (3, 3) and pose.dim() >= 3 and pose.shape[-3] == NUM_JOINTS:
+            return pose.to(self.dtype)
+        if pose.shape[-1] == NUM_JOINTS * 3:
+            return axis_angle_to_matrix(pose.to(self.dtype).reshape(*pose.shape[:-1], NUM_JOINTS, 3))
+        raise ShapeError(f"pose: expected (..., 24, 3, 3) rotation matrices or (..., 72) axis-angle, got {tuple(pose.shape)}")
+
+    def _batch(self, pose: torch.Tensor | None, betas: torch.Tensor | None, trans: torch.Tensor | None
+               ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, tuple[int, ...]]:
+        R = self._pose_matrices(pose) if pose is not None else None
+        shapes = []
+        if R is not None:
+            shapes.append(R.shape[:-3])
+        if betas is not None:
+            if betas.shape[-1] != self.num_betas:
+                raise ShapeError(f"betas: expected (..., {self.num_betas}), got {tuple(betas.shape)}")
+            shapes.append(betas.shape[:-1])
+        if trans is not None:
+            if trans.shape[-1] != 3:
+                raise ShapeError(f"trans: expected (..., 3), got {tuple(trans.shape)}")
+            shapes.append(trans.shape[:-1])
+        try:
+            batch = torch.broadcast_shapes(*shapes) if shapes else torch.Size([])
+        except RuntimeError as exc:
+            raise ShapeError(f"pose/betas/trans batch shapes do not broadcast: {shapes}") from exc
+        eye = torch.eye(3, dtype=self.dtype, device=self.device)
+        R = (R if R is not None else eye.expand(NUM_JOINTS, 3, 3)).expand(*batch, NUM_JOINTS, 3, 3)
+        b = (betas.to(self.dtype) if betas is not None else torch.zeros(self.num_betas, dtype=self.dtype, device=self.device))
+        t = (trans.to(self.dtype) if trans is not None else torch.zeros(3, dtype=self.dtype, device=self.device))
+        n = int(np.prod(batch)) if len(batch) else 1
+        return (R.reshape(n, NUM_JOINTS, 3, 3), b.expand(*batch, self.num_betas).reshape(n, -1),
+                t.expand(*batch, 3).reshape(n, 3), tuple(batch))
+
+    # ------------------------------------------------------------------ pieces
+    def rest_joints(self, betas: torch.Tensor | None = None) -> torch.Tensor:
+        """Zero-pose joint positions ``(..., 24, 3)`` (m) for betas ``(..., S)`` (default beta=0)."""
+        if betas is None:
+            return self.J_template.clone()
+        return self.J_template + torch.einsum("jcs,...s->...jc", self.J_shapedirs, betas.to(self.dtype))
+
+    def _skin(self, vidx: torch.Tensor | None, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor
+              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Skin a subset of vertices (``vidx`` or all). Flat batch ``N``. Returns verts (N, V', 3),
+        joints (N, 24, 3), global rot (N, 24, 3, 3), rest joints (N, 24, 3)."""
+        sel = (lambda x: x) if vidx is None else (lambda x: x[vidx])  # noqa: E731
+        v_t, sd, w = sel(self.v_template), sel(self.shapedirs), sel(self.weights)
+        v_shaped = v_t + torch.einsum("vcs,ns->nvc", sd, betas)  # (N, V', 3)
+        J_rest = self.J_template + torch.einsum("jcs,ns->njc", self.J_shapedirs, betas)  # (N, 24, 3)
+        if self.has_posedirs:
+            eye = torch.eye(3, dtype=R.dtype, device=R.device)
+            feat = (R[:, 1:] - eye).reshape(R.shape[0], -1)  # (N, 207)
+            pd = self.posedirs.view(-1, self.num_vertices, 3)
+            pd = pd if vidx is None else pd[:, vidx]
+            v_shaped = v_shaped + torch.einsum("np,pvc->nvc", feat, pd)
+        G, J = forward_kinematics(R, J_rest, self.parents)  # (N, 24, 3, 3), (N, 24, 3)
+        # Skinning transform of joint j: x -> G_j (x - J_rest_j) + J_j.
+        t = J - (G @ J_rest.unsqueeze(-1)).squeeze(-1)  # (N, 24, 3)
+        A = torch.cat([G.reshape(-1, NUM_JOINTS, 9), t], dim=-1)  # (N, 24, 12)
+        T = torch.einsum("vj,njk->nvk", w, A)  # (N, V', 12)
+        verts = (T[..., :9].reshape(*T.shape[:2], 3, 3) @ v_shaped.unsqueeze(-1)).squeeze(-1) + T[..., 9:]
+        return verts + trans[:, None], J + trans[:, None], G, J_rest
+
+    def forward(self, pose: torch.Tensor | None = None, betas: torch.Tensor | None = None,
+                trans: torch.Tensor | None = None, *, return_vertices: bool = True,
+                return_normals: bool = True) -> BodyOutput:
+        """Pose the body.
+
+        Args:
+            pose: ``(..., 24, 3, 3)`` local joint rotations (joint 0 = global root orientation),
+                or ``(..., 72)`` axis-angle (SMPL/AMASS edge). ``None`` = zero pose.
+            betas: ``(..., S)`` shape coefficients (broadcast). ``None`` = mean shape.
+            trans: ``(..., 3)`` root translation, m (broadcast). ``None`` = 0.
+            return_vertices: skin the full mesh (skip for joints-only use).
+            return_normals: also compute unit vertex normals.
+
+        Returns:
+            :class:`BodyOutput` with the broadcast batch shape ``...``.
+        """
+        R, b, t, batch = self._batch(pose, betas, trans)
+        if return_vertices:
+            verts, J, G, J_rest = self._skin(None, R, b, t)
+            normals = _vertex_normals(verts, self.faces, self.num_vertices) if return_normals else None
+        else:
+            J_rest = self.rest_joints(b)
+            G, J = forward_kinematics(R, J_rest, self.parents)
+            J = J + t[:, None]
+            verts = normals = None
+        un = lambda x: None if x is None else x.reshape(*batch, *x.shape[1:])  # noqa: E731
+        return BodyOutput(joints=un(J), global_rot=un(G), rest_joints=un(J_rest), vertices=un(verts), normals=un(normals))
+
+    # ------------------------------------------------------------------ sensor sites
+    def _faces_of(self, v: int) -> np.ndarray:
+        if self._vertex_faces is None:
+            faces = self.faces.cpu().numpy()
+            order = np.argsort(faces.ravel(), kind="stable")
+            counts = np.bincount(faces.ravel(), minlength=self.num_vertices)
+            splits = np.split(order // 3, np.cumsum(counts)[:-1])
+            self._vertex_faces = splits
+        return self._vertex_faces[v]
+
+    def site_ids(self, names: Sequence[str] | None = None) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+        """Resolve site names to (names, vertex ids (K,), tangent vertex ids (K,))."""
+        names = tuple(names) if names is not None else self.site_names
+        missing = [n for n in names if n not in self._site_index]
+        if missing:
+            raise WearposeError(f"unknown sensor site(s) {missing} on body asset {self.asset_id}; available: {list(self.site_names)}")
+        idx = [self._site_index[n] for n in names]
+        return names, self._site_vertices[idx], self._site_tangent[idx]
+
+    def sites(self, pose: torch.Tensor | None = None, betas: torch.Tensor | None = None,
+              trans: torch.Tensor | None = None, names: Sequence[str] | None = None,
+              *, vertex_ids: Sequence[int] | None = None, tangent_ids: Sequence[int] | None = None) -> SiteOutput:
+        """Fast path: pose of skin sites without skinning the whole mesh.
+
+        Only the site vertices and their one-ring faces are skinned; the normal is the same
+        area-weighted vertex normal as :meth:`forward` computes, and the tangent is the fixed edge
+        to ``site_tangent`` projected onto the tangent plane (EM-POSE Eq. 3). The site frame's
+        columns are ``(t, n x t, n)``: right-handed, third axis the outward normal.
+
+        Args:
+            pose, betas, trans: as :meth:`forward`.
+            names: site names of this asset (default: all); or give ``vertex_ids`` (and
+                optionally ``tangent_ids``) for arbitrary vertices.
+
+        Returns:
+            :class:`SiteOutput` with positions ``(..., K, 3)`` and rotations ``(..., K, 3, 3)``.
+        """
+        if vertex_ids is not None:
+            vids = np.asarray(vertex_ids, dtype=np.int64)
+            tids = np.asarray(tangent_ids, dtype=np.int64) if tangent_ids is not None else np.array(
+                [self._neighbour(int(v)) for v in vids], dtype=np.int64)
+            names = tuple(f"v{v}" for v in vids)
+        else:
+            names, vids, tids = self.site_ids(names)
+        if len(vids) and (vids.max() >= self.num_vertices or vids.min() < 0):
+            raise ShapeError(f"vertex ids must be in [0, {self.num_vertices}), got {vids.tolist()}")
+        R, b, t, batch = self._batch(pose, betas, trans)
+        # Local patch: site vertices, tangent vertices and their one-ring faces.
+        patch_faces = np.unique(np.concatenate([self._faces_of(int(v)) for v in vids])) if len(vids) else np.zeros(0, np.int64)
+        faces = self.faces.cpu().numpy()[patch_faces]
+        used = np.unique(np.concatenate([vids, tids, faces.ravel()]))
+        remap = {int(v): i for i, v in enumerate(used)}
+        local_faces = torch.as_tensor(np.vectorize(remap.get)(faces) if len(faces) else faces, dtype=torch.long, device=self.device)
+        verts, J, G, _ = self._skin(torch.as_tensor(used, device=self.device), R, b, t)
+        normals = _vertex_normals(verts, local_faces, len(used))
+        li = torch.as_tensor([remap[int(v)] for v in vids], device=self.device, dtype=torch.long)
+        lt = torch.as_tensor([remap[int(v)] for v in tids], device=self.device, dtype=torch.long)
+        p, n = verts[:, li], normals[:, li]
+        e = verts[:, lt] - p
+        e = e - (e * n).sum(-1, keepdim=True) * n
+        tan = e / e.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        bit = torch.cross(n, tan, dim=-1)
+        rot = torch.stack([tan, bit, n], dim=-1)  # columns
+        un = lambda x: x.reshape(*batch, *x.shape[1:])  # noqa: E731
+        return SiteOutput(names=names, positions=un(p), rotations=un(rot), joints=un(J), global_rot=un(G))
+
+    def _neighbour(self, v: int) -> int:
+        f = self.faces.cpu().numpy()[self._faces_of(v)[0]]
+        return int(next(x for x in f if x != v))
+

@@ -1,0 +1,172 @@
+"""Rotation representations and operations. Shapes: any leading batch ``...``.
+
+Every function is pure, differentiable where the maths allows, and dtype/device preserving.
+"""
+
+from __future__ import annotations
+
+import roma
+import torch
+
+from wearpose.errors import ShapeError
+
+
+def _check_last(x: torch.Tensor, shape: tuple[int, ...], name: str) -> None:
+    if not isinstance(x, torch.Tensor):
+        raise ShapeError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
+    if tuple(x.shape[-len(shape):]) != shape:
+        raise ShapeError(f"{name}: expected shape (..., {', '.join(map(str, shape))}), got {tuple(x.shape)}")
+
+
+def axis_angle_to_matrix(aa: torch.Tensor) -> torch.Tensor:
+    """Axis-angle / exponential map ``(..., 3)`` (radians) -> rotation matrix ``(..., 3, 3)``."""
+    _check_last(aa, (3,), "axis_angle")
+    return roma.rotvec_to_rotmat(aa)
+
+
+def matrix_to_axis_angle(R: torch.Tensor) -> torch.Tensor:
+    """Rotation matrix ``(..., 3, 3)`` -> axis-angle ``(..., 3)`` with angle in ``[0, pi]``."""
+    _check_last(R, (3, 3), "R")
+    return roma.rotmat_to_rotvec(R)
+
+
+def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
+    """Quaternion ``(..., 4)`` as ``(w, x, y, z)`` -> rotation matrix ``(..., 3, 3)``.
+
+    The quaternion is normalised first, so slightly non-unit input (e.g. from files) is fine.
+    """
+    _check_last(q, (4,), "quaternion")
+    q = q / q.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    return roma.unitquat_to_rotmat(roma.quat_wxyz_to_xyzw(q))
+
+
+def matrix_to_quat(R: torch.Tensor) -> torch.Tensor:
+    """Rotation matrix ``(..., 3, 3)`` -> unit quaternion ``(..., 4)`` as ``(w, x, y, z)``, w >= 0."""
+    _check_last(R, (3, 3), "R")
+    q = roma.quat_xyzw_to_wxyz(roma.rotmat_to_unitquat(R))
+    return torch.where(q[..., :1] < 0, -q, q)
+
+
+def rot6d_to_matrix(d6: torch.Tensor) -> torch.Tensor:
+    """6D representation ``(..., 6)`` = first two columns ``(a1, a2)`` -> rotation ``(..., 3, 3)``.
+
+    Gram-Schmidt as in Zhou et al. (CVPR 2019); any 6-vector with non-parallel halves maps to a
+    valid rotation, which is why networks output it.
+    """
+    _check_last(d6, (6,), "rot6d")
+    return roma.special_gramschmidt(torch.stack([d6[..., :3], d6[..., 3:]], dim=-1))
+
+
+def matrix_to_rot6d(R: torch.Tensor) -> torch.Tensor:
+    """Rotation ``(..., 3, 3)`` -> 6D ``(..., 6)``: first column then second column."""
+    _check_last(R, (3, 3), "R")
+    return torch.cat([R[..., :, 0], R[..., :, 1]], dim=-1)
+
+
+def rotation_x(angle: torch.Tensor) -> torch.Tensor:
+    """Rotation about X by ``angle`` ``(...)`` radians -> ``(..., 3, 3)``."""
+    c, s = torch.cos(angle), torch.sin(angle)
+    o, z = torch.ones_like(angle), torch.zeros_like(angle)
+    return torch.stack([o, z, z, z, c, -s, z, s, c], dim=-1).reshape(*angle.shape, 3, 3)
+
+
+def rotation_y(angle: torch.Tensor) -> torch.Tensor:
+    """Rotation about Y by ``angle`` ``(...)`` radians -> ``(..., 3, 3)``."""
+    c, s = torch.cos(angle), torch.sin(angle)
+    o, z = torch.ones_like(angle), torch.zeros_like(angle)
+    return torch.stack([c, z, s, z, o, z, -s, z, c], dim=-1).reshape(*angle.shape, 3, 3)
+
+
+def rotation_z(angle: torch.Tensor) -> torch.Tensor:
+    """Rotation about Z by ``angle`` ``(...)`` radians -> ``(..., 3, 3)``."""
+    c, s = torch.cos(angle), torch.sin(angle)
+    o, z = torch.ones_like(angle), torch.zeros_like(angle)
+    return torch.stack([c, -s, z, s, c, z, z, z, o], dim=-1).reshape(*angle.shape, 3, 3)
+
+
+_AXIS_FN = {"X": rotation_x, "Y": rotation_y, "Z": rotation_z}
+
+
+def euler_to_matrix(angles: torch.Tensor, order: str) -> torch.Tensor:
+    """Intrinsic Euler angles (radians) -> rotation matrix, BVH semantics.
+
+    Args:
+        angles: ``(..., k)`` angles in radians, one per letter of ``order``.
+        order: axis letters, e.g. ``"ZXY"``; ``R = R_Z(a0) @ R_X(a1) @ R_Y(a2)``. This is how
+            BVH channels listed as ``Zrotation Xrotation Yrotation`` are composed.
+
+    Returns:
+        ``(..., 3, 3)`` rotation matrices.
+    """
+    order = order.upper()
+    if not order or any(c not in "XYZ" for c in order):
+        raise ShapeError(f"euler order must be letters from XYZ, got {order!r}")
+    if angles.shape[-1] != len(order):
+        raise ShapeError(f"euler angles: expected last dim {len(order)} for order {order!r}, got {tuple(angles.shape)}")
+    R = _AXIS_FN[order[0]](angles[..., 0])
+    for i, c in enumerate(order[1:], start=1):
+        R = R @ _AXIS_FN[c](angles[..., i])
+    return R
+
+
+def matrix_to_euler(R: torch.Tensor, order: str) -> torch.Tensor:
+    """Rotation ``(..., 3, 3)`` -> intrinsic Euler angles ``(..., 3)`` (radians), inverse of
+    :func:`euler_to_matrix` for three distinct axes (used by the BVH writer)."""
+    _check_last(R, (3, 3), "R")
+    order = order.upper()
+    if len(order) != 3 or len(set(order)) != 3 or any(c not in "XYZ" for c in order):
+        raise ShapeError(f"matrix_to_euler needs three distinct axes, got {order!r}")
+    # roma's intrinsic convention uses upper-case axis letters.
+    return roma.rotmat_to_euler(order, R, degrees=False)
+
+
+def geodesic_angle(R1: torch.Tensor, R2: torch.Tensor) -> torch.Tensor:
+    """Angle (radians, in ``[0, pi]``) of ``R1^T R2``; ``(..., 3, 3)`` x2 -> ``(...)``.
+
+    Uses a numerically careful formulation (roma) that stays accurate near 0 and pi.
+    """
+    _check_last(R1, (3, 3), "R1")
+    _check_last(R2, (3, 3), "R2")
+    return roma.rotmat_geodesic_distance(R1, R2)
+
+
+def slerp_matrix(R0: torch.Tensor, R1: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+    """Spherical linear interpolation between rotations.
+
+    Args:
+        R0, R1: ``(..., 3, 3)`` endpoints.
+        t: ``(...)`` interpolation weights in ``[0, 1]`` (broadcast against the batch).
+
+    Returns:
+        ``(..., 3, 3)``: ``R0 @ exp(t * log(R0^T R1))`` (shortest path).
+    """
+    rel = matrix_to_axis_angle(R0.transpose(-1, -2) @ R1)
+    return R0 @ axis_angle_to_matrix(rel * t.to(rel).unsqueeze(-1))
+
+
+def project_to_so3(M: torch.Tensor) -> torch.Tensor:
+    """Nearest rotation (Frobenius) to each ``(..., 3, 3)`` matrix, via SVD with det fix."""
+    _check_last(M, (3, 3), "M")
+    return roma.special_procrustes(M)
+
+
+def rotation_between(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Minimal rotation taking direction ``a`` to direction ``b``; ``(..., 3)`` x2 -> ``(..., 3, 3)``.
+
+    For antiparallel vectors a rotation of pi about an axis orthogonal to ``a`` is returned.
+    """
+    _check_last(a, (3,), "a")
+    _check_last(b, (3,), "b")
+    a = a / a.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    b = b / b.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    a, b = torch.broadcast_tensors(a, b)
+    axis = torch.cross(a, b, dim=-1)
+    s = axis.norm(dim=-1, keepdim=True)
+    c = (a * b).sum(-1, keepdim=True)
+    angle = torch.atan2(s, c)
+    # Fallback axis for (anti)parallel input: anything orthogonal to a.
+    helper = torch.where(a[..., :1].abs() < 0.9, torch.tensor([1.0, 0.0, 0.0]).to(a), torch.tensor([0.0, 1.0, 0.0]).to(a))
+    ortho = torch.cross(a, helper, dim=-1)
+    ortho = ortho / ortho.norm(dim=-1, keepdim=True)
+    unit_axis = torch.where(s > 1e-9, axis / s.clamp_min(1e-12), ortho)
+    return axis_angle_to_matrix(unit_axis * angle)

@@ -1,0 +1,128 @@
+"""BodyModel: LBS correctness, batching, differentiability and the site fast path (tiny asset)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from tests.conftest import make_tiny_asset
+from wearpose.body import BodyModel, forward_kinematics
+from wearpose.errors import ShapeError, WearposeError
+from wearpose.geometry import axis_angle_to_matrix
+
+
+@pytest.fixture
+def body() -> BodyModel:
+    return BodyModel(make_tiny_asset(), dtype=torch.float64)
+
+
+def test_zero_pose_is_template(body: BodyModel) -> None:
+    out = body()
+    np.testing.assert_allclose(out.vertices.numpy(), body.v_template.numpy(), atol=1e-12)
+    np.testing.assert_allclose(out.joints.numpy(), (body.J_regressor @ body.v_template).numpy(), atol=1e-12)
+    np.testing.assert_allclose(out.global_rot.numpy(), np.broadcast_to(np.eye(3), (24, 3, 3)), atol=1e-12)
+
+
+def test_joints_are_regressed_from_shaped_mesh(body: BodyModel) -> None:
+    betas = torch.randn(3, 10, dtype=torch.float64)
+    out = body(betas=betas)
+    v_shaped = body.v_template + torch.einsum("vcs,bs->bvc", body.shapedirs, betas)
+    np.testing.assert_allclose(out.rest_joints.numpy(), (body.J_regressor @ v_shaped).numpy(), atol=1e-12)
+
+
+def test_root_rotation_and_translation_are_rigid(body: BodyModel) -> None:
+    R0 = axis_angle_to_matrix(torch.tensor([0.3, -1.2, 0.5], dtype=torch.float64))
+    pose = torch.eye(3, dtype=torch.float64).repeat(24, 1, 1)
+    pose[0] = R0
+    t = torch.tensor([1.0, 2.0, -3.0], dtype=torch.float64)
+    out = body(pose, trans=t)
+    rest = body()
+    pelvis = rest.joints[0]
+    expect = (rest.vertices - pelvis) @ R0.T + pelvis + t
+    np.testing.assert_allclose(out.vertices.numpy(), expect.numpy(), atol=1e-10)
+    np.testing.assert_allclose(out.normals.numpy(), (rest.normals @ R0.T).numpy(), atol=1e-10)
+
+
+def test_lbs_matches_per_vertex_reference(body: BodyModel) -> None:
+    """Vertex = sum_j w_vj (G_j (v - J_j) + P_j), computed naively here."""
+    aa = torch.randn(24, 3, dtype=torch.float64) * 0.5
+    R = axis_angle_to_matrix(aa)
+    out = body(R)
+    G, P = forward_kinematics(R, body.rest_joints())
+    J = body.rest_joints()
+    v = body.v_template
+    ref = torch.zeros_like(v)
+    for j in range(24):
+        ref += body.weights[:, j:j + 1] * ((v - J[j]) @ G[j].T + P[j])
+    np.testing.assert_allclose(out.vertices.numpy(), ref.numpy(), atol=1e-12)
+
+
+def test_axis_angle_input_equals_matrix_input(body: BodyModel) -> None:
+    aa = torch.randn(5, 72, dtype=torch.float64) * 0.4
+    a = body(aa)
+    b = body(axis_angle_to_matrix(aa.view(5, 24, 3)))
+    np.testing.assert_allclose(a.vertices.numpy(), b.vertices.numpy(), atol=1e-12)
+
+
+def test_any_batch_shape_and_broadcast(body: BodyModel) -> None:
+    pose = axis_angle_to_matrix(torch.randn(2, 3, 24, 3, dtype=torch.float64) * 0.3)
+    betas = torch.randn(10, dtype=torch.float64)
+    trans = torch.randn(2, 1, 3, dtype=torch.float64)
+    out = body(pose, betas, trans)
+    assert out.vertices.shape == (2, 3, body.num_vertices, 3)
+    assert out.joints.shape == (2, 3, 24, 3) and out.global_rot.shape == (2, 3, 24, 3, 3)
+    one = body(pose[1, 2], betas, trans[1, 0])
+    np.testing.assert_allclose(out.vertices[1, 2].numpy(), one.vertices.numpy(), atol=1e-12)
+    nov = body(pose, betas, trans, return_vertices=False)
+    assert nov.vertices is None
+    np.testing.assert_allclose(nov.joints.numpy(), out.joints.numpy(), atol=1e-12)
+
+
+def test_posedirs_apply_pose_correctives() -> None:
+    asset = make_tiny_asset(posedirs=True)
+    body = BodyModel(asset, dtype=torch.float64)
+    R = axis_angle_to_matrix(torch.randn(24, 3, dtype=torch.float64) * 0.3)
+    out = body(R)
+    no_pd = BodyModel(make_tiny_asset(posedirs=False), dtype=torch.float64)(R)
+    assert (out.vertices - no_pd.vertices).abs().max() > 1e-4
+    zero = body()
+    np.testing.assert_allclose(zero.vertices.numpy(), body.v_template.numpy(), atol=1e-12)
+
+
+def test_gradcheck_float64(body: BodyModel) -> None:
+    aa = (torch.randn(2, 72, dtype=torch.float64) * 0.3).requires_grad_()
+    betas = torch.randn(2, 10, dtype=torch.float64, requires_grad=True)
+    trans = torch.randn(2, 3, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda a, b, t: body(a, b, t).vertices, (aa, betas, trans))
+    assert torch.autograd.gradcheck(lambda a, b, t: body.sites(a, b, t).rotations, (aa, betas, trans))
+
+
+def test_site_fast_path_matches_full_mesh(body: BodyModel) -> None:
+    pose = axis_angle_to_matrix(torch.randn(4, 24, 3, dtype=torch.float64) * 0.5)
+    betas = torch.randn(4, 10, dtype=torch.float64)
+    full = body(pose, betas)
+    s = body.sites(pose, betas)
+    names, vids, tids = body.site_ids()
+    np.testing.assert_allclose(s.positions.numpy(), full.vertices[:, vids].numpy(), atol=1e-12)
+    np.testing.assert_allclose(s.rotations[..., 2].numpy(), full.normals[:, vids].numpy(), atol=1e-12)
+    R = s.rotations
+    np.testing.assert_allclose((R.transpose(-1, -2) @ R).numpy(), np.broadcast_to(np.eye(3), R.shape), atol=1e-12)
+    np.testing.assert_allclose(torch.det(R).numpy(), 1.0, atol=1e-12)
+    # tangent lies along the projected edge to the fixed neighbour vertex
+    e = full.vertices[:, tids] - full.vertices[:, vids]
+    assert torch.all((e * s.rotations[..., 0]).sum(-1) > 0)
+    # arbitrary vertices work too
+    s2 = body.sites(pose, betas, vertex_ids=[3, 17])
+    np.testing.assert_allclose(s2.positions.numpy(), full.vertices[:, [3, 17]].numpy(), atol=1e-12)
+
+
+def test_errors_are_clear(body: BodyModel) -> None:
+    with pytest.raises(ShapeError, match=r"\(\.\.\., 24, 3, 3\)"):
+        body(torch.zeros(2, 23, 3, 3))
+    with pytest.raises(ShapeError, match="betas"):
+        body(betas=torch.zeros(2, 7))
+    with pytest.raises(WearposeError, match="unknown sensor site"):
+        body.sites(names=["nose"])
+    with pytest.raises(ShapeError, match="broadcast"):
+        body(torch.zeros(2, 72), torch.zeros(3, 10))

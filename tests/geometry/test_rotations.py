@@ -1,0 +1,81 @@
+"""Rotation conversions against scipy's reference implementation."""
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation as S
+
+from wearpose import geometry as g
+from wearpose.errors import ShapeError
+
+RNG = np.random.default_rng(0)
+ROTS = S.random(64, random_state=1)
+
+
+def _t(x: np.ndarray) -> torch.Tensor:
+    return torch.as_tensor(x, dtype=torch.float64)
+
+
+def test_axis_angle_matches_scipy() -> None:
+    aa = ROTS.as_rotvec()
+    np.testing.assert_allclose(g.axis_angle_to_matrix(_t(aa)).numpy(), ROTS.as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(g.matrix_to_axis_angle(_t(ROTS.as_matrix())).numpy(), aa, atol=1e-9)
+
+
+def test_quaternion_wxyz_matches_scipy() -> None:
+    xyzw = ROTS.as_quat()
+    wxyz = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
+    np.testing.assert_allclose(g.quat_to_matrix(_t(wxyz)).numpy(), ROTS.as_matrix(), atol=1e-12)
+    q = g.matrix_to_quat(_t(ROTS.as_matrix())).numpy()
+    assert np.all(q[:, 0] >= 0)
+    wxyz = wxyz * np.sign(wxyz[:, :1])
+    np.testing.assert_allclose(q, wxyz, atol=1e-9)
+
+
+@pytest.mark.parametrize("order", ["ZXY", "ZYX", "XYZ", "YXZ"])
+def test_euler_intrinsic_matches_scipy(order: str) -> None:
+    ang = RNG.uniform(-np.pi, np.pi, size=(32, 3))
+    ref = S.from_euler(order, ang).as_matrix()  # upper case = intrinsic
+    np.testing.assert_allclose(g.euler_to_matrix(_t(ang), order).numpy(), ref, atol=1e-12)
+    back = g.euler_to_matrix(g.matrix_to_euler(_t(ref), order), order).numpy()
+    np.testing.assert_allclose(back, ref, atol=1e-9)
+
+
+def test_rot6d_roundtrip_and_gram_schmidt() -> None:
+    R = _t(ROTS.as_matrix())
+    np.testing.assert_allclose(g.rot6d_to_matrix(g.matrix_to_rot6d(R)).numpy(), R.numpy(), atol=1e-12)
+    d6 = torch.randn(10, 6, dtype=torch.float64)
+    M = g.rot6d_to_matrix(d6)
+    np.testing.assert_allclose((M.transpose(-1, -2) @ M).numpy(), np.broadcast_to(np.eye(3), (10, 3, 3)), atol=1e-12)
+    np.testing.assert_allclose(torch.det(M).numpy(), 1.0, atol=1e-12)
+
+
+def test_geodesic_and_slerp() -> None:
+    R0 = _t(ROTS.as_matrix()[:8])
+    R1 = _t((ROTS[:8] * S.from_rotvec(np.tile([0, 0, 0.8], (8, 1)))).as_matrix())
+    np.testing.assert_allclose(g.geodesic_angle(R0, R1).numpy(), 0.8, atol=1e-9)
+    mid = g.slerp_matrix(R0, R1, torch.full((8,), 0.25, dtype=torch.float64))
+    np.testing.assert_allclose(g.geodesic_angle(R0, mid).numpy(), 0.2, atol=1e-9)
+
+
+def test_rotation_between_including_antiparallel() -> None:
+    a = _t(RNG.normal(size=(20, 3)))
+    b = _t(RNG.normal(size=(20, 3)))
+    b[0] = -a[0]
+    b[1] = a[1] * 2
+    R = g.rotation_between(a, b)
+    out = (R @ (a / a.norm(dim=-1, keepdim=True)).unsqueeze(-1)).squeeze(-1)
+    np.testing.assert_allclose(out.numpy(), (b / b.norm(dim=-1, keepdim=True)).numpy(), atol=1e-9)
+
+
+def test_bad_shapes_raise() -> None:
+    with pytest.raises(ShapeError, match=r"\(\.\.\., 3\)"):
+        g.axis_angle_to_matrix(torch.zeros(4, 4))
+    with pytest.raises(ShapeError, match="order"):
+        g.euler_to_matrix(torch.zeros(3), "ZQY")
+
+
+def test_z_up_to_y_up() -> None:
+    up_z = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
+    np.testing.assert_allclose(g.change_world_points(g.Z_UP_TO_Y_UP, up_z).numpy(), [0, 1, 0])
+    np.testing.assert_allclose((g.Z_UP_TO_Y_UP @ g.Y_UP_TO_Z_UP).numpy(), np.eye(3))
