@@ -1,0 +1,48 @@
+"""Recordings: one type for every sensor modality, its versioned file format, and converters
+from public dataset layouts.
+
+Public API:
+
+- :class:`Recording`, :class:`SensorStream`, :class:`SensorInfo`, :class:`CommonGrid`
+- :func:`load_recording` / :func:`save_recording` (also ``Recording.save``), format
+  ``wearpose.recording`` v1 (``docs/formats.md``)
+- :func:`check_stream` / :func:`check_recording`: does the data look like its declared units?
+- converters: :func:`from_dip_imu`, :func:`from_totalcapture`, :func:`from_empose`,
+  :func:`amass_ground_truth`
+- :class:`RecordingError` for operations a recording cannot do (file problems are
+  :class:`wearpose.errors.InputFileError`).
+"""
+
+from wearpose.recording.types import (
+    CHANNELS,
+    KINDS,
+    OPTIONAL_CHANNELS,
+    REQUIRED_CHANNELS,
+    CommonGrid,
+    Recording,
+    RecordingError,
+    SensorInfo,
+    SensorStream,
+)
+from wearpose.recording.checks import ConventionIssue, check_recording, check_stream
+from wearpose.recording.fileformat import FORMAT_NAME, FORMAT_VERSION, load_recording, recording_arrays, save_recording
+from wearpose.recording.converters import (
+    DIP_IMU_SENSORS,
+    DIP_IMU_SIX,
+    EMPOSE_SENSORS,
+    EMPOSE_SIX,
+    TOTALCAPTURE_SITES,
+    amass_ground_truth,
+    from_dip_imu,
+    from_empose,
+    from_totalcapture,
+)
+
+__all__ = [
+    "Recording", "SensorStream", "SensorInfo", "CommonGrid", "RecordingError",
+    "KINDS", "CHANNELS", "REQUIRED_CHANNELS", "OPTIONAL_CHANNELS",
+    "ConventionIssue", "check_stream", "check_recording",
+    "FORMAT_NAME", "FORMAT_VERSION", "load_recording", "save_recording", "recording_arrays",
+    "from_dip_imu", "from_totalcapture", "from_empose", "amass_ground_truth",
+    "DIP_IMU_SENSORS", "DIP_IMU_SIX", "EMPOSE_SENSORS", "EMPOSE_SIX", "TOTALCAPTURE_SITES",
+]
