@@ -50,6 +50,8 @@ PELVIS_TARGET = np.array([0.0, -0.223, 0.028])
 NUM_BETAS = 10
 #: Hip->ankle angle outwards from vertical in the frontal plane at rest, degrees (SMPL neutral's).
 LEG_ABDUCTION_DEG = 1.5
+#: Radius (m) of the vertex ring each joint's regressor row may use.
+RING_RADIUS = 0.18
 
 #: anny frame (Z up, forward -Y, +X left) -> wearpose frame (Y up, forward +Z, +X left);
 #: a proper rotation (det +1), so triangle winding is preserved.
@@ -389,7 +391,7 @@ def regressor_candidates(v_mean: np.ndarray, J_mean: np.ndarray, weights: np.nda
     rel = v_mean - J_mean[j]
     along = np.abs(rel @ axis)
     dist = np.linalg.norm(rel, axis=1)
-    for hw, radius in ((half_width, 0.18), (2 * half_width, 0.25), (4 * half_width, 0.35)):
+    for hw, radius in ((half_width, RING_RADIUS), (2 * half_width, 1.5 * RING_RADIUS), (4 * half_width, 2 * RING_RADIUS)):
         cand = np.flatnonzero(near_seg & (along < hw) & (dist < radius))
         if len(cand) >= 30:
             return cand
@@ -584,7 +586,7 @@ def main(argv: list[str] | None = None) -> int:
             "hands": "midpoint of metacarpal3 and finger3-1 heads",
         },
         "shape_space": {"method": "PCA of T-posed vertices; 1 beta = 1 std", "explained_variance": [round(float(x), 5) for x in evr],
-                        "height_m_at_beta0": {str(k): round(v, 4) for k, v in heights.items()}},
+                        "standing_height_m_vs_beta0": {str(k): round(v, 4) for k, v in heights.items()}},
         "j_regressor": {"method": f"NNLS over a vertex ring around each joint, {n_fit} fit samples, rows sum to 1",
                         "holdout_mean_mm": round(float(err_ho.mean() * 1000), 3),
                         "holdout_max_mm": round(float(err_ho.max() * 1000), 3)},
