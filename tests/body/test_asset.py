@@ -144,3 +144,19 @@ def test_faces_wind_outwards(asset):
     t = v[asset.faces]
     vol = np.einsum("fi,fi->f", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0
     assert 0.03 < vol < 0.15  # m^3, positive: counter-clockwise seen from outside
+
+
+def test_site_normals_point_outwards(asset):
+    """Each site's area-weighted vertex normal faces the side the site is defined on."""
+    v = asset.v_template.astype(np.float64)
+    f = asset.faces
+    expected = {"head": (0, 0, 1), "sternum": (0, 0, 1), "back_upper": (0, 0, -1), "pelvis": (0, 0, -1),
+                "left_upper_arm": (0, 1, 0), "right_upper_arm": (0, 1, 0), "left_forearm": (0, 1, 0),
+                "right_forearm": (0, 1, 0), "left_wrist": (0, 1, 0), "right_wrist": (0, 1, 0),
+                "left_thigh": (1, 0, 0), "right_thigh": (-1, 0, 0), "left_shin": (0, 0, 1), "right_shin": (0, 0, 1),
+                "left_foot": (0, 1, 0), "right_foot": (0, 1, 0)}
+    for n, vid in zip(asset.site_names, asset.site_vertices):
+        tri = v[f[(f == vid).any(axis=1)]]
+        nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]).sum(0)
+        nrm /= np.linalg.norm(nrm)
+        assert nrm @ np.array(expected[n]) > 0.5, (n, nrm)
