@@ -1,0 +1,255 @@
+"""``simulate``: a motion sequence + a sensor kit + a body -> per-sensor simulated streams.
+
+The body's sites are evaluated once per distinct sensor rate (``body.sites``, the fast path that
+skins only the site patches), after resampling the motion to that rate with
+:func:`wearpose.motion.resample.resample` when the motion's rate differs. Each sensor kind then
+runs its simulator on its sites: EM (:mod:`.em`), IMU (:mod:`.imu`), MIMU (:mod:`.mimu`), VIO
+(:mod:`.vio`).
+
+Randomness: one ``seed`` per call. Every sensor gets its own generator seeded from
+``(seed, sensor name)``, so a sensor's noise does not change when other sensors are added to or
+removed from a kit. The per-sequence EM offset draw (EM-POSE supp. 2.2) uses ``(seed, "offsets")``.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, field
+from typing import Any
+
+import torch
+
+from wearpose.errors import ConfigError, ShapeError
+from wearpose.motion.resample import resample
+from wearpose.motion.sequence import MotionSequence
+from wearpose.sensors.em import EMNoise, EMOffsets, random_subject_offsets, simulate_em
+from wearpose.sensors.imu import ImuNoise, simulate_imu
+from wearpose.sensors.kits import SensorKit, get_kit, resolve_sites
+from wearpose.sensors.mimu import MimuNoise, simulate_mimu
+from wearpose.sensors.vio import VioNoise, simulate_vio
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Error models per sensor kind (``None`` = ideal for that kind)."""
+
+    em: EMNoise | None = EMNoise()
+    imu: ImuNoise | None = ImuNoise()
+    mimu: MimuNoise | None = MimuNoise()
+    vio: VioNoise | None = VioNoise()
+
+    @staticmethod
+    def default() -> NoiseConfig:
+        return NoiseConfig()
+
+    @staticmethod
+    def none() -> NoiseConfig:
+        return NoiseConfig(None, None, None, None)
+
+
+@dataclass
+class SensorData:
+    """One simulated sensor stream. ``T`` = samples at ``rate``.
+
+    Attributes:
+        name, kind, site, rate: from the kit (``site`` is the site actually used).
+        timestamps: ``(T,)`` float64 seconds from the motion's first frame.
+        valid: ``(T,)`` bool; False frames hold NaN (EM) or zeros (inertial ends, ``ends="mask"``).
+        frame: ``"source"`` (EM: position/orientation relative to the EM source frame) or
+            ``"world"`` (IMU/MIMU/VIO: orientation ``R_WS`` to the Y-up world).
+        position: ``(T, 3)`` m (EM, VIO) or None.
+        orientation: ``(T, 3, 3)`` sensor -> frame, or None.
+        acceleration: ``(T, 3)`` free acceleration, world frame, gravity removed, m/s^2 (IMU, MIMU).
+        angular_velocity: ``(T, 3)`` rad/s, sensor frame (IMU, MIMU).
+        specific_force: ``(T, 3)`` raw accelerometer, sensor frame, gravity included, m/s^2.
+        magnetic_field: ``(T, 3)`` tesla, sensor frame (MIMU).
+        extras: ground-truth or diagnostic series (e.g. ``distance`` to the EM source,
+            ``yaw_error``, ``world_position``).
+    """
+
+    name: str
+    kind: str
+    site: str
+    rate: float
+    timestamps: torch.Tensor
+    valid: torch.Tensor
+    frame: str
+    position: torch.Tensor | None = None
+    orientation: torch.Tensor | None = None
+    acceleration: torch.Tensor | None = None
+    angular_velocity: torch.Tensor | None = None
+    specific_force: torch.Tensor | None = None
+    magnetic_field: torch.Tensor | None = None
+    extras: dict[str, torch.Tensor] = field(default_factory=dict)
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.timestamps.shape[0])
+
+
+@dataclass
+class SimulationResult:
+    """Output of :func:`simulate`.
+
+    Attributes:
+        kit: the kit simulated (with ``rate`` overrides applied).
+        sensors: sensor name -> :class:`SensorData`, kit order.
+        seed: the seed used.
+        noise: the :class:`NoiseConfig` used.
+        em_offsets: the EM offsets drawn for this sequence (kit order of the EM sensors), or None.
+        em_source: ground-truth source pose per EM rate: ``{rate: {"position": (T, 3),
+            "orientation": (T, 3, 3)}}`` (world), for calibration and evaluation.
+        site_substitutions: sensor -> "wanted -> used" for sites the body lacks.
+        meta: body asset id, motion fps, frames.
+    """
+
+    kit: SensorKit
+    sensors: dict[str, SensorData]
+    seed: int
+    noise: NoiseConfig
+    em_offsets: EMOffsets | None = None
+    em_source: dict[float, dict[str, torch.Tensor]] = field(default_factory=dict)
+    site_substitutions: dict[str, str] = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __getitem__(self, name: str) -> SensorData:
+        return self.sensors[name]
+
+    @property
+    def num_sensor_frames(self) -> int:
+        """Total sensor-frames simulated (sum over sensors of their sample counts)."""
+        return sum(s.num_frames for s in self.sensors.values())
+
+
+def _generator(seed: int, key: str) -> torch.Generator:
+    g = torch.Generator()
+    g.manual_seed((int(seed) * 1_000_003 + zlib.crc32(key.encode())) % (2 ** 63 - 1))
+    return g
+
+
+def _noise_config(noise: str | NoiseConfig) -> NoiseConfig:
+    if isinstance(noise, NoiseConfig):
+        return noise
+    if noise == "default":
+        return NoiseConfig.default()
+    if noise == "none":
+        return NoiseConfig.none()
+    raise ConfigError(f"simulate: noise must be 'default', 'none' or a NoiseConfig, got {noise!r}")
+
+
+def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: int = 0,
+             noise: str | NoiseConfig = "default", offsets: EMOffsets | str | None = None,
+             rate: float | None = None, imu_smooth_n: int = 4, acc_ends: str = "one_sided",
+             em_fill: str = "nan") -> SimulationResult:
+    """Simulate a sensor kit worn by a body performing ``motion``.
+
+    Args:
+        motion: the motion (pose, betas, trans at ``motion.fps``).
+        kit: kit name (:func:`wearpose.sensors.list_kits`) or a :class:`SensorKit`.
+        body: a :class:`wearpose.body.BodyModel` whose sites the kit names.
+        seed: seeds every random process of this call.
+        noise: ``"default"`` (the documented error models), ``"none"`` (ideal sensors, no
+            dropped frames) or a :class:`NoiseConfig`.
+        offsets: EM sensor offsets ``O_p`` (kit order of the EM sensors): an
+            :class:`EMOffsets` (its translation covariance, if any, is drawn from once for this
+            sequence, EM-POSE supp. 2.2), ``"random"`` for a synthetic subject
+            (:func:`wearpose.sensors.em.random_subject_offsets`), or ``None`` for identity (the
+            sensor is the skin frame of EM-POSE Eq. 3).
+        rate: override every sensor's rate (Hz); default: the kit's rates.
+        imu_smooth_n: acceleration stencil half-width at the sensor rate (TransPose/PIP: 4 at
+            60 Hz; 1 disables smoothing).
+        acc_ends: end handling of the acceleration (:func:`wearpose.sensors.imu.synthetic_acceleration`).
+        em_fill: value of dropped EM frames, ``"nan"`` or ``"zero"``.
+
+    Returns:
+        :class:`SimulationResult`.
+    """
+    if not isinstance(motion, MotionSequence):
+        raise ShapeError(f"simulate: motion must be a MotionSequence, got {type(motion).__name__}")
+    kit = get_kit(kit)
+    if rate is not None:
+        kit = kit.with_rate(rate)
+    cfg = _noise_config(noise)
+    sites, subs = resolve_sites(kit, body.site_names, getattr(body, "asset_id", "?"))
+
+    em_specs = kit.of_kind("em6dof")
+    em_off: EMOffsets | None = None
+    if em_specs:
+        if offsets is None:
+            em_off = EMOffsets.identity(len(em_specs))
+        elif isinstance(offsets, str):
+            if offsets != "random":
+                raise ConfigError(f"simulate: offsets must be an EMOffsets, 'random' or None, got {offsets!r}")
+            em_off = random_subject_offsets(len(em_specs), _generator(seed, "subject")).draw(_generator(seed, "offsets"))
+        else:
+            if offsets.num_sensors != len(em_specs):
+                raise ShapeError(f"simulate: {offsets.num_sensors} EM offsets for the {len(em_specs)} EM sensors of kit {kit.name!r}")
+            em_off = offsets.draw(_generator(seed, "offsets"))
+    em_index = {s.name: i for i, s in enumerate(em_specs)}
+
+    out: dict[str, SensorData] = {}
+    em_source: dict[float, dict[str, torch.Tensor]] = {}
+    for r in kit.rates:
+        group = [s for s in kit.sensors if float(s.rate) == r]
+        m = motion if abs(motion.fps - r) < 1e-9 else resample(motion, r)
+        T = m.num_frames
+        ts = torch.arange(T, dtype=torch.float64) / r
+        names = list(dict.fromkeys([sites[s.name] for s in group]
+                                   + ([sites["<em_source>"]] if any(s.kind == "em6dof" for s in group) else [])))
+        so = body.sites(m.pose, m.betas, m.trans, names)
+        col = {n: i for i, n in enumerate(names)}
+        P, R = so.positions, so.rotations  # (T, K, 3), (T, K, 3, 3)
+
+        def take(specs: list) -> tuple[torch.Tensor, torch.Tensor]:
+            idx = [col[sites[s.name]] for s in specs]
+            return R[:, idx], P[:, idx]
+
+        for kind in ("em6dof", "imu", "mimu", "vio"):
+            specs = [s for s in group if s.kind == kind]
+            if not specs:
+                continue
+            Rk, Pk = take(specs)
+            if kind == "em6dof":
+                src = col[sites["<em_source>"]]
+                sub = EMOffsets(em_off.R[[em_index[s.name] for s in specs]], em_off.t[[em_index[s.name] for s in specs]])
+                res_list = []
+                # One generator per sensor: simulate sensor by sensor (cheap; EM work is tiny).
+                for j, s in enumerate(specs):
+                    one = EMOffsets(sub.R[j:j + 1], sub.t[j:j + 1])
+                    res_list.append(simulate_em(Rk[:, j:j + 1], Pk[:, j:j + 1], R[:, src], P[:, src], r, offsets=one,
+                                                noise=cfg.em, fill=em_fill, generator=_generator(seed, s.name)))
+                em_source[r] = {"position": P[:, src].clone(), "orientation": R[:, src].clone()}
+                for s, res in zip(specs, res_list):
+                    out[s.name] = SensorData(s.name, kind, sites[s.name], r, ts, res["valid"][:, 0], "source",
+                                             position=res["position"][:, 0], orientation=res["orientation"][:, 0],
+                                             extras={"distance": res["distance"][:, 0],
+                                                     "world_position": res["world_position"][:, 0],
+                                                     "world_orientation": res["world_orientation"][:, 0]})
+            else:
+                for j, s in enumerate(specs):
+                    g = _generator(seed, s.name)
+                    Rj, Pj = Rk[:, j:j + 1], Pk[:, j:j + 1]
+                    if kind == "imu":
+                        res = simulate_imu(Rj, Pj, r, noise=cfg.imu, smooth_n=imu_smooth_n, ends=acc_ends, generator=g)
+                        out[s.name] = SensorData(s.name, kind, sites[s.name], r, ts, res["valid"], "world",
+                                                 orientation=res["orientation"][:, 0], acceleration=res["acceleration"][:, 0],
+                                                 angular_velocity=res["angular_velocity"][:, 0],
+                                                 specific_force=res["specific_force"][:, 0])
+                    elif kind == "mimu":
+                        res = simulate_mimu(Rj, Pj, r, noise=cfg.mimu, smooth_n=imu_smooth_n, ends=acc_ends, generator=g)
+                        out[s.name] = SensorData(s.name, kind, sites[s.name], r, ts, res["valid"], "world",
+                                                 orientation=res["orientation"][:, 0], acceleration=res["acceleration"][:, 0],
+                                                 angular_velocity=res["angular_velocity"][:, 0],
+                                                 specific_force=res["specific_force"][:, 0],
+                                                 magnetic_field=res["magnetic_field"][:, 0],
+                                                 extras={"yaw_error": res["yaw_error"][:, 0], "disturbance": res["disturbance"][:, 0]})
+                    else:
+                        res = simulate_vio(Rj, Pj, r, noise=cfg.vio, generator=g)
+                        out[s.name] = SensorData(s.name, kind, sites[s.name], r, ts, res["valid"], "world",
+                                                 position=res["position"][:, 0], orientation=res["orientation"][:, 0],
+                                                 extras={"yaw_drift": res["yaw_drift"][:, 0],
+                                                         "position_drift": res["position_drift"][:, 0]})
+    ordered = {s.name: out[s.name] for s in kit.sensors}
+    return SimulationResult(kit, ordered, int(seed), cfg, em_off, em_source, subs,
+                            {"body_asset": getattr(body, "asset_id", "?"), "motion_fps": motion.fps,
+                             "motion_frames": motion.num_frames})
