@@ -1,0 +1,544 @@
+"""Retarget a BVH clip onto SMPL's 24-joint tree.
+
+Method: global orientation transfer with a per-joint rest-pose correction.
+
+For every SMPL joint ``j`` mapped to a BVH joint ``b`` the SMPL global rotation is
+
+    ``G_j(t) = G_b(t) @ C_j``,   ``C_j = T_b^T``,
+
+where ``G_b(t)`` is the BVH joint's world rotation (BVH FK) and ``T_b`` is the rotation of BVH
+joint frame ``b`` **in a T-pose that matches SMPL's zero pose** (so at that T-pose ``G_j = I``,
+SMPL's zero pose). ``T_b`` is built from the skeleton's geometry, parents first, as
+``T_b = F(p_s, s_s) @ F(p_b, s_b)^T`` with ``F(p, s)`` the orthonormal frame whose first axis is
+``p`` and whose second lies in the ``(p, s)`` plane:
+
+- primary direction ``p``: the bone from the joint to its next mapped joint down the chain, in
+  SMPL's rest skeleton (``p_s``) and in the BVH joint's own frame (``p_b``, from the clip's local
+  translations). So every mapped bone of the retargeted skeleton points exactly where the BVH
+  bone points, in every frame.
+- secondary direction ``s`` (twist about the bone), chosen per joint:
+
+  * pelvis and spine3 (two+ children): the right-to-left vector between the hips / the collars.
+  * thighs, shins, upper arms and forearms: the **hinge axis of the knee / elbow**. In SMPL's
+    zero pose the knee flexes about ``+X`` and the elbow about ``-Y`` (left) / ``+Y`` (right),
+    written generally as ``normalize(cross(parent_bone, flexion_direction))`` with flexion moving
+    the shin backwards (``-Z``) and the forearm forwards (``+Z``). In the BVH the axis is the
+    normal of the cone the child bone sweeps in the parent frame (:func:`estimate_hinge_axis`),
+    signed so that flexion bends the limb; built-in
+    skeletons carry constants estimated this way over the corpus, any other skeleton (or
+    ``hinge="clip"``) estimates them from the clip itself. This anchors forearm/shin twist, which
+    body-worn sensors measure, to anatomy instead of to each rig's joint orients.
+  * every other mapped joint: **minimal twist relative to the parent's corrected frame** at the
+    BVH's zero pose: ``T_b = rotation_between(K p_b, p_s) @ K`` with ``K = T_parent`` (the
+    joint's own zero rotation relative to its parent). Leaves (no bone to a mapped child) take
+    ``T_b = K``. This is meaningful for the two corpus skeletons: CMU-Daz's zero pose is a
+    T-pose with world-aligned frames, and Bandai's zero pose is a straight chain along each
+    bone's local X (neck > head, forearm > hand, shin > foot).
+
+Joints SMPL has but the BVH does not (per map): ``spine2`` takes half of the spine1 -> spine3
+relative rotation (slerp at 0.5), the other half goes to spine3; hands (and CMU's SMPL ``foot``
+joints) get the identity local rotation (they follow their parent).
+
+Root translation: the SMPL pelvis joint is put on the BVH pelvis joint's world position, scaled
+about the world origin by ``scale = leg_smpl / leg_bvh``, where *leg* is the vertical distance
+from the pelvis joint down to the ankle joints in the T-pose (SMPL rest skeleton / BVH skeleton
+posed by ``T``). Scaling the whole trajectory (height and travel) keeps feet near the floor
+``y = 0`` and strides consistent with the shorter/longer legs:
+``trans(t) = scale * units * pelvis_bvh(t) - rest_joints[0]``.
+
+The two corpus BVH worlds are Y up, facing +Z with left at +X (the wearpose world), so only the
+unit scale (cm -> m) is applied to positions.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+import torch
+
+from wearpose.body.kinematics import forward_kinematics, global_to_local
+from wearpose.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS
+from wearpose.errors import ShapeError, WearposeError
+from wearpose.geometry import project_to_so3, rotation_between, slerp_matrix
+from wearpose.geometry.units import CM_TO_M
+from wearpose.motion.bvh import BvhMotion, BvhSkeleton, bvh_forward_kinematics
+from wearpose.motion.sequence import NUM_BETAS, MotionSequence
+
+
+class RetargetError(WearposeError, ValueError):
+    """A BVH skeleton cannot be mapped onto SMPL (unknown skeleton, missing joints)."""
+
+
+#: SMPL joint -> the SMPL joint its primary bone points to (``None``: leaf, no primary bone).
+#: spine1 points to spine3 because spine2 has no BVH counterpart in either corpus skeleton.
+_NEXT: dict[str, str | None] = {
+    "pelvis": "spine1", "spine1": "spine3", "spine2": "spine3", "spine3": "neck", "neck": "head", "head": None,
+    "left_collar": "left_shoulder", "right_collar": "right_shoulder",
+    "left_shoulder": "left_elbow", "right_shoulder": "right_elbow",
+    "left_elbow": "left_wrist", "right_elbow": "right_wrist",
+    "left_wrist": "left_hand", "right_wrist": "right_hand", "left_hand": None, "right_hand": None,
+    "left_hip": "left_knee", "right_hip": "right_knee", "left_knee": "left_ankle", "right_knee": "right_ankle",
+    "left_ankle": "left_foot", "right_ankle": "right_foot", "left_foot": None, "right_foot": None,
+}
+#: Joints whose twist comes from the vector between two other joints (left minus right).
+_LATERAL: dict[str, tuple[str, str]] = {"pelvis": ("left_hip", "right_hip"), "spine3": ("left_collar", "right_collar")}
+#: Hinge joints: (parent segment joint, flexion direction of the child bone in SMPL's world).
+_HINGES: dict[str, tuple[str, tuple[float, float, float]]] = {
+    "left_knee": ("left_hip", (0.0, 0.0, -1.0)), "right_knee": ("right_hip", (0.0, 0.0, -1.0)),
+    "left_elbow": ("left_shoulder", (0.0, 0.0, 1.0)), "right_elbow": ("right_shoulder", (0.0, 0.0, 1.0)),
+}
+#: Segment joint (thigh, upper arm) -> the hinge at its distal end.
+_SEGMENT_HINGE: dict[str, str] = {seg: h for h, (seg, _f) in _HINGES.items()}
+#: Bone pairs checked by :func:`bone_direction_errors` (SMPL joint names; the BVH bones are the
+#: mapped joints').
+BONE_PAIRS: tuple[tuple[str, str], ...] = (
+    ("pelvis", "spine1"), ("spine3", "neck"), ("neck", "head"),
+    ("left_hip", "left_knee"), ("right_hip", "right_knee"), ("left_knee", "left_ankle"), ("right_knee", "right_ankle"),
+    ("left_shoulder", "left_elbow"), ("right_shoulder", "right_elbow"),
+    ("left_elbow", "left_wrist"), ("right_elbow", "right_wrist"),
+)
+
+
+@dataclass(frozen=True)
+class SkeletonMap:
+    """How one BVH skeleton maps onto SMPL-24.
+
+    Attributes:
+        name: identifier stored in ``meta["skeleton"]``.
+        joints: SMPL joint name -> BVH joint name.
+        units_to_m: metres per file unit.
+        hinge_axes: optional constants per SMPL hinge joint (``left_knee``...):
+            ``(axis in the BVH parent joint's frame, axis in the BVH hinge joint's frame)``,
+            the knee/elbow flexion axis (signed: positive rotation flexes).
+        foot_joints: BVH joints whose lowest height is reported as the clip's floor.
+        description: one line on where the map and constants come from.
+    """
+
+    name: str
+    joints: Mapping[str, str]
+    units_to_m: float = CM_TO_M
+    hinge_axes: Mapping[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = field(default_factory=dict)
+    foot_joints: tuple[str, ...] = ()
+    description: str = ""
+
+
+#: CMU mocap, cgspeed "Daz-friendly" BVH (root ``hip``). SMPL spine2, feet and hands unmapped.
+CMU_DAZ = SkeletonMap(
+    name="cmu_daz",
+    joints={
+        "pelvis": "hip", "spine1": "abdomen", "spine3": "chest", "neck": "neck", "head": "head",
+        "left_collar": "lCollar", "right_collar": "rCollar", "left_shoulder": "lShldr", "right_shoulder": "rShldr",
+        "left_elbow": "lForeArm", "right_elbow": "rForeArm", "left_wrist": "lHand", "right_wrist": "rHand",
+        "left_hip": "lThigh", "right_hip": "rThigh", "left_knee": "lShin", "right_knee": "rShin",
+        "left_ankle": "lFoot", "right_ankle": "rFoot",
+    },
+    # Flexion axes from estimate_hinge_axes over 40 random CMU clips (per-clip spread: median
+    # 0.1-0.3 deg); the same axis is used in the parent and the hinge frame because CMU-Daz's
+    # zero pose is a straight, untwisted limb. The elbow axis is 30 deg off vertical in the
+    # rig's T-pose: the upper-arm twist is corrected by that much (SMPL's elbow hinge is +-Y).
+    # tests/motion/test_corpus.py re-estimates them.
+    hinge_axes={
+        "left_knee": ((1.0, -0.017, 0.001),) * 2, "right_knee": ((1.0, 0.017, -0.001),) * 2,
+        "left_elbow": ((-0.118, -0.859, 0.498),) * 2, "right_elbow": ((-0.119, 0.860, -0.496),) * 2,
+    },
+    foot_joints=("lFoot", "rFoot"),
+    description="CMU mocap via cgspeed Daz-friendly BVH (43 joints, root hip), centimetres",
+)
+
+#: Bandai Namco Research Motion Datasets 1/2 (root ``joint_Root`` > ``Hips``). SMPL spine2 and
+#: hands unmapped.
+BANDAI = SkeletonMap(
+    name="bandai",
+    joints={
+        "pelvis": "Hips", "spine1": "Spine", "spine3": "Chest", "neck": "Neck", "head": "Head",
+        "left_collar": "Shoulder_L", "right_collar": "Shoulder_R", "left_shoulder": "UpperArm_L", "right_shoulder": "UpperArm_R",
+        "left_elbow": "LowerArm_L", "right_elbow": "LowerArm_R", "left_wrist": "Hand_L", "right_wrist": "Hand_R",
+        "left_hip": "UpperLeg_L", "right_hip": "UpperLeg_R", "left_knee": "LowerLeg_L", "right_knee": "LowerLeg_R",
+        "left_ankle": "Foot_L", "right_ankle": "Foot_R", "left_foot": "Toes_L", "right_foot": "Toes_R",
+    },
+    # Flexion axes from estimate_hinge_axes over 40 random Bandai clips: knees flex about local
+    # +Y (spread < 0.2 deg), elbows about local -Y in the upper-arm frame (spread 5 deg). The elbow's
+    # own frame also carries forearm pronation (rotation about the bone, local X), so the axis
+    # seen in the forearm frame varies per clip; the constant uses the zero-twist forearm frame
+    # (Bandai's zero elbow rotation is a straight, untwisted arm), i.e. the same axis.
+    hinge_axes={
+        "left_knee": ((0.0, 1.0, 0.0),) * 2, "right_knee": ((0.0, 1.0, 0.0),) * 2,
+        "left_elbow": ((0.0, -1.0, 0.0),) * 2, "right_elbow": ((0.0, -1.0, 0.0),) * 2,
+    },
+    foot_joints=("Toes_L", "Toes_R", "Foot_L", "Foot_R"),
+    description="Bandai Namco Research Motion Dataset 1/2 BVH (22 joints, root joint_Root > Hips), centimetres",
+)
+
+BUILTIN_MAPS: dict[str, SkeletonMap] = {m.name: m for m in (CMU_DAZ, BANDAI)}
+
+
+def detect_skeleton_map(skeleton: BvhSkeleton, maps: Sequence[SkeletonMap] | None = None) -> SkeletonMap:
+    """The built-in map whose BVH joint names all occur in ``skeleton`` (best coverage wins).
+
+    Raises:
+        RetargetError: no map covers the skeleton's joints.
+    """
+    maps = list(BUILTIN_MAPS.values()) if maps is None else list(maps)
+    names = set(skeleton.names)
+    best, best_cov = None, 0.0
+    for m in maps:
+        cov = sum(b in names for b in m.joints.values()) / max(len(m.joints), 1)
+        if cov > best_cov:
+            best, best_cov = m, cov
+    if best is None or best_cov < 1.0:
+        known = ", ".join(f"{m.name} (root {m.joints['pelvis']!r})" for m in maps)
+        raise RetargetError(
+            f"no built-in SMPL joint map fits this BVH skeleton (root {skeleton.names[0]!r}, {skeleton.num_joints} joints); "
+            f"known skeletons: {known}; "
+            "pass a SkeletonMap for other skeletons")
+    return best
+
+
+# ---------------------------------------------------------------------------- small helpers
+def _unit(v: torch.Tensor) -> torch.Tensor:
+    return v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
+def _frame(p: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
+    """Orthonormal frame (columns) with axis 1 along ``p`` and axis 2 in the ``(p, s)`` plane."""
+    e1 = _unit(p)
+    s_perp = s - (s @ e1) * e1
+    if s_perp.norm() < 1e-6:
+        raise RetargetError("twist reference is parallel to the bone; cannot fix the twist")
+    e2 = _unit(s_perp)
+    return torch.stack([e1, e2, torch.linalg.cross(e1, e2)], dim=-1)
+
+
+def _path_to_ancestor(skel: BvhSkeleton, desc: int, anc: int) -> list[int] | None:
+    """Joints from ``desc`` up to (excluding) ``anc``, or None if ``anc`` is not an ancestor."""
+    path = []
+    j = desc
+    while j != anc:
+        if j < 0:
+            return None
+        path.append(j)
+        j = skel.parents[j]
+    return path
+
+
+def _rest_offsets(motion: BvhMotion) -> torch.Tensor:
+    """``(J, 3)`` local translations used as bone vectors: the per-joint median over the clip
+    (position channels replace OFFSETs; their median is robust to a stale header OFFSET)."""
+    return motion.translations.median(dim=0).values
+
+
+def _position_in(skel: BvhSkeleton, offsets: torch.Tensor, desc: int, anc: int) -> torch.Tensor | None:
+    """Position of joint ``desc`` in joint ``anc``'s frame at the BVH zero pose (file units)."""
+    path = _path_to_ancestor(skel, desc, anc)
+    if path is None:
+        return None
+    return offsets[path].sum(0)
+
+
+# ---------------------------------------------------------------------------- hinge axes
+def estimate_hinge_axis(local_rot: torch.Tensor, parent_bone: torch.Tensor, child_bone: torch.Tensor
+                        ) -> tuple[torch.Tensor, torch.Tensor, float]:
+    """Flexion axis of a hinge-like joint (knee, elbow) from its motion.
+
+    The child bone's direction seen from the parent frame, ``c_t = L_t u``, sweeps a cone about
+    the hinge axis, so the axis (in the parent frame) is the direction of least variance of
+    ``c_t`` -- exact for a pure hinge whatever the cone angle, and blind to twist about the child
+    bone (forearm pronation does not move the bone). In the hinge joint's own frame the axis is
+    ``Lm^T a_parent`` with ``Lm`` the chordal mean of ``L_t`` (exact for a pure hinge; with
+    pronation it is the axis at the clip's mean pronation).
+
+    Args:
+        local_rot: ``(T, 3, 3)`` the hinge joint's local rotation (child frame -> parent frame).
+        parent_bone: ``(3,)`` the parent segment's bone direction, in the parent's frame.
+        child_bone: ``(3,)`` the child segment's bone direction, in the child's frame.
+
+    Returns:
+        ``(axis_in_parent, axis_in_child, rms)``: unit axes, signed so that a positive rotation
+        about them increases the angle between the two bones (flexion), and the RMS spread of
+        the child bone direction, radians (about the RMS flexion; small means poorly determined).
+    """
+    L = local_rot.to(torch.float64)
+    u = _unit(child_bone.to(torch.float64))
+    c = L @ u  # (T, 3) child bone direction in the parent frame
+    c0 = c - c.mean(0)
+    evals, evecs = torch.linalg.eigh(c0.T @ c0 / max(len(c), 1))
+    a_parent = evecs[:, 0]
+    # Sign: flexion rotates the child bone away from the parent bone about +axis.
+    pb = _unit(parent_bone.to(torch.float64))
+    flex = torch.linalg.cross(pb.expand(len(c), 3), c, dim=-1).sum(0)
+    if float(flex @ a_parent) < 0:
+        a_parent = -a_parent
+    Lm = project_to_so3(L.mean(0))
+    a_child = _unit(Lm.T @ a_parent)
+    return a_parent, a_child, float(evals[-1].clamp_min(0).sqrt())
+
+
+def estimate_hinge_axes(motion: BvhMotion, smap: SkeletonMap) -> dict[str, tuple[torch.Tensor, torch.Tensor, float]]:
+    """:func:`estimate_hinge_axis` for the knees and elbows of ``motion`` under ``smap``.
+
+    Returns:
+        SMPL hinge joint name -> ``(axis in BVH parent frame, axis in BVH hinge frame, rms)``.
+    """
+    skel = motion.skeleton
+    offs = _rest_offsets(motion)
+    out = {}
+    for hinge, (seg, _flex) in _HINGES.items():
+        b_h, b_p = skel.index(smap.joints[hinge]), skel.index(smap.joints[seg])
+        if skel.parents[b_h] != b_p:
+            continue  # only direct parent-child hinges are estimated
+        nxt = _NEXT[hinge]
+        b_c = skel.index(smap.joints[nxt]) if nxt in smap.joints else None
+        if b_c is None:
+            continue
+        child_bone = _position_in(skel, offs, b_c, b_h)
+        parent_bone = offs[b_h]
+        out[hinge] = estimate_hinge_axis(motion.rotations[:, b_h], parent_bone, child_bone)
+    return out
+
+
+# ---------------------------------------------------------------------------- the T-pose
+@dataclass
+class TPose:
+    """The BVH skeleton's T-pose matching SMPL's zero pose.
+
+    Attributes:
+        rotations: SMPL joint index -> ``(3, 3)`` BVH joint frame -> world at the T-pose
+            (``T_b``; the correction is ``C_j = T_b^T``).
+        scale: SMPL/BVH leg-length ratio (dimensionless, applied after the unit change).
+        hinge_source: SMPL hinge joint -> ``"map"``, ``"clip"`` or ``"parent"`` (fallback).
+    """
+
+    rotations: dict[int, torch.Tensor]
+    scale: float
+    hinge_source: dict[str, str]
+
+
+def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
+                hinge: Literal["auto", "map", "clip"] = "auto", min_hinge_rms: float = math.radians(10.0)) -> TPose:
+    """Compute the per-joint T-pose frames ``T_b`` (see module doc) and the leg scale.
+
+    Args:
+        motion: the BVH clip (its local translations give the bone vectors; its knee/elbow
+            motion gives hinge axes when they are estimated from the clip).
+        smap: joint map.
+        rest_joints: ``(24, 3)`` SMPL rest joints, metres.
+        hinge: ``"map"`` use ``smap.hinge_axes``; ``"clip"`` estimate from this clip; ``"auto"``
+            map constants when present, else the clip (if its RMS flexion reaches
+            ``min_hinge_rms``), else minimal twist from the parent.
+    """
+    skel = motion.skeleton
+    rest = rest_joints.to(torch.float64)
+    offs = _rest_offsets(motion)
+    bidx = {s: skel.index(b) for s, b in smap.joints.items()}
+    clip_axes: dict[str, tuple[torch.Tensor, torch.Tensor, float]] | None = None
+    hinge_src: dict[str, str] = {}
+
+    def hinge_axes_for(h: str) -> tuple[torch.Tensor, torch.Tensor] | None:
+        nonlocal clip_axes
+        if hinge in ("auto", "map") and h in smap.hinge_axes:
+            hinge_src[h] = "map"
+            ap, ac = smap.hinge_axes[h]
+            return _unit(torch.tensor(ap, dtype=torch.float64)), _unit(torch.tensor(ac, dtype=torch.float64))
+        if hinge == "map":
+            raise RetargetError(f"skeleton map {smap.name!r} has no hinge axis for {h}")
+        if clip_axes is None:
+            clip_axes = estimate_hinge_axes(motion, smap)
+        if h in clip_axes and (hinge == "clip" or clip_axes[h][2] >= min_hinge_rms):
+            hinge_src[h] = "clip"
+            return clip_axes[h][0], clip_axes[h][1]
+        hinge_src[h] = "parent"
+        return None
+
+    def mapped_ancestor(j: int) -> int | None:
+        p = PARENTS[j]
+        while p >= 0 and JOINT_NAMES[p] not in bidx:
+            p = PARENTS[p]
+        return p if p >= 0 else None
+
+    def primary(name: str) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+        nxt = _NEXT[name]
+        if nxt is None:
+            return None, None
+        b = bidx[name]
+        p_s = rest[JOINT_INDEX[nxt]] - rest[JOINT_INDEX[name]]
+        if nxt in bidx:
+            p_b = _position_in(skel, offs, bidx[nxt], b)
+        else:
+            # No mapped counterpart (e.g. CMU's toe End Site for SMPL's foot, fingers for the
+            # hand): use the mean of the joint's child and End Site offsets, if any.
+            vecs = [offs[c] for c in skel.children(b)]
+            if b in skel.end_sites:
+                vecs += list(torch.from_numpy(skel.end_sites[b]))
+            p_b = torch.stack(vecs).mean(0) if vecs else None
+        if p_b is None or p_b.norm() < 1e-6:
+            return None, None
+        return p_s, p_b
+
+    T: dict[int, torch.Tensor] = {}
+    for j, name in enumerate(JOINT_NAMES):
+        if name not in bidx:
+            continue
+        b = bidx[name]
+        p_s, p_b = primary(name)
+        anc = mapped_ancestor(j)
+        K = T[anc] if anc is not None else torch.eye(3, dtype=torch.float64)
+        if anc is not None:
+            # Relative rotation of intermediate BVH joints at the zero pose is the identity.
+            if _path_to_ancestor(skel, b, bidx[JOINT_NAMES[anc]]) is None:
+                raise RetargetError(f"{smap.name}: BVH joint {smap.joints[name]} is not below {smap.joints[JOINT_NAMES[anc]]}")
+        s_pair: tuple[torch.Tensor, torch.Tensor] | None = None
+        if name in _LATERAL and p_b is not None:
+            l, r = _LATERAL[name]
+            if l in bidx and r in bidx:
+                s_s = rest[JOINT_INDEX[l]] - rest[JOINT_INDEX[r]]
+                s_b = _position_in(skel, offs, bidx[l], b) - _position_in(skel, offs, bidx[r], b)
+                s_pair = (s_s, s_b)
+        hname = name if name in _HINGES else _SEGMENT_HINGE.get(name)
+        if s_pair is None and p_b is not None and hname is not None and hname in bidx and _HINGES[hname][0] in bidx:
+            axes = hinge_axes_for(hname)
+            if axes is not None:
+                seg, flex = _HINGES[hname]
+                parent_bone_s = rest[JOINT_INDEX[hname]] - rest[JOINT_INDEX[seg]]
+                s_s = torch.linalg.cross(_unit(parent_bone_s), torch.tensor(flex, dtype=torch.float64), dim=-1)
+                s_pair = (s_s, axes[0] if name == seg else axes[1])
+        if s_pair is not None:
+            T[j] = _frame(p_s, s_pair[0]) @ _frame(p_b, s_pair[1]).T
+        elif p_b is not None:
+            T[j] = rotation_between(K @ p_b, p_s) @ K
+        else:
+            T[j] = K.clone()
+
+    # Leg scale: pelvis-to-ankle height in SMPL's rest pose / in the BVH T-pose.
+    def bvh_drop(side: str) -> float:
+        chain = ["pelvis", f"{side}_hip", f"{side}_knee", f"{side}_ankle"]
+        drop = 0.0
+        for a, c in zip(chain[:-1], chain[1:]):
+            v = _position_in(skel, offs, bidx[c], bidx[a])
+            if v is None:
+                raise RetargetError(f"{smap.name}: cannot measure the {side} leg")
+            drop -= float((T[JOINT_INDEX[a]] @ v)[1])
+        return drop * smap.units_to_m
+
+    smpl_drop = float(rest[0, 1] - 0.5 * (rest[JOINT_INDEX["left_ankle"], 1] + rest[JOINT_INDEX["right_ankle"], 1]))
+    bvh_leg = 0.5 * (bvh_drop("left") + bvh_drop("right"))
+    if bvh_leg <= 1e-6:
+        raise RetargetError(f"{smap.name}: legs do not point down in the T-pose (pelvis-to-ankle height {bvh_leg:.3f} m)")
+    return TPose(T, smpl_drop / bvh_leg, hinge_src)
+
+
+# ---------------------------------------------------------------------------- retargeting
+@dataclass
+class Retargeted:
+    """Result of :func:`retarget_bvh`.
+
+    Attributes:
+        sequence: the SMPL motion (float32).
+        tpose: the T-pose used (corrections ``C_j = tpose.rotations[j].T``).
+        smap: the joint map used.
+        bvh_world_pos: ``(T, J, 3)`` BVH joint world positions, metres (unscaled; for checks).
+        lowest_foot_y: lowest SMPL foot joint height (ankles and feet) over the clip, metres.
+        lowest_bvh_foot_y: lowest BVH ``smap.foot_joints`` height over the clip, metres, scaled
+            like the SMPL root (so comparable with ``lowest_foot_y``).
+    """
+
+    sequence: MotionSequence
+    tpose: TPose
+    smap: SkeletonMap
+    bvh_world_pos: torch.Tensor
+    lowest_foot_y: float
+    lowest_bvh_foot_y: float
+    bvh_names: tuple[str, ...] = ()
+
+
+def retarget_bvh(motion: BvhMotion, rest_joints: torch.Tensor, smap: SkeletonMap | None = None,
+                 betas: torch.Tensor | None = None, hinge: Literal["auto", "map", "clip"] = "auto",
+                 meta: Mapping[str, Any] | None = None) -> Retargeted:
+    """Retarget a BVH clip to SMPL-24 (method in the module doc).
+
+    Args:
+        motion: parsed BVH (:func:`wearpose.motion.read_bvh`), ``T`` frames.
+        rest_joints: ``(24, 3)`` SMPL rest joints for ``betas``, metres (``BodyModel.rest_joints``).
+        smap: joint map; detected from the joint names when ``None``.
+        betas: ``(10,)`` shape stored in the sequence (zeros by default).
+        hinge: where knee/elbow hinge axes come from (see :func:`solve_tpose`).
+        meta: extra entries for ``sequence.meta``.
+
+    Returns:
+        :class:`Retargeted` whose ``sequence`` has ``pose`` ``(T, 24, 3, 3)``, ``trans`` ``(T, 3)``
+        metres (Y-up world) and ``fps = 1 / frame_time``.
+    """
+    if tuple(rest_joints.shape) != (NUM_JOINTS, 3):
+        raise ShapeError(f"rest_joints: expected ({NUM_JOINTS}, 3) metres, got {tuple(rest_joints.shape)}")
+    smap = smap or detect_skeleton_map(motion.skeleton)
+    skel = motion.skeleton
+    rest = rest_joints.to(torch.float64)
+    tpose = solve_tpose(motion, smap, rest, hinge=hinge)
+    G_b, P_b = bvh_forward_kinematics(motion)
+    Tn = motion.num_frames
+    eye = torch.eye(3, dtype=torch.float64).expand(Tn, 3, 3)
+    G: list[torch.Tensor | None] = [None] * NUM_JOINTS
+    for j, name in enumerate(JOINT_NAMES):
+        if name in smap.joints:
+            G[j] = G_b[:, skel.index(smap.joints[name])] @ tpose.rotations[j].T
+    for j, name in enumerate(JOINT_NAMES):
+        if G[j] is not None:
+            continue
+        parent = G[PARENTS[j]] if PARENTS[j] >= 0 else eye
+        if name == "spine2" and G[3] is not None and G[9] is not None:
+            # Half of the spine1 -> spine3 relative rotation (slerp at 0.5).
+            rel = G[3].transpose(-1, -2) @ G[9]
+            G[j] = G[3] @ slerp_matrix(eye, rel, torch.full((Tn,), 0.5, dtype=torch.float64))
+        else:
+            G[j] = parent.clone()  # identity local rotation (hands, unmapped feet)
+    G_all = torch.stack(G, dim=1)  # type: ignore[arg-type]
+    pose = global_to_local(G_all)
+    pelvis_b = P_b[:, skel.index(smap.joints["pelvis"])] * smap.units_to_m
+    trans = tpose.scale * pelvis_b - rest[0]
+    b = torch.zeros(NUM_BETAS, dtype=torch.float64) if betas is None else betas.to(torch.float64)
+    _, joints = forward_kinematics(pose, rest)
+    joints = joints + trans[:, None]
+    feet = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
+    lowest = float(joints[:, feet, 1].min())
+    bvh_feet = [skel.index(n) for n in smap.foot_joints if n in skel.names]
+    lowest_bvh = float((P_b[:, bvh_feet, 1] * smap.units_to_m * tpose.scale).min()) if bvh_feet else float("nan")
+    m: dict[str, Any] = {
+        "source_format": "bvh", "skeleton": smap.name, "source_fps": motion.fps,
+        "retarget": {"method": "global-orientation transfer with rest-pose correction", "leg_scale": tpose.scale,
+                     "hinge_axes": tpose.hinge_source, "lowest_foot_y": lowest, "lowest_bvh_foot_y": lowest_bvh},
+    }
+    if motion.path is not None:
+        m["source_file"] = str(motion.path)
+    m.update(dict(meta or {}))
+    seq = MotionSequence(pose.to(torch.float32), b.to(torch.float32), trans.to(torch.float32), motion.fps, m)
+    return Retargeted(seq, tpose, smap, P_b * smap.units_to_m, lowest, lowest_bvh, skel.names)
+
+
+def bone_direction_errors(result: Retargeted, rest_joints: torch.Tensor,
+                          pairs: Sequence[tuple[str, str]] = BONE_PAIRS) -> dict[str, np.ndarray]:
+    """Per-frame angle (radians) between each retargeted SMPL bone and its BVH bone.
+
+    SMPL bones come from ``forward_kinematics(pose, rest_joints)``; BVH bones from the clip's own
+    FK. Pairs whose joints are not both mapped are skipped.
+
+    Returns:
+        ``"a->b"`` -> ``(T,)`` angles in radians.
+    """
+    seq = result.sequence
+    _, J = forward_kinematics(seq.pose.to(torch.float64), rest_joints.to(torch.float64))
+    mapped = result.smap.joints
+    out = {}
+    P = result.bvh_world_pos
+    names = list(result.bvh_names)
+    for a, b in pairs:
+        if a not in mapped or b not in mapped:
+            continue
+        ds = _unit(J[:, JOINT_INDEX[b]] - J[:, JOINT_INDEX[a]])
+        db = _unit(P[:, names.index(result.smap.joints[b])] - P[:, names.index(result.smap.joints[a])])
+        cos = (ds * db).sum(-1).clamp(-1.0, 1.0)
+        out[f"{a}->{b}"] = torch.arccos(cos).numpy()
+    return out
+

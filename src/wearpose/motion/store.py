@@ -1,0 +1,322 @@
+"""The prepared corpus: every clip converted once to a :class:`MotionSequence` file plus an index.
+
+Layout of a cache directory::
+
+    <cache>/index.json                          clip table, failures, settings
+    <cache>/clips/<source>/<subject>/<clip>.npz MotionSequence files (MotionSequence.save)
+
+Clip ids are ``"<source>/<subject>/<clip>"`` (clip names repeat across subjects, e.g. ``01``).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import os
+import tempfile
+import time
+from collections.abc import Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from wearpose.errors import ConfigError, InputFileError, WearposeError
+from wearpose.motion.amass import read_amass
+from wearpose.motion.bvh import read_bvh
+from wearpose.motion.paths import cache_dir as default_cache_dir
+from wearpose.motion.paths import data_dir as default_data_dir
+from wearpose.motion.resample import resample
+from wearpose.motion.retarget import retarget_bvh
+from wearpose.motion.sequence import MotionSequence
+from wearpose.motion.template import default_rest_joints
+
+INDEX_NAME = "index.json"
+INDEX_VERSION = 1
+#: Bump when the conversion changes so that existing caches are rebuilt.
+CONVERTER_VERSION = "motion-1"
+SPLITS = ("train", "val", "test")
+_SUFFIXES = (".bvh", ".bvh.gz", ".npz")
+
+
+def _hash_split(subject: str) -> str:
+    """Deterministic split for folders without a manifest: 80/10/10 by a hash of the subject."""
+    h = int(hashlib.sha1(subject.encode("utf-8")).hexdigest()[:8], 16) / 2**32
+    return "train" if h < 0.8 else ("val" if h < 0.9 else "test")
+
+
+def _clip_name(p: Path) -> str:
+    n = p.name
+    for s in (".bvh.gz", ".bvh", ".npz"):
+        if n.endswith(s):
+            return n[: -len(s)]
+    return p.stem
+
+
+def _read_manifest(data: Path) -> list[dict[str, Any]]:
+    path = data / "manifest.csv"
+    need = ("path", "source", "subject", "clip", "split")
+    with open(path, newline="", encoding="utf-8") as f:
+        reader = csv.DictReader(f)
+        missing = [c for c in need if c not in (reader.fieldnames or [])]
+        if missing:
+            raise InputFileError(path, f"missing columns {missing}", f"a CSV header with at least {', '.join(need)}", field="header")
+        rows = list(reader)
+    out = []
+    for i, r in enumerate(rows, start=2):
+        rel = r["path"]
+        # Paths in the corpus manifest are relative to shared/ (i.e. start with data/).
+        cands = [data / rel, data.parent / rel]
+        if rel.startswith(data.name + "/"):
+            cands.insert(0, data / rel[len(data.name) + 1:])
+        src = next((c for c in cands if c.exists()), cands[0])
+        if r["split"] not in SPLITS:
+            raise InputFileError(path, f"split {r['split']!r}", f"one of {SPLITS}", field=f"line {i}, split")
+        out.append({
+            "file": src, "source": r["source"], "subject": r["subject"], "clip": r["clip"], "split": r["split"],
+            "licence": r.get("licence", "unknown") or "unknown", "description": r.get("description", ""),
+            "skip_first": r.get("frame0_is_tpose", "0").strip() == "1",
+        })
+    return out
+
+
+def _scan_folders(folders: Sequence[Path]) -> list[dict[str, Any]]:
+    out = []
+    for root in folders:
+        files = sorted(p for p in root.rglob("*") if p.is_file() and p.name.endswith(_SUFFIXES))
+        for p in files:
+            subject = p.parent.name if p.parent != root else root.name
+            rel = p.relative_to(root)
+            source = rel.parts[0] if len(rel.parts) > 2 else root.name
+            out.append({"file": p, "source": source, "subject": subject, "clip": _clip_name(p),
+                        "split": _hash_split(subject), "licence": "unknown", "description": "", "skip_first": False})
+    return out
+
+
+def _stamp(path: Path, fps: float | None, rest_key: str) -> str:
+    st = path.stat()
+    return f"{CONVERTER_VERSION}|{st.st_size}|{st.st_mtime_ns}|{fps}|{rest_key}"
+
+
+def _convert_one(job: dict[str, Any]) -> dict[str, Any]:
+    """Worker: one source file -> one MotionSequence file. Never raises (errors are returned)."""
+    torch.set_num_threads(1)  # one process per core; intra-op threads would only contend
+    src = Path(job["file"])
+    try:
+        rest = torch.tensor(job["rest_joints"], dtype=torch.float64)
+        meta = {"source_file": str(src), "subject": job["subject"], "clip": job["clip"], "split": job["split"],
+                "licence": job["licence"], "source": job["source"], "description": job["description"],
+                "rest_joints_source": job["rest_source"]}
+        if src.name.endswith(".npz"):
+            seq = read_amass(src, rest)
+            seq.meta.update(meta)
+        else:
+            seq = retarget_bvh(read_bvh(src), rest, meta=meta).sequence
+        if job["skip_first"] and seq.num_frames > 1:
+            seq = seq.slice(1)  # the converter's T-pose, not captured motion
+            seq.meta["skipped_frame0"] = True
+        if job["fps"] is not None:
+            seq = resample(seq, job["fps"])
+        seq.save(job["out"])
+        return {"ok": True, "id": job["id"], "frames": seq.num_frames, "fps": seq.fps, "seconds": seq.duration,
+                "skeleton": seq.meta.get("skeleton"),
+                "lowest_foot_y": seq.meta.get("retarget", {}).get("lowest_foot_y")}
+    except Exception as exc:  # noqa: BLE001 - one bad file must not stop the corpus
+        kind = "" if isinstance(exc, WearposeError) else f"{type(exc).__name__}: "
+        return {"ok": False, "id": job["id"], "error": f"{kind}{exc}"}
+
+
+def _write_json(path: Path, obj: Any) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        json.dump(obj, f, indent=1, sort_keys=True)
+    os.replace(tmp, path)
+
+
+def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, cache_dir: str | Path | None = None,
+                   fps: float | None = None, progress: bool = True, workers: int | None = None,
+                   rest_joints: torch.Tensor | None = None, limit: int | None = None) -> dict[str, Any]:
+    """Convert every corpus clip to a MotionSequence file in ``cache_dir`` and write the index.
+
+    Args:
+        data_dir: corpus folder with ``manifest.csv`` (default :func:`wearpose.motion.paths.data_dir`);
+            or folder(s) without a manifest, in which case every ``.bvh``/``.bvh.gz``/``.npz``
+            below them is converted, subject = parent folder name, split = hash of the subject.
+        cache_dir: output (default :func:`wearpose.motion.paths.cache_dir`).
+        fps: resample every clip to this rate; ``None`` keeps each clip's own rate.
+        progress: show a ``rich`` progress bar.
+        workers: processes (default: ``min(2, os.cpu_count())``); ``1`` runs in this process.
+        rest_joints: ``(24, 3)`` SMPL rest joints, metres (default: the body model at betas = 0,
+            else the SMPL-like template).
+        limit: convert only the first ``limit`` clips (for quick checks).
+
+    Returns:
+        ``{"converted", "skipped", "failed", "seconds", "failures": {clip_id: error}, "index": path}``.
+        Conversion is idempotent: entries whose source file, settings and output are unchanged are
+        skipped. A failing file is recorded (in the index too) and the rest carries on.
+    """
+    t0 = time.perf_counter()
+    if data_dir is None or isinstance(data_dir, (str, Path)):
+        data = default_data_dir(data_dir)
+        jobs_src = _read_manifest(data) if (data / "manifest.csv").is_file() else _scan_folders([data])
+    else:
+        folders = [Path(d) for d in data_dir]
+        for d in folders:
+            if not d.is_dir():
+                raise ConfigError(f"data folder {d} does not exist")
+        jobs_src = _scan_folders(folders)
+    if limit is not None:
+        jobs_src = jobs_src[:limit]
+    cache = default_cache_dir(cache_dir)
+    cache.mkdir(parents=True, exist_ok=True)
+    if rest_joints is None:
+        rest_joints, rest_source = default_rest_joints()
+    else:
+        rest_source = "argument"
+    rest_list = rest_joints.to(torch.float64).tolist()
+    rest_key = hashlib.sha1(json.dumps([round(x, 7) for r in rest_list for x in r]).encode()).hexdigest()[:12]
+
+    index_path = cache / INDEX_NAME
+    old: dict[str, Any] = {}
+    if index_path.is_file():
+        try:
+            old = json.loads(index_path.read_text(encoding="utf-8")).get("clips", {})
+        except (ValueError, OSError):
+            old = {}
+    clips: dict[str, Any] = {}
+    failures: dict[str, str] = {}
+    todo: list[dict[str, Any]] = []
+    seen: set[str] = set()
+    for r in jobs_src:
+        cid = f"{r['source']}/{r['subject']}/{r['clip']}"
+        if cid in seen:
+            failures[cid] = f"duplicate clip id (second file {r['file']})"
+            continue
+        seen.add(cid)
+        rel_out = Path("clips") / r["source"] / r["subject"] / f"{r['clip']}.npz"
+        entry = {"id": cid, "clip": r["clip"], "subject": r["subject"], "source": r["source"], "split": r["split"],
+                 "licence": r["licence"], "description": r["description"], "file": rel_out.as_posix(),
+                 "source_file": str(r["file"])}
+        if not Path(r["file"]).is_file():
+            failures[cid] = str(InputFileError(r["file"], "file not found", "the clip listed in manifest.csv"))
+            continue
+        stamp = _stamp(Path(r["file"]), fps, rest_key)
+        entry["stamp"] = stamp
+        prev = old.get(cid)
+        if prev and prev.get("stamp") == stamp and (cache / rel_out).is_file():
+            clips[cid] = prev
+            continue
+        clips[cid] = entry
+        todo.append({**r, "file": str(r["file"]), "id": cid, "out": str(cache / rel_out), "fps": fps,
+                     "rest_joints": rest_list, "rest_source": rest_source})
+    skipped = len(clips) - len(todo)
+
+    def finish(res: dict[str, Any]) -> None:
+        cid = res["id"]
+        if res["ok"]:
+            clips[cid].update({k: res[k] for k in ("frames", "fps", "seconds", "skeleton", "lowest_foot_y")})
+        else:
+            failures[cid] = res["error"]
+            clips.pop(cid, None)
+
+    n_workers = workers if workers is not None else min(2, os.cpu_count() or 1)
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    columns = (TextColumn("[bold]preparing motion corpus"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+               TimeRemainingColumn())
+    with Progress(*columns, disable=not progress or not todo, transient=False) as bar:
+        task = bar.add_task("convert", total=len(todo))
+        if n_workers <= 1 or len(todo) <= 1:
+            for job in todo:
+                finish(_convert_one(job))
+                bar.advance(task)
+        else:
+            # Biggest files first so that the two workers finish together.
+            todo.sort(key=lambda j: -Path(j["file"]).stat().st_size)
+            with ProcessPoolExecutor(max_workers=n_workers) as ex:
+                futures = [ex.submit(_convert_one, job) for job in todo]
+                for fut in as_completed(futures):
+                    finish(fut.result())
+                    bar.advance(task)
+
+    index = {"format": "wearpose.motion.index", "version": INDEX_VERSION, "converter": CONVERTER_VERSION,
+             "fps": fps, "rest_joints_source": rest_source, "rest_joints": rest_list,
+             "clips": dict(sorted(clips.items())), "failures": dict(sorted(failures.items()))}
+    _write_json(index_path, index)
+    return {"converted": len(todo) - sum(1 for j in todo if j["id"] in failures), "skipped": skipped,
+            "failed": len(failures), "failures": failures, "seconds": time.perf_counter() - t0, "index": str(index_path)}
+
+
+class CorpusStore:
+    """Read access to a prepared cache (:func:`prepare_corpus`).
+
+    Args:
+        cache_dir: the cache (default :func:`wearpose.motion.paths.cache_dir`).
+
+    Raises:
+        InputFileError: no (valid) ``index.json`` in the cache.
+    """
+
+    def __init__(self, cache_dir: str | Path | None = None):
+        self.root = default_cache_dir(cache_dir)
+        path = self.root / INDEX_NAME
+        if not path.is_file():
+            raise InputFileError(path, "no prepared corpus index", "an index.json written by prepare_corpus (run it first)")
+        try:
+            index = json.loads(path.read_text(encoding="utf-8"))
+        except ValueError as exc:
+            raise InputFileError(path, f"invalid JSON ({exc})", "an index.json written by prepare_corpus") from exc
+        if index.get("format") != "wearpose.motion.index" or index.get("version") != INDEX_VERSION:
+            raise InputFileError(path, f"format {index.get('format')!r} version {index.get('version')!r}",
+                                 f"format 'wearpose.motion.index' version {INDEX_VERSION}", field="format")
+        self.index = index
+        self.entries: dict[str, dict[str, Any]] = index["clips"]
+        self.failures: dict[str, str] = index.get("failures", {})
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def clips(self, split: str | Iterable[str] | None = None, source: str | Iterable[str] | None = None,
+              licence: str | Iterable[str] | None = None) -> list[str]:
+        """Sorted clip ids, optionally filtered (each filter: one value or several)."""
+        def ok(value: str, f: str | Iterable[str] | None) -> bool:
+            return f is None or (value == f if isinstance(f, str) else value in set(f))
+        return sorted(cid for cid, e in self.entries.items()
+                      if ok(e["split"], split) and ok(e["source"], source) and ok(e["licence"], licence))
+
+    def entry(self, clip_id: str) -> dict[str, Any]:
+        """The index row of ``clip_id`` (KeyError naming the id if absent)."""
+        try:
+            return self.entries[clip_id]
+        except KeyError:
+            raise KeyError(f"clip {clip_id!r} is not in the prepared corpus at {self.root}") from None
+
+    def load(self, clip_id: str, dtype: torch.dtype = torch.float32) -> MotionSequence:
+        """The clip's :class:`MotionSequence`."""
+        return MotionSequence.load(self.root / self.entry(clip_id)["file"], dtype=dtype)
+
+    def summary(self) -> dict[str, Any]:
+        """Counts and minutes: ``{"clips", "subjects", "minutes", "minutes_per_split",
+        "minutes_per_source", "minutes_per_licence", "clips_per_split", "frame_rates", "failures"}``."""
+        def add(d: dict[str, float], k: str, v: float) -> None:
+            d[k] = d.get(k, 0.0) + v
+        per_split: dict[str, float] = {}
+        per_source: dict[str, float] = {}
+        per_lic: dict[str, float] = {}
+        n_split: dict[str, float] = {}
+        rates: dict[str, float] = {}
+        for e in self.entries.values():
+            m = float(e.get("seconds", 0.0)) / 60.0
+            add(per_split, e["split"], m)
+            add(per_source, e["source"], m)
+            add(per_lic, e["licence"], m)
+            add(n_split, e["split"], 1)
+            add(rates, f"{float(e.get('fps', 0)):g}", 1)
+        r = lambda d: {k: round(v, 2) for k, v in sorted(d.items())}  # noqa: E731
+        return {"clips": len(self.entries), "subjects": len({(e["source"], e["subject"]) for e in self.entries.values()}),
+                "minutes": round(sum(per_split.values()), 2), "minutes_per_split": r(per_split),
+                "minutes_per_source": r(per_source), "minutes_per_licence": r(per_lic),
+                "clips_per_split": {k: int(v) for k, v in sorted(n_split.items())},
+                "frame_rates": {k: int(v) for k, v in sorted(rates.items())}, "failures": len(self.failures)}

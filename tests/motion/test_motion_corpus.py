@@ -1,0 +1,113 @@
+"""Integration tests on the shared motion corpus (marker ``corpus``; skipped without the data).
+
+Acceptance for retargeting: the retargeted SMPL skeleton's bones (FK with the rest joints) point
+along the BVH's corresponding bones (mean angle < 10 deg per bone over the clip); a Bandai walk
+stays upright and faces its travel direction; the built-in hinge constants agree with the clips.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from wearpose.body.kinematics import forward_kinematics
+from wearpose.geometry import matrix_to_axis_angle
+from wearpose.motion import (
+    BUILTIN_MAPS, CorpusStore, bone_direction_errors, estimate_hinge_axes, prepare_corpus, read_bvh, retarget_bvh,
+    template_rest_joints,
+)
+from motion_testutils import corpus_dir
+
+DATA = corpus_dir()
+pytestmark = [
+    pytest.mark.corpus,
+    pytest.mark.skipif(DATA is None, reason="motion corpus not found: set WEARPOSE_DATA or place it at ../shared/data"),
+]
+REST = template_rest_joints()
+
+CLIPS = {
+    "cmu_walk": "cmu_daz/07/07_01.bvh.gz",
+    "cmu_jump": "cmu_daz/02/02_04.bvh.gz",
+    "bandai_walk": "bandai/bandai-C/dataset-2_walk_normal_001.bvh.gz",
+    "bandai_raise": "bandai/bandai-C/dataset-2_raise-up-left-hand_masculine_001.bvh.gz",
+}
+
+
+def _clip(key: str) -> Path:
+    p = DATA / CLIPS[key]
+    if not p.is_file():
+        pytest.skip(f"corpus clip {CLIPS[key]} not present")
+    return p
+
+
+@pytest.mark.parametrize("key", list(CLIPS))
+def test_bone_directions_match(key: str) -> None:
+    motion = read_bvh(_clip(key))
+    res = retarget_bvh(motion, REST)
+    assert res.smap.name == key.split("_")[0].replace("cmu", "cmu_daz")
+    errs = bone_direction_errors(res, REST)
+    assert len(errs) == 11
+    for bone, e in errs.items():
+        assert math.degrees(float(np.mean(e))) < 10.0, (bone, math.degrees(float(np.mean(e))))
+    # Feet near the floor (y = 0): the lowest SMPL foot/ankle joint within 15 cm of it.
+    assert -0.15 < res.lowest_foot_y < 0.15
+
+
+def test_bandai_walk_upright_and_facing_travel() -> None:
+    res = retarget_bvh(read_bvh(_clip("bandai_walk")), REST)
+    seq = res.sequence
+    G, J = forward_kinematics(seq.pose.double(), REST)
+    J = J + seq.trans.double()[:, None]
+    assert bool((J[:, 15, 1] - J[:, 0, 1] > 0.4).all())  # head well above pelvis in every frame
+    up = G[:, 12, :, 1]  # neck's +Y axis in the world: upright
+    assert float(up[:, 1].min()) > 0.7
+    travel = J[-1, 0] - J[0, 0]
+    travel[1] = 0
+    assert float(travel.norm()) > 2.0
+    fwd = G[:, 0, :, 2].mean(0)  # pelvis +Z (SMPL's forward)
+    fwd[1] = 0
+    angle = math.degrees(math.acos(float(torch.dot(fwd, travel) / fwd.norm() / travel.norm())))
+    assert angle < 20.0
+    # The left hip joint is on the body's left: +X of the pelvis frame points to it.
+    left = J[:, 1] - J[:, 2]
+    assert float((left * G[:, 0, :, 0]).sum(-1).min()) > 0
+
+
+@pytest.mark.parametrize("key", ["cmu_walk", "bandai_walk"])
+def test_hinge_constants_agree_with_the_clip(key: str) -> None:
+    motion = read_bvh(_clip(key))
+    smap = BUILTIN_MAPS["cmu_daz" if key.startswith("cmu") else "bandai"]
+    est = estimate_hinge_axes(motion, smap)
+    for hinge in ("left_knee", "right_knee", "left_elbow", "right_elbow"):
+        a_par, _, rms = est[hinge]
+        if rms < math.radians(10):
+            continue
+        const = torch.tensor(smap.hinge_axes[hinge][0], dtype=torch.float64)
+        ang = math.degrees(math.acos(min(1.0, float(a_par @ const / const.norm()))))
+        assert ang < 8.0, (hinge, ang)
+
+
+def test_retargeted_knees_bend_about_smpl_x() -> None:
+    """Twist check: with the hinge correction the SMPL knee's local rotation is mostly about +X
+    (SMPL's knee axis) for both sources."""
+    for key in ("cmu_walk", "bandai_walk"):
+        pose = retarget_bvh(read_bvh(_clip(key)), REST).sequence.pose.double()
+        for j in (4, 5):
+            w = matrix_to_axis_angle(pose[:, j])
+            evals, evecs = torch.linalg.eigh(w.T @ w)
+            axis = evecs[:, -1]
+            assert abs(float(axis[0])) > math.cos(math.radians(20)), (key, j, axis)
+
+
+def test_prepare_a_few_corpus_clips(tmp_path: Path) -> None:
+    r = prepare_corpus(DATA, tmp_path, progress=False, workers=1, rest_joints=REST, limit=3)
+    assert r["failed"] == 0 and r["converted"] == 3
+    store = CorpusStore(tmp_path)
+    cid = store.clips()[0]
+    seq = store.load(cid)
+    e = store.entry(cid)
+    assert seq.meta["skipped_frame0"] and e["frames"] == seq.num_frames and seq.fps == 60.0

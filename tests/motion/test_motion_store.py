@@ -1,0 +1,131 @@
+"""Corpus store on a tiny synthetic corpus (manifest and folder modes), and path resolution."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import os
+from pathlib import Path
+
+import pytest
+import torch
+
+from wearpose.errors import ConfigError, InputFileError
+from wearpose.motion import (
+    BANDAI, CorpusStore, MotionSequence, cache_dir, data_dir, prepare_corpus, save_amass, template_rest_joints,
+)
+from wearpose.motion.store import _hash_split
+from motion_testutils import synthetic_bvh_from_smpl, synthetic_smpl_motion
+
+REST = template_rest_joints()
+
+
+def bandai_like_bvh(seed: int = 0, T: int = 20) -> str:
+    local, pelvis = synthetic_smpl_motion(REST, T=T, seed=seed)
+    text, _ = synthetic_bvh_from_smpl(REST, local, pelvis, seed=seed + 1)
+    # Rename longest names first so that J_left_hip does not clobber J_left_hip...
+    for smpl, b in sorted(BANDAI.joints.items(), key=lambda kv: -len(kv[0])):
+        text = text.replace(f"J_{smpl}\n", f"{b}\n")
+    return text
+
+
+def write_gz(path: Path, text: str) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with gzip.open(path, "wt") as f:
+        f.write(text)
+    return path
+
+
+@pytest.fixture()
+def corpus(tmp_path: Path) -> Path:
+    data = tmp_path / "data"
+    write_gz(data / "bandai" / "s1" / "walk.bvh.gz", bandai_like_bvh(0))
+    write_gz(data / "bandai" / "s2" / "wave.bvh.gz", bandai_like_bvh(1, T=31))
+    write_gz(data / "bandai" / "s2" / "broken.bvh.gz", bandai_like_bvh(2).replace("Frames: 20", "Frames: 25"))
+    rows = [
+        "path,source,subject,clip,description,frames,fps,seconds,split,licence,frame0_is_tpose",
+        "data/bandai/s1/walk.bvh.gz,bandai,s1,walk,walk,20,30,0.667,train,CC-BY-NC-4.0,1",
+        "data/bandai/s2/wave.bvh.gz,bandai,s2,wave,wave,31,30,1.033,test,CC-BY-NC-4.0,0",
+        "data/bandai/s2/broken.bvh.gz,bandai,s2,broken,x,20,30,0.667,test,CC-BY-NC-4.0,0",
+        "data/bandai/s2/gone.bvh.gz,bandai,s2,gone,x,20,30,0.667,val,CC-BY-NC-4.0,0",
+    ]
+    (data / "manifest.csv").write_text("\n".join(rows) + "\n")
+    return data
+
+
+def test_prepare_with_manifest(corpus: Path, tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    r = prepare_corpus(corpus, cache, progress=False, workers=1, rest_joints=REST)
+    assert r["converted"] == 2 and r["skipped"] == 0 and r["failed"] == 2
+    assert "truncated" in r["failures"]["bandai/s2/broken"] and "not found" in r["failures"]["bandai/s2/gone"]
+    store = CorpusStore(cache)
+    assert store.clips() == ["bandai/s1/walk", "bandai/s2/wave"]
+    assert store.clips(split="test") == ["bandai/s2/wave"] and store.clips(source="cmu_daz") == []
+    assert store.clips(licence=["CC-BY-NC-4.0"], split=("train", "test")) == ["bandai/s1/walk", "bandai/s2/wave"]
+    walk = store.load("bandai/s1/walk")
+    assert walk.num_frames == 19 and walk.meta["skipped_frame0"] and walk.meta["split"] == "train"  # T-pose frame dropped
+    assert walk.meta["skeleton"] == "bandai" and walk.fps == 30.0
+    e = store.entry("bandai/s2/wave")
+    assert e["frames"] == 31 and e["seconds"] == pytest.approx(31 / 30) and e["licence"] == "CC-BY-NC-4.0"
+    s = store.summary()
+    assert s["clips"] == 2 and s["subjects"] == 2 and s["failures"] == 2
+    assert s["minutes_per_split"] == {"test": round(31 / 30 / 60, 2), "train": round(19 / 30 / 60, 2)}
+    assert s["frame_rates"] == {"30": 2}
+    with pytest.raises(KeyError, match="nope"):
+        store.load("nope")
+
+    # Idempotent: nothing to do the second time; a touched source is converted again.
+    r2 = prepare_corpus(corpus, cache, progress=False, workers=1, rest_joints=REST)
+    assert r2["converted"] == 0 and r2["skipped"] == 2
+    src = corpus / "bandai" / "s2" / "wave.bvh.gz"
+    os.utime(src, ns=(src.stat().st_atime_ns, src.stat().st_mtime_ns + 10**9))
+    r3 = prepare_corpus(corpus, cache, progress=False, workers=1, rest_joints=REST)
+    assert r3["converted"] == 1 and r3["skipped"] == 1
+
+
+def test_prepare_parallel_and_resampled(corpus: Path, tmp_path: Path) -> None:
+    cache = tmp_path / "cache60"
+    r = prepare_corpus(corpus, cache, fps=60.0, progress=False, workers=2, rest_joints=REST)
+    assert r["converted"] == 2
+    wave = CorpusStore(cache).load("bandai/s2/wave")
+    assert wave.fps == 60.0 and wave.num_frames == 61  # 30 source intervals -> 60
+
+
+def test_prepare_folders_without_manifest(tmp_path: Path) -> None:
+    root = tmp_path / "mine"
+    write_gz(root / "subjA" / "a.bvh.gz", bandai_like_bvh(3))
+    g = torch.Generator().manual_seed(0)
+    seq = MotionSequence(torch.eye(3).repeat(8, 24, 1, 1), torch.zeros(10), torch.randn(8, 3, generator=g), 50.0, {})
+    save_amass(seq, root / "subjB" / "b.npz", REST)
+    cache = tmp_path / "c"
+    r = prepare_corpus([root], cache, progress=False, workers=1, rest_joints=REST)
+    assert r["converted"] == 2 and r["failed"] == 0, r["failures"]
+    store = CorpusStore(cache)
+    e = store.entry("mine/subjA/a")
+    assert e["split"] == _hash_split("subjA") and e["licence"] == "unknown"
+    b = store.load("mine/subjB/b")
+    assert b.fps == 50.0 and b.meta["source_format"] == "amass"
+    assert _hash_split("subjA") == _hash_split("subjA") and {_hash_split(f"s{i}") for i in range(50)} == {"train", "val", "test"}
+
+
+def test_store_errors(tmp_path: Path) -> None:
+    with pytest.raises(InputFileError, match="prepare_corpus"):
+        CorpusStore(tmp_path)
+    (tmp_path / "index.json").write_text(json.dumps({"format": "other"}))
+    with pytest.raises(InputFileError):
+        CorpusStore(tmp_path)
+
+
+def test_paths(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv("WEARPOSE_DATA", str(tmp_path))
+    assert data_dir() == tmp_path
+    monkeypatch.setenv("WEARPOSE_DATA", str(tmp_path / "missing"))
+    with pytest.raises(ConfigError, match="WEARPOSE_DATA"):
+        data_dir()
+    assert data_dir(tmp_path) == tmp_path
+    monkeypatch.setenv("WEARPOSE_CACHE", str(tmp_path / "cc"))
+    assert cache_dir() == tmp_path / "cc"
+    monkeypatch.delenv("WEARPOSE_CACHE")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache_dir() == tmp_path / "xdg" / "wearpose"
+    assert cache_dir("~/x") == Path.home() / "x"
