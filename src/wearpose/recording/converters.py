@@ -54,6 +54,8 @@ class _NumpyOnlyUnpickler(pickle.Unpickler):
         ("numpy.core.numeric", "_frombuffer"), ("numpy._core.numeric", "_frombuffer"),
         ("numpy", "ndarray"), ("numpy", "dtype"), ("copy_reg", "_reconstructor"), ("copyreg", "_reconstructor"),
         ("__builtin__", "object"), ("builtins", "object"),
+        # Protocol-2 pickles (Python 2 era, like DIP-IMU) encode raw array bytes via _codecs.encode.
+        ("_codecs", "encode"),
     }
 
     def find_class(self, module: str, name: str) -> Any:
