@@ -75,10 +75,16 @@ def smpl_hinge_axis(rest: torch.Tensor, hinge: str) -> torch.Tensor:
     return a / a.norm()
 
 
-def synthetic_smpl_motion(rest: torch.Tensor, T: int = 60, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+#: Bone of each swing-only joint (SMPL joint -> the joint its bone points to).
+SWING_BONES = {"spine1": "spine3", "left_collar": "left_shoulder", "right_collar": "right_shoulder"}
+
+
+def synthetic_smpl_motion(rest: torch.Tensor, T: int = 60, seed: int = 0,
+                          swing_only: Sequence[str] = ()) -> tuple[torch.Tensor, torch.Tensor]:
     """SMPL local rotations ``(T, 24, 3, 3)`` and pelvis world positions ``(T, 3)`` (metres):
     smooth random ball-joint motion, pure hinge knees/elbows about SMPL's hinge axes (flexing
-    0-90 deg), identity spine2 and hands, walking forward along +Z."""
+    0-90 deg), identity spine2 and hands, walking forward along +Z. Joints in ``swing_only``
+    (keys of :data:`SWING_BONES`) rotate about axes perpendicular to their bone (no twist)."""
     g = torch.Generator().manual_seed(seed)
     t = torch.linspace(0, 1, T, dtype=torch.float64)
     R = torch.eye(3, dtype=torch.float64).repeat(T, 24, 1, 1)
@@ -92,6 +98,10 @@ def synthetic_smpl_motion(rest: torch.Tensor, T: int = 60, seed: int = 0) -> tup
             continue
         a = torch.randn(2, 3, generator=g, dtype=torch.float64) * 0.3
         aa = a[0] + a[1] * torch.sin(2 * math.pi * t)[:, None]
+        if name in swing_only:
+            n = rest[JOINT_INDEX[SWING_BONES[name]]] - rest[j]
+            n = n / n.norm()
+            aa = aa - (aa @ n)[:, None] * n
         R[:, j] = axis_angle_to_matrix(aa)
     # Root: upright, small yaw wobble.
     yaw = 0.2 * torch.sin(2 * math.pi * t)
@@ -100,8 +110,8 @@ def synthetic_smpl_motion(rest: torch.Tensor, T: int = 60, seed: int = 0) -> tup
     return R, pelvis
 
 
-def synthetic_bvh_from_smpl(rest: torch.Tensor, local: torch.Tensor, pelvis: torch.Tensor, seed: int = 1
-                            ) -> tuple[str, dict[str, torch.Tensor]]:
+def synthetic_bvh_from_smpl(rest: torch.Tensor, local: torch.Tensor, pelvis: torch.Tensor, seed: int = 1,
+                            random_orient: Sequence[str] = RANDOM_ORIENT) -> tuple[str, dict[str, torch.Tensor]]:
     """A BVH (centimetres, all joints 6 channels ZXY, position channels = OFFSETs like Bandai)
     whose skeleton is SMPL's minus spine2/hands, with random joint frame orientations ``O_j``
     (BVH frame = SMPL frame @ O_j). Returns the text and ``{smpl name: O_j}``."""
@@ -118,7 +128,7 @@ def synthetic_bvh_from_smpl(rest: torch.Tensor, local: torch.Tensor, pelvis: tor
         parents.append(idx[JOINT_NAMES[p]] if p >= 0 else -1)
     O: dict[str, torch.Tensor] = {}
     for k, n in enumerate(SYN_JOINTS):
-        O[n] = random_rotations(1, g)[0] if n in RANDOM_ORIENT or parents[k] < 0 else O[SYN_JOINTS[parents[k]]]
+        O[n] = random_rotations(1, g)[0] if n in random_orient or parents[k] < 0 else O[SYN_JOINTS[parents[k]]]
     Tn = local.shape[0]
     offsets = np.zeros((len(SYN_JOINTS), 3))
     values = []

@@ -34,6 +34,10 @@ SMPL's zero pose). ``T_b`` is built from the skeleton's geometry, parents first,
     ``T_b = K``. This is meaningful for the two corpus skeletons: CMU-Daz's zero pose is a
     T-pose with world-aligned frames, and Bandai's zero pose is a straight chain along each
     bone's local X (neck > head, forearm > hand, shin > foot).
+  * joints listed in the map's ``mean_twist`` (Bandai: spine1 and the collars, whose zero pose
+    is twisted by about 90 deg): as above, then turned about the bone so that their local twist
+    relative to the corrected parent averages zero over the clip (swing-twist decomposition,
+    circular mean). These joints barely twist in practice (Bandai: 3 deg RMS).
 
 Joints SMPL has but the BVH does not (per map): ``spine2`` takes half of the spine1 -> spine3
 relative rotation (slerp at 0.5), the other half goes to spine3; hands (and CMU's SMPL ``foot``
@@ -63,7 +67,7 @@ import torch
 from wearpose.body.kinematics import forward_kinematics, global_to_local
 from wearpose.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS
 from wearpose.errors import ShapeError, WearposeError
-from wearpose.geometry import project_to_so3, rotation_between, slerp_matrix
+from wearpose.geometry import axis_angle_to_matrix, matrix_to_quat, project_to_so3, rotation_between, slerp_matrix
 from wearpose.geometry.units import CM_TO_M
 from wearpose.motion.bvh import BvhMotion, BvhSkeleton, bvh_forward_kinematics
 from wearpose.motion.sequence import NUM_BETAS, MotionSequence
@@ -115,6 +119,9 @@ class SkeletonMap:
             ``(axis in the BVH parent joint's frame, axis in the BVH hinge joint's frame)``,
             the knee/elbow flexion axis (signed: positive rotation flexes).
         foot_joints: BVH joints whose lowest height is reported as the clip's floor.
+        mean_twist: SMPL joints (with a primary bone) whose twist about that bone is not taken
+            from the BVH zero pose but chosen so that their local twist relative to the
+            corrected parent averages zero over the clip (for rigs whose zero pose is twisted).
         description: one line on where the map and constants come from.
     """
 
@@ -123,6 +130,7 @@ class SkeletonMap:
     units_to_m: float = CM_TO_M
     hinge_axes: Mapping[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = field(default_factory=dict)
     foot_joints: tuple[str, ...] = ()
+    mean_twist: tuple[str, ...] = ()
     description: str = ""
 
 
@@ -170,6 +178,10 @@ BANDAI = SkeletonMap(
         "left_elbow": ((0.0, -1.0, 0.0),) * 2, "right_elbow": ((0.0, -1.0, 0.0),) * 2,
     },
     foot_joints=("Toes_L", "Toes_R", "Foot_L", "Foot_R"),
+    # Bandai's zero pose is not untwisted at the spine and the collars: Spine's frame is turned
+    # about 90 deg about the bone relative to Hips (its X channel sits near 90), and so are the
+    # Shoulder_L/R frames relative to Chest. Their twist is therefore set from the clip.
+    mean_twist=("spine1", "left_collar", "right_collar"),
     description="Bandai Namco Research Motion Dataset 1/2 BVH (22 joints, root joint_Root > Hips), centimetres",
 )
 
@@ -237,6 +249,14 @@ def _position_in(skel: BvhSkeleton, offsets: torch.Tensor, desc: int, anc: int) 
     if path is None:
         return None
     return offsets[path].sum(0)
+
+
+def _mean_twist(R: torch.Tensor, axis: torch.Tensor) -> float:
+    """Circular mean (radians) of the twist of rotations ``R`` ``(T, 3, 3)`` about unit ``axis``
+    (swing-twist decomposition ``R = swing @ twist``, twist applied first, about ``axis``)."""
+    q = matrix_to_quat(R)  # (w, x, y, z), w >= 0
+    psi = 2.0 * torch.atan2(q[:, 1:] @ axis, q[:, 0])
+    return float(torch.atan2(torch.sin(psi).mean(), torch.cos(psi).mean()))
 
 
 # ---------------------------------------------------------------------------- hinge axes
@@ -310,11 +330,13 @@ class TPose:
             (``T_b``; the correction is ``C_j = T_b^T``).
         scale: SMPL/BVH leg-length ratio (dimensionless, applied after the unit change).
         hinge_source: SMPL hinge joint -> ``"map"``, ``"clip"`` or ``"parent"`` (fallback).
+        twist_offsets: SMPL joint -> twist (radians) applied by the ``mean_twist`` rule.
     """
 
     rotations: dict[int, torch.Tensor]
     scale: float
     hinge_source: dict[str, str]
+    twist_offsets: dict[str, float] = field(default_factory=dict)
 
 
 def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
@@ -336,6 +358,8 @@ def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
     bidx = {s: skel.index(b) for s, b in smap.joints.items()}
     clip_axes: dict[str, tuple[torch.Tensor, torch.Tensor, float]] | None = None
     hinge_src: dict[str, str] = {}
+    twist_offsets: dict[str, float] = {}
+    world_rot: torch.Tensor | None = None
 
     def hinge_axes_for(h: str) -> tuple[torch.Tensor, torch.Tensor] | None:
         nonlocal clip_axes
@@ -411,6 +435,15 @@ def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
             T[j] = rotation_between(K @ p_b, p_s) @ K
         else:
             T[j] = K.clone()
+        if name in smap.mean_twist and p_s is not None and anc is not None:
+            if world_rot is None:
+                world_rot = bvh_forward_kinematics(motion)[0]
+            b_anc = bidx[JOINT_NAMES[anc]]
+            # SMPL local rotation with the current correction: G_parent^T G_b T^T (parent corrected).
+            M = (world_rot[:, b_anc] @ T[anc].T).transpose(-1, -2) @ world_rot[:, b] @ T[j].T
+            phi = _mean_twist(M, _unit(p_s))
+            twist_offsets[name] = phi
+            T[j] = axis_angle_to_matrix(_unit(p_s) * phi) @ T[j]
 
     # Leg scale: pelvis-to-ankle height in SMPL's rest pose / in the BVH T-pose.
     def bvh_drop(side: str) -> float:
@@ -427,7 +460,7 @@ def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
     bvh_leg = 0.5 * (bvh_drop("left") + bvh_drop("right"))
     if bvh_leg <= 1e-6:
         raise RetargetError(f"{smap.name}: legs do not point down in the T-pose (pelvis-to-ankle height {bvh_leg:.3f} m)")
-    return TPose(T, smpl_drop / bvh_leg, hinge_src)
+    return TPose(T, smpl_drop / bvh_leg, hinge_src, twist_offsets)
 
 
 # ---------------------------------------------------------------------------- retargeting
@@ -508,7 +541,9 @@ def retarget_bvh(motion: BvhMotion, rest_joints: torch.Tensor, smap: SkeletonMap
     m: dict[str, Any] = {
         "source_format": "bvh", "skeleton": smap.name, "source_fps": motion.fps,
         "retarget": {"method": "global-orientation transfer with rest-pose correction", "leg_scale": tpose.scale,
-                     "hinge_axes": tpose.hinge_source, "lowest_foot_y": lowest, "lowest_bvh_foot_y": lowest_bvh},
+                     "hinge_axes": tpose.hinge_source,
+                     "twist_offsets_deg": {k: math.degrees(v) for k, v in tpose.twist_offsets.items()},
+                     "lowest_foot_y": lowest, "lowest_bvh_foot_y": lowest_bvh},
     }
     if motion.path is not None:
         m["source_file"] = str(motion.path)
