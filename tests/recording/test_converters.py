@@ -12,7 +12,6 @@ from recording_testutils import rotations
 from wearpose.errors import InputFileError
 from wearpose.geometry import Z_UP_TO_Y_UP, matrix_to_quat
 from wearpose.recording import (
-    DIP_IMU_SIX,
     EMPOSE_SENSORS,
     amass_ground_truth,
     from_dip_imu,

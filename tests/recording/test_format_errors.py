@@ -211,3 +211,28 @@ def test_ground_truth_errors(tmp_path):
     a["ground_truth/trans"] = a["ground_truth/trans"][:10]
     e = _err(tmp_path, a)
     assert e.field == "ground_truth/trans" and "truncated" in e.problem
+
+
+def test_g_and_sensor_frame_diagnosed_by_name(tmp_path):
+    """A recording written with raw accelerometer data (g, sensor frame, gravity in) but no
+    declaration is diagnosed as exactly that."""
+    from recording_testutils import rotations
+
+    n = 240
+    R = np.repeat(rotations(1, seed=3, speed=1.0), n, axis=0)  # a tilted sensor, at rest for 2 s
+    R[120:] = rotations(120, seed=4, speed=0.2)  # then moving
+    rng = np.random.default_rng(1)
+    f_world = np.tile([0.0, 1.0, 0.0], (n, 1))  # +1 g up at rest
+    f_world[120:] += rng.normal(scale=0.5, size=(120, 3))
+    f_sensor = np.einsum("nji,nj->ni", R, f_world) + rng.normal(scale=0.002, size=(n, 3))
+    info = SensorInfo("wrist", "imu", rate=60.0)  # defaults: m/s^2, world frame, gravity removed
+    rec = Recording([SensorStream(info, np.arange(n) / 60, np.ones(n, bool), orientation=R, acceleration=f_sensor)])
+    with pytest.raises(InputFileError) as ei:
+        load_recording(rec.save(tmp_path / "raw.npz"))
+    e = ei.value
+    assert e.field == "sensors/wrist/acceleration"
+    assert "looks like g" in e.problem and "looks like the sensor frame" in e.problem and "gravity is included" in e.problem
+    assert "acc_unit 'g'" in e.expected and "acc_frame 'sensor'" in e.expected
+    rec.sensors[0].info = SensorInfo("wrist", "imu", rate=60.0, acc_unit="g", acc_frame="sensor", acc_gravity="included")
+    ok = load_recording(rec.save(tmp_path / "declared.npz")).to_canonical()
+    np.testing.assert_allclose(ok.sensor("wrist").acceleration[:100], 0.0, atol=0.1)  # 0.002 g noise

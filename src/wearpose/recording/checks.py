@@ -123,30 +123,51 @@ def static_frames(s: SensorStream) -> np.ndarray:
 
 
 def _check_acceleration(s: SensorStream) -> list[ConventionIssue]:
+    """Unit, gravity and frame of the acceleration, judged from the frames where the sensor rests.
+
+    At rest an accelerometer reads gravity's reaction, +1 g *up*: 9.81 in m/s^2, 1.0 in g, about
+    0 once gravity is removed; in the world frame it points along the world's up axis, in the
+    sensor frame it does so only after rotating by ``R_WS``.
+    """
     if s.acceleration is None:
         return []
     st = static_frames(s)
     if st.sum() < MIN_STATIC_FRAMES:
         return []  # never at rest: nothing to compare against
-    m = float(np.median(np.linalg.norm(s.acceleration[st].astype(np.float64), axis=1)))
-    unit, grav = s.info.acc_unit, s.info.acc_gravity
-    near_1g_ms2 = abs(m - G) <= 0.15 * G
-    near_1g_g = abs(m - 1.0) <= 0.15
+    f = s.acceleration[st].astype(np.float64)
+    m = float(np.median(np.linalg.norm(f, axis=1)))
+    info = s.info
+    unit, grav = info.acc_unit, info.acc_gravity
+    looks_ms2, looks_g = abs(m - G) <= 0.15 * G, abs(m - 1.0) <= 0.15
+    one_g = G if unit == "m/s2" else 1.0
     issues = []
-    if unit == "m/s2" and near_1g_g and not near_1g_ms2:
-        issues.append(ConventionIssue(s.name, "acceleration",
-                                      f"static magnitude {m:.3g} while declared m/s^2; looks like g",
+    if unit == "m/s2" and looks_g:
+        issues.append(ConventionIssue(s.name, "acceleration", f"static magnitude {m:.3g} while declared m/s^2; looks like g",
                                       "m/s^2; declare acc_unit 'g' in the sensor info or multiply by 9.81"))
-    elif unit == "g" and near_1g_ms2:
+    elif unit == "g" and looks_ms2:
+        issues.append(ConventionIssue(s.name, "acceleration", f"static magnitude {m:.3g} while declared g; looks like m/s^2",
+                                      "g as declared, or declare acc_unit 'm/s2'"))
+    gravity_in = looks_ms2 or looks_g
+    if grav == "removed" and gravity_in:
         issues.append(ConventionIssue(s.name, "acceleration",
-                                      f"static magnitude {m:.3g} while declared g; looks like m/s^2",
-                                      "g units as declared, or declare acc_unit 'm/s2'"))
-    elif grav == "removed" and ((unit == "m/s2" and near_1g_ms2) or (unit == "g" and near_1g_g)):
-        issues.append(ConventionIssue(s.name, "acceleration",
-                                      f"static magnitude {m:.3g} {unit} while declared gravity-removed; looks like gravity is included",
+                                      f"static magnitude {m:.3g} (about 1 g) while declared gravity-removed; looks like gravity is included",
                                       "free acceleration (about 0 at rest); declare acc_gravity 'included' or remove gravity"))
-    elif grav == "included" and m < 0.3 * (G if unit == "m/s2" else 1.0):
+    elif grav == "included" and m < 0.3 * one_g:
         issues.append(ConventionIssue(s.name, "acceleration",
                                       f"static magnitude {m:.3g} {unit} while declared gravity-included; looks like gravity is removed",
                                       "an accelerometer reading (about 1 g at rest); declare acc_gravity 'removed'"))
+    if gravity_in and s.orientation is not None:
+        up = np.array([0.0, 1.0, 0.0]) if info.world_up == "y_up" else np.array([0.0, 0.0, 1.0])
+        d = f / np.linalg.norm(f, axis=1, keepdims=True)
+        cos_world = float(np.median(d @ up))
+        cos_sensor = float(np.median(np.einsum("nij,nj->ni", s.orientation[st].astype(np.float64), d) @ up))
+        if info.acc_frame == "world" and cos_world < 0.9 and cos_sensor > 0.97:
+            issues.append(ConventionIssue(s.name, "acceleration",
+                                          f"at rest the reading points {np.degrees(np.arccos(np.clip(cos_world, -1, 1))):.0f} deg away from world up "
+                                          "but along up once rotated by the orientation; looks like the sensor frame",
+                                          "world-frame acceleration as declared, or declare acc_frame 'sensor'"))
+        elif info.acc_frame == "sensor" and cos_sensor < 0.9 and cos_world > 0.97:
+            issues.append(ConventionIssue(s.name, "acceleration",
+                                          "at rest the reading points along world up without rotating by the orientation; looks like the world frame",
+                                          "sensor-frame acceleration as declared, or declare acc_frame 'world'"))
     return issues

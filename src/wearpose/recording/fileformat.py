@@ -269,8 +269,11 @@ def _load(path: Path, check_conventions: bool) -> Recording:
         for s in rec.sensors:
             issues = check_stream(s)
             if issues:
-                i = issues[0]
-                raise InputFileError(path, i.problem, i.expected, field=f"sensors/{i.sensor}/{i.field}")
+                # Report every suspicion about the first field at once (e.g. "looks like g" and
+                # "looks like the sensor frame"): fixing one at a time would take several runs.
+                same = [i for i in issues if i.field == issues[0].field]
+                raise InputFileError(path, "; ".join(i.problem for i in same), "; ".join(i.expected for i in same),
+                                     field=f"sensors/{s.name}/{issues[0].field}")
     return rec
 
 

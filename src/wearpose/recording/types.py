@@ -292,7 +292,6 @@ def _normalise_stream(s: SensorStream, prefix: str | None = None) -> None:
             raise _Problem(f"{where}/{c}", f"NaN or infinite value in valid frame {bad}", "finite values wherever valid is True (NaN only in frames with valid=False)")
         if c == "orientation" and good.shape[0]:
             _check_rotations(good, f"{where}/{c}", np.flatnonzero(valid))
-        arr = arr.copy() if arr is getattr(s, c) else arr
         # A dropped frame carries no data: make that explicit so nobody uses a stale value.
         arr[~valid] = np.nan
         setattr(s, c, arr)
