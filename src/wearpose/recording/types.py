@@ -106,8 +106,10 @@ class SensorInfo:
         position_unit: ``"m"``, ``"cm"`` or ``"mm"``.
         gyro_unit: ``"rad/s"`` or ``"deg/s"``.
         mag_unit: free text unit of ``magnetic_field`` (``"uT"``, ``"a.u."``...); never converted.
-        reference: EM/VIO only: ``"source"`` (pose relative to the EM source, EM canonical form) or
-            ``"world"`` (pose in a world/tracking frame, e.g. an optical-tracker frame).
+        reference: frame ``position``/``orientation`` are relative to. EM: ``"source"`` (the EM
+            source, EM canonical form; default) or ``"world"`` (a world/tracking frame, e.g. an
+            optical tracker's, as in EM-POSE's released data). IMU/MIMU/VIO: always ``"world"``
+            (the default for them). ``None`` means "the kind's default".
         source: EM only: name of the EM source (transmitter) the sensor is measured against.
         source_site: EM only: body site of that source (``"lower_back"``, ``"head"``...).
     """
@@ -123,7 +125,7 @@ class SensorInfo:
     position_unit: str = "m"
     gyro_unit: str = "rad/s"
     mag_unit: str = "a.u."
-    reference: str = "source"
+    reference: str | None = None
     source: str | None = None
     source_site: str | None = None
 
@@ -168,11 +170,16 @@ def _check_info(info: SensorInfo) -> None:
     where = f"sensors/{info.name}" if isinstance(info.name, str) else "sensors"
     if not isinstance(info.name, str) or not NAME_RE.match(info.name):
         raise _Problem(where, f"sensor name {info.name!r} is not allowed", "1-64 characters from [A-Za-z0-9_.-]")
+    if info.reference is None and info.kind in KINDS:
+        # Resolved here so the file always states the frame explicitly.
+        object.__setattr__(info, "reference", "source" if info.kind == "em6dof" else "world")
     for key, choices in _CHOICES.items():
         value = getattr(info, key)
         if value not in choices:
             raise _Problem(f"{where}/{key}" if key != "kind" else f"{where}/kind",
                            f"{'unknown kind' if key == 'kind' else 'unknown value'} {value!r}", f"one of {list(choices)}")
+    if info.kind != "em6dof" and info.reference != "world":
+        raise _Problem(f"{where}/reference", f"{info.reference!r} for a {info.kind} sensor", "'world': only EM sensors measure relative to a source")
     for key in ("site", "source", "source_site"):
         v = getattr(info, key)
         if v is not None and not isinstance(v, str):
