@@ -35,11 +35,12 @@ rotated frame, which no rotation about the vertical changes. Zhou's 6D is
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
+import numpy as np
 import torch
 
-from wearpose.errors import ShapeError
+from wearpose.errors import ConfigError, ShapeError
 from wearpose.geometry import Y_UP_TO_Z_UP, axis_angle_to_matrix, matrix_to_rot6d, rotation_y
 from wearpose.sensors.imu import ImuNoise, simulate_imu
 
@@ -133,7 +134,7 @@ def magnetic_disturbance(T: int, num_sensors: int, fps: float, noise: MimuNoise,
 
 def simulate_mimu(R: torch.Tensor, p: torch.Tensor, fps: float, *, noise: MimuNoise | None = None,
                   smooth_n: int = 4, ends: str = "one_sided", generator: torch.Generator | None = None,
-                  earth: tuple[float, float, float] = EARTH_FIELD) -> dict[str, torch.Tensor]:
+                  earth: tuple[float, float, float] = EARTH_FIELD, fusion: str | None = None) -> dict[str, torch.Tensor]:
     """Simulate MIMUs: fused orientation (drift, disturbance, noise), inertial channels, magnetometer.
 
     Args:
@@ -141,6 +142,11 @@ def simulate_mimu(R: torch.Tensor, p: torch.Tensor, fps: float, *, noise: MimuNo
         fps: Hz. noise: :class:`MimuNoise` (``None`` = ideal). smooth_n, ends: as
             :func:`wearpose.sensors.imu.synthetic_acceleration`.
         generator: random source. earth: earth field, tesla, world frame.
+        fusion: ``None`` (default): the analytic error model above. ``"madgwick"``: run the
+            Madgwick MARG filter (:func:`ahrs_fusion`) on the simulated noisy gyro,
+            accelerometer and (disturbed) magnetometer instead; ``"madgwick_imu"``: the same
+            without the magnetometer (6-axis, heading drifts with the gyro bias). The white /
+            impulse orientation noise and the analytic yaw terms are not added then.
 
     Returns:
         dict: ``orientation`` ``(T, S, 3, 3)`` fused estimate, ``acceleration`` ``(T, S, 3)``
@@ -154,7 +160,9 @@ def simulate_mimu(R: torch.Tensor, p: torch.Tensor, fps: float, *, noise: MimuNo
     dtype = R.dtype
     T, S = R.shape[:2]
     R64 = R.to(torch.float64)
-    out = simulate_imu(R64, p.to(torch.float64), fps, noise=None if noise is None else noise.imu,
+    # The inertial channels carry ImuNoise; the orientation error is this module's model, so the
+    # IMU's own white orientation noise is switched off here.
+    out = simulate_imu(R64, p.to(torch.float64), fps, noise=None if noise is None else replace(noise.imu, orientation_white=0.0),
                        smooth_n=smooth_n, ends=ends, generator=generator)
     f = out["specific_force"].to(torch.float64)
     m_W = torch.tensor(earth, dtype=torch.float64)
@@ -174,6 +182,15 @@ def simulate_mimu(R: torch.Tensor, p: torch.Tensor, fps: float, *, noise: MimuNo
         R_meas = rotation_y(psi) @ R64 @ axis_angle_to_matrix(rv)
         mag_noise = noise.mag_white * torch.randn(T, S, 3, generator=generator, dtype=torch.float64)
     mag = (R64.transpose(-1, -2) @ (m_W + d).unsqueeze(-1)).squeeze(-1) + mag_noise
+    if fusion is not None:
+        if fusion not in ("madgwick", "madgwick_imu"):
+            raise ConfigError(f"simulate_mimu: fusion must be None, 'madgwick' or 'madgwick_imu', got {fusion!r}")
+        w_meas = out["angular_velocity"].to(torch.float64)
+        R_meas = torch.stack([ahrs_fusion(w_meas[:, k], f[:, k], mag[:, k] if fusion == "madgwick" else None, fps, R64[0, k])
+                              for k in range(S)], dim=1)
+        # heading error of the fused estimate about the vertical (diagnostic)
+        E = R_meas @ R64.transpose(-1, -2)
+        psi = torch.atan2(E[..., 0, 2] - E[..., 2, 0], E[..., 0, 0] + E[..., 2, 2])
     g = torch.tensor((0.0, -9.81, 0.0), dtype=torch.float64)
     acc = (R_meas @ f.unsqueeze(-1)).squeeze(-1) + g
     valid = out["valid"]
@@ -182,6 +199,57 @@ def simulate_mimu(R: torch.Tensor, p: torch.Tensor, fps: float, *, noise: MimuNo
     return {"orientation": R_meas.to(dtype), "acceleration": acc.to(dtype),
             "angular_velocity": out["angular_velocity"].to(dtype), "specific_force": f.to(dtype),
             "magnetic_field": mag.to(dtype), "valid": valid, "yaw_error": psi.to(dtype), "disturbance": d.to(dtype)}
+
+
+#: wearpose world (Y up, magnetic north +Z) -> the ``ahrs`` Madgwick earth frame (x north,
+#: z up: x = our +Z, y = our +X, z = our +Y). Checked numerically: a static Madgwick MARG run
+#: converges to ``q2R(Q) == C_EW @ R_WS``.
+_C_EW = torch.tensor([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], dtype=torch.float64)
+
+
+def ahrs_fusion(gyr: torch.Tensor, acc: torch.Tensor, mag: torch.Tensor | None, fps: float, R0: torch.Tensor,
+                method: str = "madgwick", gain: float | None = None) -> torch.Tensor:
+    """Run a real AHRS filter (the ``ahrs`` package, Madgwick) on simulated MIMU channels.
+
+    Optional dependency: ``ahrs==0.4.0`` (MIT). With ``mag`` it runs the MARG update (heading
+    from the magnetometer, so magnetic disturbances turn the heading), without it the IMU
+    update (heading integrates the gyro bias: yaw drift).
+
+    Args:
+        gyr: ``(T, 3)`` rad/s sensor frame. acc: ``(T, 3)`` specific force (gravity included),
+            m/s^2, sensor frame. mag: ``(T, 3)`` tesla sensor frame, or None. fps: Hz.
+        R0: ``(3, 3)`` initial orientation ``R_WS(0)`` (the filter starts converged).
+        method: ``"madgwick"`` (the only one whose frame conventions are verified here).
+        gain: filter gain (``ahrs`` default 0.033 IMU / 0.041 MARG).
+
+    Returns:
+        ``(T, 3, 3)`` fused ``R_WS`` in the wearpose world, float64.
+    """
+    try:
+        from ahrs.common.orientation import q2R
+        from ahrs.filters import Madgwick
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ConfigError("AHRS fusion needs the optional package ahrs==0.4.0 (pip install ahrs==0.4.0)") from exc
+    if method != "madgwick":
+        raise ConfigError(f"ahrs_fusion: method must be 'madgwick', got {method!r}")
+    from wearpose.geometry import matrix_to_quat
+
+    q0 = matrix_to_quat(_C_EW @ R0.to(torch.float64)).numpy()
+    kw = {"frequency": float(fps), "q0": q0}
+    if gain is not None:
+        kw["gain"] = gain
+    # ahrs integrates gyr[t] over the step (t-1, t]; our samples are instantaneous (central
+    # convention), so hand it the trapezoid mean of the two ends of each step.
+    w = gyr.detach().to(torch.float64)
+    w = torch.cat([w[:1], 0.5 * (w[:-1] + w[1:])], dim=0)
+    g = w.numpy()
+    a = acc.detach().to(torch.float64).numpy()
+    if mag is not None:
+        f = Madgwick(gyr=g, acc=a, mag=mag.detach().to(torch.float64).numpy() * 1e3, **kw)  # mT, as ahrs documents
+    else:
+        f = Madgwick(gyr=g, acc=a, **kw)
+    RE = torch.from_numpy(np.stack([q2R(q) for q in f.Q]))
+    return _C_EW.T @ RE
 
 
 # ------------------------------------------------------------------------------ representations
