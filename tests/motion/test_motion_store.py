@@ -70,7 +70,7 @@ def test_prepare_with_manifest(corpus: Path, tmp_path: Path) -> None:
     s = store.summary()
     assert s["clips"] == 2 and s["subjects"] == 2 and s["failures"] == 2
     assert s["minutes_per_split"] == {"test": round(31 / 30 / 60, 2), "train": round(19 / 30 / 60, 2)}
-    assert s["frame_rates"] == {"30": 2}
+    assert s["frame_rates"] == {"30": 2} and isinstance(s["floor_suspect"], list)
     with pytest.raises(KeyError, match="nope"):
         store.load("nope")
 

@@ -532,10 +532,7 @@ def retarget_bvh(motion: BvhMotion, rest_joints: torch.Tensor, smap: SkeletonMap
     pelvis_b = P_b[:, skel.index(smap.joints["pelvis"])] * smap.units_to_m
     trans = tpose.scale * pelvis_b - rest[0]
     b = torch.zeros(NUM_BETAS, dtype=torch.float64) if betas is None else betas.to(torch.float64)
-    _, joints = forward_kinematics(pose, rest)
-    joints = joints + trans[:, None]
-    feet = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
-    lowest = float(joints[:, feet, 1].min())
+    lowest = lowest_foot_height(pose, trans, rest)
     bvh_feet = [skel.index(n) for n in smap.foot_joints if n in skel.names]
     lowest_bvh = float((P_b[:, bvh_feet, 1] * smap.units_to_m * tpose.scale).min()) if bvh_feet else float("nan")
     m: dict[str, Any] = {
@@ -550,6 +547,17 @@ def retarget_bvh(motion: BvhMotion, rest_joints: torch.Tensor, smap: SkeletonMap
     m.update(dict(meta or {}))
     seq = MotionSequence(pose.to(torch.float32), b.to(torch.float32), trans.to(torch.float32), motion.fps, m)
     return Retargeted(seq, tpose, smap, P_b * smap.units_to_m, lowest, lowest_bvh, skel.names)
+
+
+def lowest_foot_height(pose: torch.Tensor, trans: torch.Tensor, rest_joints: torch.Tensor) -> float:
+    """Lowest height (metres, world Y) of SMPL's ankle and foot joints over a clip.
+
+    Args:
+        pose: ``(T, 24, 3, 3)`` local rotations; trans: ``(T, 3)``; rest_joints: ``(24, 3)``.
+    """
+    _, joints = forward_kinematics(pose.to(torch.float64), rest_joints.to(torch.float64))
+    feet = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
+    return float((joints[:, feet, 1] + trans.to(torch.float64)[:, None, 1]).min())
 
 
 def bone_direction_errors(result: Retargeted, rest_joints: torch.Tensor,

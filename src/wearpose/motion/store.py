@@ -29,14 +29,17 @@ from wearpose.motion.bvh import read_bvh
 from wearpose.motion.paths import cache_dir as default_cache_dir
 from wearpose.motion.paths import data_dir as default_data_dir
 from wearpose.motion.resample import resample
-from wearpose.motion.retarget import retarget_bvh
+from wearpose.motion.retarget import lowest_foot_height, retarget_bvh
 from wearpose.motion.sequence import MotionSequence
 from wearpose.motion.template import default_rest_joints
 
 INDEX_NAME = "index.json"
 INDEX_VERSION = 1
 #: Bump when the conversion changes so that existing caches are rebuilt.
-CONVERTER_VERSION = "motion-1"
+CONVERTER_VERSION = "motion-2"
+#: Clips whose lowest ankle/foot joint is further than this from the floor (y = 0) are counted
+#: as ``floor_suspect`` in :meth:`CorpusStore.summary` (source data placed off the floor).
+FLOOR_TOLERANCE_M = 0.15
 SPLITS = ("train", "val", "test")
 _SUFFIXES = (".bvh", ".bvh.gz", ".npz")
 
@@ -119,10 +122,11 @@ def _convert_one(job: dict[str, Any]) -> dict[str, Any]:
             seq.meta["skipped_frame0"] = True
         if job["fps"] is not None:
             seq = resample(seq, job["fps"])
+        # Floor check on the frames kept (CMU's T-pose frame 0 sits elsewhere in some clips).
+        seq.meta["lowest_foot_y"] = lowest_foot_height(seq.pose, seq.trans, rest)
         seq.save(job["out"])
         return {"ok": True, "id": job["id"], "frames": seq.num_frames, "fps": seq.fps, "seconds": seq.duration,
-                "skeleton": seq.meta.get("skeleton"),
-                "lowest_foot_y": seq.meta.get("retarget", {}).get("lowest_foot_y")}
+                "skeleton": seq.meta.get("skeleton"), "lowest_foot_y": round(seq.meta["lowest_foot_y"], 4)}
     except Exception as exc:  # noqa: BLE001 - one bad file must not stop the corpus
         kind = "" if isinstance(exc, WearposeError) else f"{type(exc).__name__}: "
         return {"ok": False, "id": job["id"], "error": f"{kind}{exc}"}
@@ -299,7 +303,9 @@ class CorpusStore:
 
     def summary(self) -> dict[str, Any]:
         """Counts and minutes: ``{"clips", "subjects", "minutes", "minutes_per_split",
-        "minutes_per_source", "minutes_per_licence", "clips_per_split", "frame_rates", "failures"}``."""
+        "minutes_per_source", "minutes_per_licence", "clips_per_split", "frame_rates", "failures",
+        "floor_suspect"}`` (the last: ids of clips whose lowest foot joint is more than
+        :data:`FLOOR_TOLERANCE_M` from y = 0)."""
         def add(d: dict[str, float], k: str, v: float) -> None:
             d[k] = d.get(k, 0.0) + v
         per_split: dict[str, float] = {}
@@ -315,8 +321,11 @@ class CorpusStore:
             add(n_split, e["split"], 1)
             add(rates, f"{float(e.get('fps', 0)):g}", 1)
         r = lambda d: {k: round(v, 2) for k, v in sorted(d.items())}  # noqa: E731
+        suspect = sorted(cid for cid, e in self.entries.items()
+                         if e.get("lowest_foot_y") is not None and abs(float(e["lowest_foot_y"])) > FLOOR_TOLERANCE_M)
         return {"clips": len(self.entries), "subjects": len({(e["source"], e["subject"]) for e in self.entries.values()}),
                 "minutes": round(sum(per_split.values()), 2), "minutes_per_split": r(per_split),
                 "minutes_per_source": r(per_source), "minutes_per_licence": r(per_lic),
                 "clips_per_split": {k: int(v) for k, v in sorted(n_split.items())},
-                "frame_rates": {k: int(v) for k, v in sorted(rates.items())}, "failures": len(self.failures)}
+                "frame_rates": {k: int(v) for k, v in sorted(rates.items())}, "failures": len(self.failures),
+                "floor_suspect": suspect}
