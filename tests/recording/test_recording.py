@@ -142,3 +142,17 @@ def test_save_load_round_trip(tmp_path):
     assert back.ground_truth.fps == 30.0 and back.ground_truth.meta == {"source_format": "test"}
     assert torch.allclose(back.ground_truth.pose, rec.ground_truth.pose, atol=1e-5)
     assert torch.allclose(back.ground_truth.trans, rec.ground_truth.trans)
+
+
+def test_from_stacked_inverts_common_grid():
+    rec = two_sensor_recording()
+    g = rec.on_common_grid()
+    back = Recording.from_stacked([s.info for s in rec.sensors], g.timestamps,
+                                  {c: torch.from_numpy(v) for c, v in g.channels.items()}, g.valid, meta={"x": 1})
+    assert back.names == rec.names and back.meta == {"x": 1}
+    for a, b in zip(rec.sensors, back.sensors):
+        assert set(a.channels()) == set(b.channels())
+        for c in a.channels():
+            np.testing.assert_array_equal(getattr(a, c), getattr(b, c))
+    with pytest.raises(ShapeError):
+        Recording.from_stacked([rec.sensors[0].info], g.timestamps, {"acceleration": np.zeros((120, 3))})

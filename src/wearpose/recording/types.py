@@ -27,7 +27,7 @@ import copy
 import math
 import re
 from dataclasses import dataclass, field, fields, replace
-from typing import Any, Iterable
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 import torch
@@ -420,6 +420,41 @@ class Recording:
         if not isinstance(self.subject, dict) or not isinstance(self.meta, dict):
             raise ShapeError("Recording.subject and Recording.meta must be dicts")
         self.ground_truth_start = float(self.ground_truth_start)
+
+    @classmethod
+    def from_stacked(cls, infos: Sequence[SensorInfo], timestamps: Any, channels: dict[str, Any],
+                     valid: Any = None, **kwargs: Any) -> Recording:
+        """Build a recording from arrays stacked over sensors (the inverse of :meth:`on_common_grid`).
+
+        Args:
+            infos: ``S`` sensor infos, in column order.
+            timestamps: ``(T,)`` seconds shared by every sensor.
+            channels: field name -> ``(T, S, ...)`` array (e.g. a simulator's output). A sensor
+                takes a channel when its kind allows it and its column is not entirely NaN.
+            valid: ``(T, S)`` bool, default all True.
+            **kwargs: ``ground_truth``, ``ground_truth_start``, ``subject``, ``meta``.
+        """
+        infos = list(infos)
+        S = len(infos)
+        ts = np.asarray(timestamps, dtype=np.float64)
+        v = np.ones((ts.shape[0], S), bool) if valid is None else np.asarray(valid)
+        if v.shape != (ts.shape[0], S):
+            raise ShapeError(f"Recording.from_stacked: valid has shape {v.shape}, expected ({ts.shape[0]}, {S})")
+        streams = []
+        for j, info in enumerate(infos):
+            allowed = REQUIRED_CHANNELS[info.kind] + OPTIONAL_CHANNELS[info.kind]
+            ch = {}
+            for c, arr in channels.items():
+                if c not in CHANNELS:
+                    raise ShapeError(f"Recording.from_stacked: unknown channel {c!r}; expected one of {list(CHANNELS)}")
+                a = arr.detach().cpu().numpy() if isinstance(arr, torch.Tensor) else np.asarray(arr)
+                if a.ndim < 2 or a.shape[1] != S:
+                    raise ShapeError(f"Recording.from_stacked: channel {c!r} has shape {a.shape}, expected (T, {S}, ...)")
+                col = a[:, j]
+                if c in allowed and not np.all(np.isnan(col)):
+                    ch[c] = col
+            streams.append(SensorStream(info, ts, v[:, j], **ch))
+        return cls(streams, **kwargs)
 
     # ------------------------------------------------------------------ queries
     @property
