@@ -12,7 +12,7 @@ from wearpose.motion.paths import cache_dir, data_dir
 from wearpose.motion.resample import resample
 from wearpose.motion.retarget import (
     BANDAI, BUILTIN_MAPS, CMU_DAZ, RetargetError, Retargeted, SkeletonMap, TPose, bone_direction_errors,
-    detect_skeleton_map, estimate_hinge_axes, retarget_bvh, solve_tpose,
+    detect_skeleton_map, estimate_hinge_axes, lowest_foot_height, retarget_bvh, solve_tpose,
 )
 from wearpose.motion.sequence import FORMAT_VERSION, MotionSequence
 from wearpose.motion.store import CorpusStore, prepare_corpus
@@ -22,7 +22,7 @@ __all__ = [
     "MotionSequence", "FORMAT_VERSION", "resample",
     "read_bvh", "parse_bvh_text", "BvhMotion", "BvhSkeleton", "bvh_forward_kinematics", "end_site_positions",
     "retarget_bvh", "Retargeted", "SkeletonMap", "TPose", "solve_tpose", "detect_skeleton_map", "estimate_hinge_axes",
-    "bone_direction_errors", "RetargetError", "CMU_DAZ", "BANDAI", "BUILTIN_MAPS",
+    "bone_direction_errors", "lowest_foot_height", "RetargetError", "CMU_DAZ", "BANDAI", "BUILTIN_MAPS",
     "read_amass", "save_amass",
     "prepare_corpus", "CorpusStore", "data_dir", "cache_dir",
     "default_rest_joints", "template_rest_joints",

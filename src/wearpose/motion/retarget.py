@@ -52,6 +52,13 @@ posed by ``T``). Scaling the whole trajectory (height and travel) keeps feet nea
 
 The two corpus BVH worlds are Y up, facing +Z with left at +X (the wearpose world), so only the
 unit scale (cm -> m) is applied to positions.
+
+Consequences worth knowing: matching bones exactly means that where the source skeleton's rest
+shape differs from SMPL's, the difference shows up as joint rotations. The CMU-Daz converter's
+T-pose (frame 0; its zero pose, world-aligned frames) has elbows bent about 17 deg forward and
+collars about 14 deg low, so it retargets to an SMPL pose with 3-19 deg per joint rather than to
+exactly zero; and the pelvis tilts forward by the angle between the source's pelvis->spine bone
+and SMPL's (about 10-16 deg with the default body), compensated by spine1.
 """
 
 from __future__ import annotations

@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import multiprocessing
 import os
 import tempfile
 import time
@@ -239,7 +240,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
         else:
             # Biggest files first so that the two workers finish together.
             todo.sort(key=lambda j: -Path(j["file"]).stat().st_size)
-            with ProcessPoolExecutor(max_workers=n_workers) as ex:
+            # "spawn": forking a parent that already ran torch can deadlock its OpenMP pool.
+            with ProcessPoolExecutor(max_workers=n_workers, mp_context=multiprocessing.get_context("spawn")) as ex:
                 futures = [ex.submit(_convert_one, job) for job in todo]
                 for fut in as_completed(futures):
                     finish(fut.result())

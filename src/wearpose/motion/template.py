@@ -7,7 +7,9 @@ readers and tests work before/without a body asset; files written with it say so
 
 from __future__ import annotations
 
+import functools
 import warnings
+from typing import Any
 
 import torch
 
@@ -37,6 +39,14 @@ def template_rest_joints(dtype: torch.dtype = torch.float64) -> torch.Tensor:
     return torch.tensor(SMPL_LIKE_REST_JOINTS, dtype=dtype)
 
 
+@functools.lru_cache(maxsize=1)
+def _body_model() -> Any:
+    """The default body model, loaded once per process (loading the asset is not free)."""
+    from wearpose.body.model import BodyModel  # noqa: PLC0415 - imported lazily: heavier module
+
+    return BodyModel(dtype=torch.float64)
+
+
 def default_rest_joints(betas: torch.Tensor | None = None, dtype: torch.dtype = torch.float64
                         ) -> tuple[torch.Tensor, str]:
     """Rest joints ``(24, 3)`` (metres) for ``betas`` (default zeros) and where they came from.
@@ -48,9 +58,7 @@ def default_rest_joints(betas: torch.Tensor | None = None, dtype: torch.dtype = 
         ``(rest_joints, source)`` where ``source`` is the body asset id or ``"smpl-like-template"``.
     """
     try:
-        from wearpose.body.model import BodyModel  # noqa: PLC0415 - optional, written separately
-
-        model = BodyModel(dtype=torch.float64)
+        model = _body_model()
         b = torch.zeros(model.num_betas, dtype=torch.float64) if betas is None else betas.to(torch.float64)
         joints = model.rest_joints(b)
         joints = joints.reshape(-1, 24, 3)[0] if joints.dim() > 2 else joints
