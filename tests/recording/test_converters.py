@@ -39,7 +39,7 @@ def test_dip_imu_six(tmp_path):
     p.parent.mkdir()
     ori, acc, gt = _write_dip(p)
     rec = from_dip_imu(p)
-    assert rec.names == ("left_forearm", "right_forearm", "left_shin", "right_shin", "head", "pelvis")
+    assert rec.names == ("left_forearm", "right_forearm", "left_lower_leg", "right_lower_leg", "head", "pelvis")
     lf = rec.sensor("left_forearm")
     assert lf.kind == "imu" and lf.info.site == "left_forearm" and lf.info.rate == 60.0
     assert not lf.valid[3] and not lf.valid[4] and lf.valid[5]  # NaN frames masked, not filled
@@ -176,17 +176,17 @@ def test_empose(tmp_path):
     pos, ori = _write_empose(p)
     rec = from_empose(p)
     assert rec.names == EMPOSE_SENSORS and rec.kinds == ("em6dof",)
-    rf = rec.sensor("right_forearm")
-    assert rf.info.reference == "world" and rf.info.rate == 30.0
+    rf = rec.sensor("right_lower_arm")
+    assert rf.info.reference == "world" and rf.info.rate == 30.0 and rf.info.site == "right_wrist"
     assert not rf.valid[10:15].any() and np.isnan(rf.position[12]).all()
-    np.testing.assert_allclose(rec.sensor("left_shin").position, pos[:, 11], atol=1e-6)
+    np.testing.assert_allclose(rec.sensor("left_lower_leg").position, pos[:, 11], atol=1e-6)
     np.testing.assert_allclose(rec.sensor("back").orientation, ori[:, 0], atol=1e-6)
     assert rec.subject["id"] == "0402" and len(rec.subject["offsets"]["translation_mean_m"]) == 12
     gt = rec.ground_truth
     assert gt.num_frames == 60 and gt.betas.shape == (10,)
     assert torch.allclose(gt.pose[:, 22:], torch.eye(3).expand(60, 2, 3, 3))  # SMPL-H body: hands at identity
     six = from_empose(p, sensors="six", with_ground_truth=False)
-    assert six.names == ("back", "head", "right_forearm", "right_shin", "left_forearm", "left_shin")
+    assert six.names == ("back", "head", "right_lower_arm", "right_lower_leg", "left_lower_arm", "left_lower_leg")
     back = load_recording(rec.save(tmp_path / "em.npz"))
     assert back.subject == rec.subject and back.ground_truth.num_frames == 60
 

@@ -30,6 +30,7 @@ from wearpose.recording.converters import (
     DIP_IMU_SENSORS,
     DIP_IMU_SIX,
     EMPOSE_SENSORS,
+    EMPOSE_SITES,
     EMPOSE_SIX,
     TOTALCAPTURE_SITES,
     amass_ground_truth,
@@ -44,5 +45,5 @@ __all__ = [
     "ConventionIssue", "check_stream", "check_recording",
     "FORMAT_NAME", "FORMAT_VERSION", "load_recording", "save_recording", "recording_arrays",
     "from_dip_imu", "from_totalcapture", "from_empose", "amass_ground_truth",
-    "DIP_IMU_SENSORS", "DIP_IMU_SIX", "EMPOSE_SENSORS", "EMPOSE_SIX", "TOTALCAPTURE_SITES",
+    "DIP_IMU_SENSORS", "DIP_IMU_SIX", "EMPOSE_SENSORS", "EMPOSE_SITES", "EMPOSE_SIX", "TOTALCAPTURE_SITES",
 ]

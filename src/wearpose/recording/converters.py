@@ -38,9 +38,12 @@ DIP_IMU_SENSORS: tuple[str, ...] = (
 #: The 6 sensors DIP/TransPose/PIP use: indices ``[7, 8, 11, 12, 0, 2]`` (TransPose
 #: ``preprocess.py``: ``imu_mask = [7, 8, 11, 12, 0, 2]``), i.e. the sensors on the forearms
 #: ("elbow"), lower legs ("knee"), head and pelvis ("belly"), which TransPose simulates at SMPL
-#: vertices 1961, 5424, 1176, 4662, 411, 3021 -- wearpose's ``left_forearm``, ``right_forearm``,
-#: ``left_shin``, ``right_shin``, ``head``, ``pelvis`` sites.
-DIP_IMU_SIX: dict[int, str] = {7: "left_forearm", 8: "right_forearm", 11: "left_shin", 12: "right_shin", 0: "head", 2: "pelvis"}
+#: vertices 1961, 5424, 1176, 4662, 411, 3021. Index -> (sensor name of the ``imu6`` kit, body site).
+DIP_IMU_SIX: dict[int, tuple[str, str]] = {
+    7: ("left_forearm", "left_forearm"), 8: ("right_forearm", "right_forearm"),
+    11: ("left_lower_leg", "left_shin"), 12: ("right_lower_leg", "right_shin"),
+    0: ("head", "head"), 2: ("pelvis", "pelvis"),
+}
 DIP_IMU_FPS = 60.0
 
 
@@ -135,7 +138,7 @@ def from_dip_imu(path: str | Path, sensors: str | Sequence[int] = "six", fps: fl
 
     Args:
         path: the ``.pkl``.
-        sensors: ``"six"`` (DIP/TransPose/PIP's 6, :data:`DIP_IMU_SIX`, named by site), ``"all"``
+        sensors: ``"six"`` (DIP/TransPose/PIP's 6, :data:`DIP_IMU_SIX`, named as in the ``imu6`` kit), ``"all"``
             (17, :data:`DIP_IMU_SENSORS`) or a list of indices into the 17.
         fps: sample rate, Hz (DIP-IMU: 60).
         with_ground_truth: attach ``gt`` as a :class:`MotionSequence` (zero translation, zero betas:
@@ -153,19 +156,19 @@ def from_dip_imu(path: str | Path, sensors: str | Sequence[int] = "six", fps: fl
     if T == 0:
         raise InputFileError(path, "no frames", "at least one frame", field="imu_ori")
     if sensors == "six":
-        picks = [(i, DIP_IMU_SIX[i]) for i in DIP_IMU_SIX]
+        picks = [(i, DIP_IMU_SIX[i][0]) for i in DIP_IMU_SIX]
     elif sensors == "all":
         picks = list(enumerate(DIP_IMU_SENSORS))
     else:
         idx = list(sensors)  # type: ignore[arg-type]
         if any(not isinstance(i, (int, np.integer)) or not 0 <= i < 17 for i in idx):
             raise ShapeError(f"from_dip_imu: sensors must be 'six', 'all' or indices in [0, 17), got {sensors!r}")
-        picks = [(int(i), DIP_IMU_SIX.get(int(i), DIP_IMU_SENSORS[int(i)])) for i in idx]
+        picks = [(int(i), DIP_IMU_SIX[int(i)][0] if int(i) in DIP_IMU_SIX else DIP_IMU_SENSORS[int(i)]) for i in idx]
     ok = _finite_rows(ori.astype(np.float64), acc.astype(np.float64))
     ts = np.arange(T, dtype=np.float64) / fps
     streams = []
     for i, name in picks:
-        site = DIP_IMU_SIX.get(i)
+        site = DIP_IMU_SIX[i][1] if i in DIP_IMU_SIX else None
         info = SensorInfo(name=name, kind="imu", site=site, rate=float(fps), acc_unit="m/s2", acc_frame="world",
                           acc_gravity="removed", world_up="y_up")
         streams.append(_stream(path, f"imu_ori[:, {i}]", info, ts, ok[:, i],
@@ -193,14 +196,23 @@ def _stream(path: Path, field: str, info: SensorInfo, ts: np.ndarray, valid: np.
 
 
 # ------------------------------------------------------------------------------ TotalCapture
-#: TotalCapture Xsens sensor names (13 sensors) -> wearpose sensor names / sites.
-TOTALCAPTURE_SITES: dict[str, str] = {
-    "Head": "head", "Sternum": "sternum", "Pelvis": "pelvis",
-    "L_UpArm": "left_upper_arm", "R_UpArm": "right_upper_arm", "L_LowArm": "left_forearm", "R_LowArm": "right_forearm",
-    "L_UpLeg": "left_thigh", "R_UpLeg": "right_thigh", "L_LowLeg": "left_shin", "R_LowLeg": "right_shin",
-    "L_Foot": "left_foot", "R_Foot": "right_foot",
+#: TotalCapture Xsens sensor names (13 sensors) -> (wearpose sensor name, body site). Names follow
+#: the ``imu6`` kit (``left_forearm``, ``left_lower_leg``...), sites the body asset's site names.
+TOTALCAPTURE_SITES: dict[str, tuple[str, str]] = {
+    "Head": ("head", "head"), "Sternum": ("sternum", "sternum"), "Pelvis": ("pelvis", "pelvis"),
+    "L_UpArm": ("left_upper_arm", "left_upper_arm"), "R_UpArm": ("right_upper_arm", "right_upper_arm"),
+    "L_LowArm": ("left_forearm", "left_forearm"), "R_LowArm": ("right_forearm", "right_forearm"),
+    "L_UpLeg": ("left_upper_leg", "left_thigh"), "R_UpLeg": ("right_upper_leg", "right_thigh"),
+    "L_LowLeg": ("left_lower_leg", "left_shin"), "R_LowLeg": ("right_lower_leg", "right_shin"),
+    "L_Foot": ("left_foot", "left_foot"), "R_Foot": ("right_foot", "right_foot"),
 }
 TOTALCAPTURE_FPS = 60.0
+
+
+def _tc_name(tc: str) -> tuple[str, str | None]:
+    if tc in TOTALCAPTURE_SITES:
+        return TOTALCAPTURE_SITES[tc]
+    return re.sub(r"[^A-Za-z0-9_.\-]", "_", tc.lower())[:64], None
 
 
 def from_totalcapture(path: str | Path, fps: float = TOTALCAPTURE_FPS, sensors: Sequence[str] | None = None) -> Recording:
@@ -231,7 +243,7 @@ def from_totalcapture(path: str | Path, fps: float = TOTALCAPTURE_FPS, sensors: 
 
     Returns:
         ``imu`` sensors (7-number files) or ``mimu`` sensors with orientation (13-number files),
-        named by site (:data:`TOTALCAPTURE_SITES`; unknown names are lower-cased).
+        named as in the ``imu6`` kit with body-asset sites (:data:`TOTALCAPTURE_SITES`; unknown names are lower-cased, site None).
     """
     path = Path(path)
     expected = "TotalCapture .sensors text: '<num_sensors> <num_frames>', then per frame a frame-number line and one '<Name> qw qx qy qz ax ay az [gx gy gz mx my mz]' line per sensor"
@@ -308,8 +320,8 @@ def from_totalcapture(path: str | Path, fps: float = TOTALCAPTURE_FPS, sensors: 
             R = quaternions_to_matrices(q, f"{names[k]} quaternion", ok)
         except _Problem as p:
             raise InputFileError(path, f"sensor {names[k]}: {p.problem}", p.expected, field=f"{names[k]} quaternion") from None
-        wp_name = TOTALCAPTURE_SITES.get(names[k], re.sub(r"[^A-Za-z0-9_.\-]", "_", names[k].lower()))
-        info = SensorInfo(name=wp_name, kind=kind, site=TOTALCAPTURE_SITES.get(names[k]), rate=float(fps), acc_unit="m/s2",
+        wp_name, site = _tc_name(names[k])
+        info = SensorInfo(name=wp_name, kind=kind, site=site, rate=float(fps), acc_unit="m/s2",
                           acc_frame="sensor", acc_gravity="included", world_up="z_up", gyro_unit="rad/s", mag_unit="a.u.")
         ch = {"orientation": R.astype(np.float32), "acceleration": v[:, 4:7].astype(np.float32)}
         if width == 13:
@@ -318,7 +330,7 @@ def from_totalcapture(path: str | Path, fps: float = TOTALCAPTURE_FPS, sensors: 
         streams.append(_stream(path, names[k], info, ts, ok, **ch))
     meta = {"source": "TotalCapture", "source_file": str(path), "device": "Xsens MTw",
             "licence": "TotalCapture licence (research use; cvssp.org/data/totalcapture)",
-            "source_sensor_names": {TOTALCAPTURE_SITES.get(names[k], names[k].lower()): names[k] for k in keep}}
+            "source_sensor_names": {_tc_name(names[k])[0]: names[k] for k in keep}}
     return Recording(streams, None, 0.0, {}, meta)
 
 
@@ -326,10 +338,15 @@ def from_totalcapture(path: str | Path, fps: float = TOTALCAPTURE_FPS, sensors: 
 #: EM-POSE's 12 real sensors in the order of its ``*_clean.npz`` arrays (``S_ORDER`` in
 #: facebookresearch/em-pose ``empose/helpers/configuration.py``: back, head, right lower arm,
 #: right upper arm, right shoulder, right upper leg, right lower leg, then the same on the left),
-#: as wearpose sensor names / sites.
+#: named as in the ``em12`` kit.
 EMPOSE_SENSORS: tuple[str, ...] = (
-    "back", "head", "right_forearm", "right_upper_arm", "right_shoulder", "right_thigh", "right_shin",
-    "left_forearm", "left_upper_arm", "left_shoulder", "left_thigh", "left_shin",
+    "back", "head", "right_lower_arm", "right_upper_arm", "right_shoulder", "right_upper_leg", "right_lower_leg",
+    "left_lower_arm", "left_upper_arm", "left_shoulder", "left_upper_leg", "left_lower_leg",
+)
+#: Body site of each (the body asset's site names; the lower-arm tracker sits at the wrist).
+EMPOSE_SITES: tuple[str, ...] = (
+    "back_upper", "head", "right_wrist", "right_upper_arm", "right_shoulder", "right_thigh", "right_shin",
+    "left_wrist", "left_upper_arm", "left_shoulder", "left_thigh", "left_shin",
 )
 #: The 6-sensor configuration (``S_CONFIG_6 = [0, 1, 2, 6, 7, 11]``): back, head, wrists, lower legs.
 EMPOSE_SIX: tuple[int, ...] = (0, 1, 2, 6, 7, 11)
@@ -404,8 +421,8 @@ def from_empose(path: str | Path, sensors: str | Sequence[int] = "all", fps: flo
     ts = np.arange(F, dtype=np.float64) / fps
     streams = []
     for i in picks:
-        info = SensorInfo(name=names[i], kind="em6dof", site=names[i] if M == 12 else None, rate=float(fps),
-                          reference="world", source="empose_source", source_site="lower_back")
+        info = SensorInfo(name=names[i], kind="em6dof", site=EMPOSE_SITES[i] if M == 12 else None, rate=float(fps),
+                          reference="world", source="empose_source", source_site="pelvis")
         streams.append(_stream(path, f"sensor_pos[:, {i}]", info, ts, ok[:, i],
                                position=pos[:, i].astype(np.float32), orientation=ori[:, i].astype(np.float32)))
     subject: dict[str, Any] = {"id": path.name.split("_")[0]}
