@@ -12,7 +12,8 @@ from wearpose.body import BodyModel
 from wearpose.geometry import geodesic_angle
 from wearpose.motion.resample import resample
 from wearpose.sensors import (
-    EMOffsets, KitError, NoiseConfig, SensorKit, SensorSpec, angular_velocity, get_kit, integrate_gyro, list_kits, simulate,
+    EMOffsets, KitError, NoiseConfig, SensorKit, SensorSpec, angular_velocity, get_kit, integrate_gyro, list_kits,
+    random_subject_offsets, simulate,
     synthetic_acceleration,
 )
 
@@ -127,3 +128,37 @@ def test_every_kit_on_the_embedded_asset():
             if s.kind == "em6dof":
                 d = s.extras["distance"]
                 assert (d > 0.05).all() and (d < 2.0).all()  # within EM range of the source
+
+
+def test_segment_orientation_mode(body_all_sites):
+    m = smooth_motion(T=60, fps=60.0)
+    site = _sim(m, "imu6", body_all_sites, noise="none")
+    seg = _sim(m, "imu6", body_all_sites, noise="none", imu_orientation="segment")
+    so = body_all_sites.sites(m.pose, m.betas, m.trans, ["left_forearm"])
+    # TransPose ji_mask: the left forearm IMU takes the left elbow's global rotation (joint 18)
+    assert torch.allclose(seg["left_forearm"].orientation, so.global_rot[:, 18])
+    assert torch.allclose(site["left_forearm"].extras["segment_orientation"], so.global_rot[:, 18])
+    assert torch.allclose(seg["left_forearm"].acceleration, site["left_forearm"].acceleration)  # same vertex
+    with pytest.raises(Exception, match="imu_orientation"):
+        _sim(m, "imu6", body_all_sites, imu_orientation="bone")
+
+
+def test_mimu_fusion_through_simulate(body_all_sites):
+    pytest.importorskip("ahrs")
+    m = smooth_motion(T=60, fps=60.0)
+    r = _sim(m, "mimu6", body_all_sites, noise="none", mimu_fusion="madgwick")
+    truth = _sim(m, "mimu6", body_all_sites, noise="none")
+    err = geodesic_angle(r["head"].orientation, truth["head"].orientation).max().item()
+    assert 0 < math.degrees(err) < 5
+
+
+def test_participant_pool_and_rate_scaled_smoothing(body_all_sites):
+    m = smooth_motion(T=121, fps=120.0)
+    pool = [EMOffsets.identity(6), random_subject_offsets(6, torch.Generator().manual_seed(1))]
+    picks = {_sim(m, "em6", body_all_sites, noise="none", offsets=pool, seed=s).meta["offsets_index"] for s in range(12)}
+    assert picks == {0, 1}
+    # at 120 Hz the default stencil is 8 frames (TransPose's 1/15 s window)
+    r = _sim(m, "imu6", body_all_sites, noise="none", rate=120)
+    so = body_all_sites.sites(m.pose, m.betas, m.trans, ["head"])
+    a8, _ = synthetic_acceleration(so.positions[:, 0], 120.0, smooth_n=8)
+    assert torch.allclose(r["head"].acceleration, a8, atol=1e-8)

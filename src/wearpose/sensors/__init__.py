@@ -9,9 +9,9 @@ from wearpose.sensors.em import EMNoise, EMOffsets, apply_offsets, random_subjec
 from wearpose.sensors.imu import (
     ImuNoise, angular_velocity, free_acceleration, integrate_gyro, simulate_imu, specific_force, synthetic_acceleration,
 )
-from wearpose.sensors.kits import SENSOR_KINDS, KitError, SensorKit, SensorSpec, get_kit, list_kits, register_kit, resolve_sites
+from wearpose.sensors.kits import SENSOR_KINDS, SITE_SEGMENT, KitError, SensorKit, SensorSpec, get_kit, list_kits, register_kit, resolve_sites
 from wearpose.sensors.mimu import (
-    EARTH_FIELD, MimuNoise, birae_3param, birae_6param, birae_6param_to_matrix, simulate_mimu, zhou_6d,
+    EARTH_FIELD, MimuNoise, ahrs_fusion, birae_3param, birae_6param, birae_6param_to_matrix, simulate_mimu, zhou_6d,
 )
 from wearpose.sensors.normalize import empose_normalize, root_relative_orientations
 from wearpose.sensors.simulate import NoiseConfig, SensorData, SimulationResult, simulate
@@ -19,11 +19,11 @@ from wearpose.sensors.vio import VioNoise, simulate_vio
 
 __all__ = [
     "simulate", "SimulationResult", "SensorData", "NoiseConfig",
-    "SensorKit", "SensorSpec", "SENSOR_KINDS", "KitError", "get_kit", "list_kits", "register_kit", "resolve_sites",
+    "SensorKit", "SensorSpec", "SENSOR_KINDS", "SITE_SEGMENT", "KitError", "get_kit", "list_kits", "register_kit", "resolve_sites",
     "ImuNoise", "synthetic_acceleration", "angular_velocity", "integrate_gyro", "specific_force", "free_acceleration",
     "simulate_imu",
     "EMNoise", "EMOffsets", "random_subject_offsets", "apply_offsets", "relative_to_source", "simulate_em",
-    "MimuNoise", "EARTH_FIELD", "simulate_mimu", "birae_6param", "birae_3param", "birae_6param_to_matrix", "zhou_6d",
+    "MimuNoise", "EARTH_FIELD", "simulate_mimu", "ahrs_fusion", "birae_6param", "birae_3param", "birae_6param_to_matrix", "zhou_6d",
     "root_relative_orientations", "empose_normalize",
     "VioNoise", "simulate_vio",
 ]

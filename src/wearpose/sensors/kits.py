@@ -43,6 +43,18 @@ from wearpose.errors import ConfigError, WearposeError
 SENSOR_KINDS: tuple[str, ...] = ("em6dof", "imu", "mimu", "vio")
 
 
+#: SMPL joint whose global rotation is the *segment* orientation of a site: the bone the sensor
+#: is strapped to. Matches TransPose/PIP's ``ji_mask = [18, 19, 4, 5, 15, 0]`` for the forearm,
+#: shin, head and pelvis sites (their IMU orientation is the joint's global rotation) and
+#: BiRAE's "sensor-to-segment alignment is identity"; a wrist-watch site rides on the forearm.
+SITE_SEGMENT: dict[str, str] = {
+    "head": "head", "sternum": "spine3", "back_upper": "spine3", "pelvis": "pelvis",
+    **{f"{lr}_{site}": f"{lr}_{joint}" for lr in ("left", "right") for site, joint in (
+        ("shoulder", "collar"), ("upper_arm", "shoulder"), ("forearm", "elbow"), ("wrist", "elbow"),
+        ("thigh", "hip"), ("shin", "knee"), ("foot", "ankle"))},
+}
+
+
 class KitError(ConfigError):
     """Unknown kit, malformed kit, or a kit that does not fit a body asset."""
 

@@ -235,20 +235,26 @@ def ahrs_fusion(gyr: torch.Tensor, acc: torch.Tensor, mag: torch.Tensor | None, 
     from wearpose.geometry import matrix_to_quat
 
     q0 = matrix_to_quat(_C_EW @ R0.to(torch.float64)).numpy()
-    kw = {"frequency": float(fps), "q0": q0}
+    kw: dict = {"frequency": float(fps)}
     if gain is not None:
         kw["gain"] = gain
     # ahrs integrates gyr[t] over the step (t-1, t]; our samples are instantaneous (central
     # convention), so hand it the trapezoid mean of the two ends of each step.
     w = gyr.detach().to(torch.float64)
-    w = torch.cat([w[:1], 0.5 * (w[:-1] + w[1:])], dim=0)
-    g = w.numpy()
+    w = torch.cat([w[:1], 0.5 * (w[:-1] + w[1:])], dim=0).numpy()
     a = acc.detach().to(torch.float64).numpy()
-    if mag is not None:
-        f = Madgwick(gyr=g, acc=a, mag=mag.detach().to(torch.float64).numpy() * 1e3, **kw)  # mT, as ahrs documents
-    else:
-        f = Madgwick(gyr=g, acc=a, **kw)
-    RE = torch.from_numpy(np.stack([q2R(q) for q in f.Q]))
+    m = None if mag is None else mag.detach().to(torch.float64).numpy() * 1e3  # mT, as ahrs documents
+    # Step the filter ourselves: ahrs 0.4.0's batch MARG mode ignores q0 and starts from an
+    # NED e-compass solution, inconsistent with the frame its updates use.
+    f = Madgwick(**kw)
+    Q = np.empty((a.shape[0], 4))
+    Q[0] = q0 / np.linalg.norm(q0)
+    for t in range(1, a.shape[0]):
+        if m is None:
+            Q[t] = f.updateIMU(Q[t - 1], gyr=w[t], acc=a[t])
+        else:
+            Q[t] = f.updateMARG(Q[t - 1], gyr=w[t], acc=a[t], mag=m[t])
+    RE = torch.from_numpy(np.stack([q2R(q) for q in Q]))
     return _C_EW.T @ RE
 
 

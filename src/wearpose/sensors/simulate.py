@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import torch
 
@@ -24,7 +24,8 @@ from wearpose.motion.resample import resample
 from wearpose.motion.sequence import MotionSequence
 from wearpose.sensors.em import EMNoise, EMOffsets, random_subject_offsets, simulate_em
 from wearpose.sensors.imu import ImuNoise, simulate_imu
-from wearpose.sensors.kits import SensorKit, get_kit, resolve_sites
+from wearpose.body.skeleton import JOINT_INDEX
+from wearpose.sensors.kits import SITE_SEGMENT, SensorKit, get_kit, resolve_sites
 from wearpose.sensors.mimu import MimuNoise, simulate_mimu
 from wearpose.sensors.vio import VioNoise, simulate_vio
 
@@ -138,9 +139,9 @@ def _noise_config(noise: str | NoiseConfig) -> NoiseConfig:
 
 
 def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: int = 0,
-             noise: str | NoiseConfig = "default", offsets: EMOffsets | str | None = None,
-             rate: float | None = None, imu_smooth_n: int = 4, acc_ends: str = "one_sided",
-             em_fill: str = "nan") -> SimulationResult:
+             noise: str | NoiseConfig = "default", offsets: EMOffsets | Sequence[EMOffsets] | str | None = None,
+             rate: float | None = None, imu_smooth_n: int | None = None, acc_ends: str = "one_sided",
+             em_fill: str = "nan", imu_orientation: str = "site", mimu_fusion: str | None = None) -> SimulationResult:
     """Simulate a sensor kit worn by a body performing ``motion``.
 
     Args:
@@ -154,12 +155,26 @@ def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: i
             :class:`EMOffsets` (its translation covariance, if any, is drawn from once for this
             sequence, EM-POSE supp. 2.2), ``"random"`` for a synthetic subject
             (:func:`wearpose.sensors.em.random_subject_offsets`), or ``None`` for identity (the
-            sensor is the skin frame of EM-POSE Eq. 3).
+            sensor is the skin frame of EM-POSE Eq. 3). A sequence of :class:`EMOffsets` (one
+            per calibrated participant) picks one at random for this sequence, as EM-POSE
+            trains ("for each AMASS sequence ... we randomly decide on a participant p whose
+            offsets O_p should be applied", Sec. 5.3); the index is in ``meta["offsets_index"]``.
         rate: override every sensor's rate (Hz); default: the kit's rates.
-        imu_smooth_n: acceleration stencil half-width at the sensor rate (TransPose/PIP: 4 at
-            60 Hz; 1 disables smoothing).
+        imu_smooth_n: acceleration stencil half-width in frames at the sensor rate; default
+            ``None`` keeps TransPose/PIP's window (4 frames at 60 Hz = 1/15 s) at any rate,
+            ``round(4 * rate / 60)``; 1 disables smoothing.
         acc_ends: end handling of the acceleration (:func:`wearpose.sensors.imu.synthetic_acceleration`).
         em_fill: value of dropped EM frames, ``"nan"`` or ``"zero"``.
+        imu_orientation: orientation of IMU/MIMU sensors: ``"site"`` (default: the skin frame
+            of the site, EM-POSE Eq. 3 -- a physical sensor with a sensor-to-segment offset) or
+            ``"segment"`` (the global rotation of the bone the site is on,
+            :data:`wearpose.sensors.kits.SITE_SEGMENT`: what TransPose/PIP synthesise and
+            what BiRAE assumes after calibration). Either way the position (hence the
+            acceleration) is the site vertex, and ``extras["segment_orientation"]`` holds the
+            bone's ground-truth rotation.
+        mimu_fusion: ``None`` (analytic BiRAE-style error model) or ``"madgwick"`` /
+            ``"madgwick_imu"`` (a real AHRS filter, optional package ``ahrs``;
+            :func:`wearpose.sensors.mimu.simulate_mimu`).
 
     Returns:
         :class:`SimulationResult`.
@@ -170,10 +185,13 @@ def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: i
     if rate is not None:
         kit = kit.with_rate(rate)
     cfg = _noise_config(noise)
+    if imu_orientation not in ("site", "segment"):
+        raise ConfigError(f"simulate: imu_orientation must be 'site' or 'segment', got {imu_orientation!r}")
     sites, subs = resolve_sites(kit, body.site_names, getattr(body, "asset_id", "?"))
 
     em_specs = kit.of_kind("em6dof")
     em_off: EMOffsets | None = None
+    offsets_index: int | None = None
     if em_specs:
         if offsets is None:
             em_off = EMOffsets.identity(len(em_specs))
@@ -182,6 +200,12 @@ def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: i
                 raise ConfigError(f"simulate: offsets must be an EMOffsets, 'random' or None, got {offsets!r}")
             em_off = random_subject_offsets(len(em_specs), _generator(seed, "subject")).draw(_generator(seed, "offsets"))
         else:
+            if not isinstance(offsets, EMOffsets):
+                pool = list(offsets)
+                if not pool or not all(isinstance(o, EMOffsets) for o in pool):
+                    raise ConfigError("simulate: offsets must be an EMOffsets, a non-empty sequence of them, 'random' or None")
+                offsets_index = int(torch.randint(len(pool), (1,), generator=_generator(seed, "participant")))
+                offsets = pool[offsets_index]
             if offsets.num_sensors != len(em_specs):
                 raise ShapeError(f"simulate: {offsets.num_sensors} EM offsets for the {len(em_specs)} EM sensors of kit {kit.name!r}")
             em_off = offsets.draw(_generator(seed, "offsets"))
@@ -194,6 +218,7 @@ def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: i
         m = motion if abs(motion.fps - r) < 1e-9 else resample(motion, r)
         T = m.num_frames
         ts = torch.arange(T, dtype=torch.float64) / r
+        smooth_n = imu_smooth_n if imu_smooth_n is not None else max(1, int(round(4 * r / 60.0)))
         names = list(dict.fromkeys([sites[s.name] for s in group]
                                    + ([sites["<em_source>"]] if any(s.kind == "em6dof" for s in group) else [])))
         so = body.sites(m.pose, m.betas, m.trans, names)
@@ -229,20 +254,29 @@ def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: i
                 for j, s in enumerate(specs):
                     g = _generator(seed, s.name)
                     Rj, Pj = Rk[:, j:j + 1], Pk[:, j:j + 1]
+                    seg = so.global_rot[:, JOINT_INDEX[SITE_SEGMENT[sites[s.name]]]] if sites[s.name] in SITE_SEGMENT else None
+                    if kind in ("imu", "mimu") and imu_orientation == "segment":
+                        if seg is None:
+                            raise ConfigError(f"simulate: no segment known for site {sites[s.name]!r} (sensor {s.name!r}); "
+                                              f"known: {sorted(SITE_SEGMENT)}")
+                        Rj = seg[:, None]
+                    gt = {} if seg is None else {"segment_orientation": seg}
                     if kind == "imu":
-                        res = simulate_imu(Rj, Pj, r, noise=cfg.imu, smooth_n=imu_smooth_n, ends=acc_ends, generator=g)
+                        res = simulate_imu(Rj, Pj, r, noise=cfg.imu, smooth_n=smooth_n, ends=acc_ends, generator=g)
                         out[s.name] = SensorData(s.name, kind, sites[s.name], r, ts, res["valid"], "world",
                                                  orientation=res["orientation"][:, 0], acceleration=res["acceleration"][:, 0],
                                                  angular_velocity=res["angular_velocity"][:, 0],
-                                                 specific_force=res["specific_force"][:, 0])
+                                                 specific_force=res["specific_force"][:, 0], extras=dict(gt))
                     elif kind == "mimu":
-                        res = simulate_mimu(Rj, Pj, r, noise=cfg.mimu, smooth_n=imu_smooth_n, ends=acc_ends, generator=g)
+                        res = simulate_mimu(Rj, Pj, r, noise=cfg.mimu, smooth_n=smooth_n, ends=acc_ends, generator=g,
+                                            fusion=mimu_fusion)
                         out[s.name] = SensorData(s.name, kind, sites[s.name], r, ts, res["valid"], "world",
                                                  orientation=res["orientation"][:, 0], acceleration=res["acceleration"][:, 0],
                                                  angular_velocity=res["angular_velocity"][:, 0],
                                                  specific_force=res["specific_force"][:, 0],
                                                  magnetic_field=res["magnetic_field"][:, 0],
-                                                 extras={"yaw_error": res["yaw_error"][:, 0], "disturbance": res["disturbance"][:, 0]})
+                                                 extras={"yaw_error": res["yaw_error"][:, 0], "disturbance": res["disturbance"][:, 0],
+                                                         **gt})
                     else:
                         res = simulate_vio(Rj, Pj, r, noise=cfg.vio, generator=g)
                         out[s.name] = SensorData(s.name, kind, sites[s.name], r, ts, res["valid"], "world",
@@ -252,4 +286,4 @@ def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: i
     ordered = {s.name: out[s.name] for s in kit.sensors}
     return SimulationResult(kit, ordered, int(seed), cfg, em_off, em_source, subs,
                             {"body_asset": getattr(body, "asset_id", "?"), "motion_fps": motion.fps,
-                             "motion_frames": motion.num_frames})
+                             "motion_frames": motion.num_frames, "offsets_index": offsets_index})
