@@ -10,17 +10,19 @@ Y-up world, sampled at ``fps``. Outputs follow the canonical inertial form of DE
   included, ``f_S = R_WS^T (a_W - g)`` with ``g = (0, -9.81, 0)`` (so a sensor at rest reads
   ``+9.81`` along the world up axis expressed in its frame).
 
-**Acceleration** (TransPose/PIP synthesis). TransPose's ``preprocess.py`` (``_syn_acc``, used
-by PIP: "we synthesize the IMU measurements ... as proposed by Yi et al." [PIP supp. Sec. A])
-computes the second central difference of the vertex position over a widened stencil,
-``smooth_n = 4``::
+**Acceleration** (TransPose/PIP synthesis). PIP synthesises its AMASS IMU data "as proposed by
+Yi et al." (TransPose; PIP supplementary, "Datasets"). TransPose's ``preprocess.py``
+(``process_amass(smooth_n=4)`` -> ``_syn_acc``) takes the second central difference of the
+sensor vertex over a widened stencil, ``n = smooth_n = 4`` frames at 60 Hz::
 
     a(t) = (p(t - n) + p(t + n) - 2 p(t)) / (n dt)^2          for n <= t < T - n
     a(t) = (p(t - 1) + p(t + 1) - 2 p(t)) / dt^2              for the frames next to the ends
     a(0) = a(T - 1) = 0                                         (TransPose zero-pads)
 
-(found with the code search "TransPose _syn_acc smooth_n": ``Xinyu-Yi/TransPose``,
-``preprocess.py``, ``process_amass(smooth_n=4)``; the 3600 there is ``fps^2`` at 60 Hz.) The
+(source: code search "TransPose _syn_acc smooth_n" -> ``Xinyu-Yi/TransPose`` ``preprocess.py``,
+commit 2ff1d143; its constant 3600 is ``fps^2`` at 60 Hz. Derived projects such as MobilePoser
+copy it with ``fps`` as a parameter.) :func:`wearpose.sensors.simulate` keeps the same *time*
+window at other rates (``n = round(4 rate / 60)``). The
 widened stencil is a low-pass: a sinusoid of angular frequency ``w`` is scaled by
 ``2 (1 - cos(w n dt)) / (w n dt)^2`` (0.985 at 1 Hz, 0.94 at 2 Hz with n=4 at 60 Hz).
 
@@ -30,7 +32,7 @@ The two extreme frames are handled by ``ends``:
 - ``"one_sided"`` (default): second-order one-sided difference
   ``a(0) = (2 p0 - 5 p1 + 4 p2 - p3) / dt^2`` (mirrored at the end); every frame valid.
 - ``"mask"``: the extreme frames are marked invalid (``valid=False``) and set to 0.
-- ``"zero"``: TransPose's zero padding, frames left valid (bit-compatible with its synthesis).
+- ``"zero"``: TransPose's zero padding, frames left valid (the same numbers as its synthesis).
 
 **Gyro** from orientation increments. ``log(R_t^T R_{t+1}) * fps`` is the body-frame angular
 velocity at the *midpoint* ``t + 1/2`` (exact for a constant body rate). Two conventions:

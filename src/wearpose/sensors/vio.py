@@ -30,7 +30,7 @@ class VioNoise:
     Attributes:
         position_white: per-axis white position noise, m (1 mm).
         orientation_white: per-axis white orientation noise, rad (0.2 deg).
-        position_walk: position drift random walk, m/sqrt(s) (1 cm after 1 s... 8 cm after 60 s).
+        position_walk: position drift random walk per axis, m/sqrt(s) (std 1 cm after 1 s, 7.7 cm after 60 s).
         yaw_walk: heading drift random walk, rad/sqrt(s) (0.1 deg/sqrt(s)).
     """
 
