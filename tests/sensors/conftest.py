@@ -18,3 +18,12 @@ def body_all_sites() -> BodyModel:
 @pytest.fixture(scope="session")
 def body_tiny() -> BodyModel:
     return BodyModel(make_tiny_asset(), dtype=torch.float64)
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    # These tests run many tiny tensor ops; thread hand-offs dominate on a loaded machine.
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
