@@ -63,6 +63,16 @@ def body_info(source: Optional[str] = None) -> dict[str, Any]:
     }
 
 
+def corpus_info(cache: Optional[Path] = None) -> dict[str, Any]:
+    """Summary of the prepared corpus, or why there is none."""
+    from wearpose.motion import CorpusStore, cache_dir
+
+    try:
+        return {"prepared": True, **CorpusStore(cache_dir(cache)).summary()}
+    except (WearposeError, FileNotFoundError) as exc:
+        return {"prepared": False, "reason": f"{exc} (run: wearpose data prepare)"}
+
+
 @app.command()
 def info(
     body: Optional[str] = typer.Option(None, help="Body asset: default, smpl ($WEARPOSE_SMPL_MODEL) or a file path."),
@@ -72,18 +82,109 @@ def info(
 
     Example: wearpose info --json
     """
-    result: dict[str, Any] = {"body": body_info(body)}
-    try:
-        from wearpose.motion import CorpusStore, default_cache_dir
-
-        store = CorpusStore(default_cache_dir())
-        result["corpus"] = store.summary()
-    except (ImportError, WearposeError, FileNotFoundError) as exc:
-        result["corpus"] = {"prepared": False, "reason": str(exc)}
+    result: dict[str, Any] = {"body": body_info(body), "corpus": corpus_info()}
 
     def render(r: dict[str, Any]) -> None:
         console.print(_kv_table("body asset", r["body"]))
-        console.print(_kv_table("corpus", {k: v for k, v in r["corpus"].items()}))
+        console.print(_kv_table("corpus", r["corpus"]))
+
+    _emit(result, as_json, render)
+
+
+@data_app.command("prepare")
+def data_prepare(
+    folders: Optional[list[Path]] = typer.Argument(None, help="Corpus folder (with manifest.csv) or folders of BVH/AMASS files; default $WEARPOSE_DATA or ../shared/data."),
+    cache: Optional[Path] = typer.Option(None, help="Output store; default $WEARPOSE_CACHE or ~/.cache/wearpose."),
+    fps: Optional[float] = typer.Option(None, help="Resample every clip to this rate (default: keep each clip's rate)."),
+    workers: Optional[int] = typer.Option(None, help="Worker processes (default: up to 2)."),
+    limit: Optional[int] = typer.Option(None, help="Convert only the first N clips (quick check)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+) -> None:
+    """Convert the motion corpus into the cached, indexed store (train/val/test by subject).
+
+    Example: wearpose data prepare --fps 60
+    """
+    from wearpose.motion import cache_dir, data_dir, prepare_corpus
+
+    src = [data_dir(f) for f in folders] if folders else data_dir()
+    res = prepare_corpus(src, cache_dir(cache), fps=fps, progress=not as_json, workers=workers, limit=limit)
+    _emit(res, as_json, lambda r: console.print(_kv_table("prepared", {k: v for k, v in r.items() if k != "failures"}))
+          or [err_console.print(f"[red]failed[/] {k}: {v}") for k, v in r.get("failures", {}).items()])
+
+
+@data_app.command("info")
+def data_info(
+    cache: Optional[Path] = typer.Option(None, help="Store to inspect; default $WEARPOSE_CACHE or ~/.cache/wearpose."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON for scripts."),
+) -> None:
+    """Summarise the prepared corpus: clips, subjects, minutes per split/source/licence.
+
+    Example: wearpose data info --json
+    """
+    from wearpose.motion import CorpusStore, cache_dir
+
+    summary = CorpusStore(cache_dir(cache)).summary()
+    _emit(summary, as_json, lambda r: console.print(_kv_table("corpus", r)))
+
+
+@app.command()
+def view(
+    clip: str = typer.Argument(..., help="A clip id of the prepared store, or a .bvh/.bvh.gz/.npz (MotionSequence or AMASS) file."),
+    out: Path = typer.Option(Path("out/view.html"), help="Output HTML file."),
+    body: Optional[str] = typer.Option(None, help="Body asset: default, smpl or a file path."),
+    start: float = typer.Option(0.0, help="Start time in seconds."),
+    seconds: Optional[float] = typer.Option(20.0, help="Length to include in seconds (the page carries every frame)."),
+    cache: Optional[Path] = typer.Option(None, help="Prepared store (for clip ids)."),
+) -> None:
+    """Write a self-contained HTML page that plays a clip on the body, with skeleton and sensor sites.
+
+    Example: wearpose view cmu_daz/05/05_01 --out out/walk.html
+    """
+    from wearpose.body import BodyModel
+    from wearpose.motion import load_motion
+    from wearpose.viewer import write_html
+
+    model = BodyModel(body)
+    seq = load_motion(clip, cache=cache, rest_joints=model.rest_joints())
+    a = int(round(start * seq.fps))
+    b = seq.num_frames if seconds is None else min(seq.num_frames, a + int(round(seconds * seq.fps)))
+    seq = seq.slice(a, b)
+    path = write_html(out, model, seq.pose, seq.betas, seq.trans, seq.fps, title=f"wearpose: {clip}")
+    console.print(f"wrote {path} ({seq.num_frames} frames at {seq.fps:g} fps); open it in a browser")
+
+
+DEFAULT_DEMO_CLIP = "cmu_daz/05/05_01"  # a walk from the test split
+
+
+@app.command()
+def demo(
+    clip: str = typer.Option(DEFAULT_DEMO_CLIP, help="Clip id, corpus path or motion file to run the demo on."),
+    out: Path = typer.Option(Path("out/demo"), help="Output folder (HTML page, round-trip files, metrics JSON)."),
+    body: Optional[str] = typer.Option(None, help="Body asset: default, smpl or a file path."),
+    as_json: bool = typer.Option(False, "--json", help="Print the metrics as JSON."),
+) -> None:
+    """Play a corpus clip on the body and check it against itself after a file round trip.
+
+    Reads the clip (BVH retargeted to SMPL-24, or the prepared store), writes it as a wearpose
+    MotionSequence and as AMASS npz, reads both back, evaluates every metric of the round-tripped
+    motion against the original (all should be ~0) and writes an HTML page showing the motion.
+
+    Example: wearpose demo --clip bandai/bandai-B/dataset-2_walk_feminine_001
+    """
+    from wearpose.cli.demo import run_roundtrip_demo
+
+    result = run_roundtrip_demo(clip, out, body=body)
+
+    def render(r: dict[str, Any]) -> None:
+        t = Table(title=f"{r['clip']}: round trip vs original ({r['frames']} frames, {r['fps']:g} fps)")
+        t.add_column("metric")
+        for name in r["metrics"]:
+            t.add_column(name)
+        keys = sorted({k for m in r["metrics"].values() for k in m})
+        for k in keys:
+            t.add_row(k, *[f"{m.get(k, float('nan')):.3g}" for m in r["metrics"].values()])
+        console.print(t)
+        console.print(f"page: {r['html']}  (open in a browser)")
 
     _emit(result, as_json, render)
 

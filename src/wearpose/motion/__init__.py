@@ -8,6 +8,7 @@ from wearpose.motion.amass import read_amass, save_amass
 from wearpose.motion.bvh import (
     BvhMotion, BvhSkeleton, bvh_forward_kinematics, end_site_positions, parse_bvh_text, read_bvh,
 )
+from wearpose.motion.load import load_motion
 from wearpose.motion.paths import cache_dir, data_dir
 from wearpose.motion.resample import resample
 from wearpose.motion.retarget import (
@@ -19,7 +20,7 @@ from wearpose.motion.store import CorpusStore, prepare_corpus
 from wearpose.motion.template import default_rest_joints, template_rest_joints
 
 __all__ = [
-    "MotionSequence", "FORMAT_VERSION", "resample",
+    "MotionSequence", "FORMAT_VERSION", "resample", "load_motion",
     "read_bvh", "parse_bvh_text", "BvhMotion", "BvhSkeleton", "bvh_forward_kinematics", "end_site_positions",
     "retarget_bvh", "Retargeted", "SkeletonMap", "TPose", "solve_tpose", "detect_skeleton_map", "estimate_hinge_axes",
     "bone_direction_errors", "lowest_foot_height", "RetargetError", "CMU_DAZ", "BANDAI", "BUILTIN_MAPS",

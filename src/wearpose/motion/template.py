@@ -1,14 +1,10 @@
-"""SMPL rest joints: from the body model when it is available, else a typed-in SMPL-like template.
-
-The template is only a stand-in (it approximates SMPL's neutral joint layout at betas = 0) so that
-readers and tests work before/without a body asset; files written with it say so in their
-``meta["rest_joints_source"]``.
+"""SMPL rest joints for the motion readers: the default body model's, and a typed-in SMPL-like
+template that tests use as an independent synthetic skeleton.
 """
 
 from __future__ import annotations
 
 import functools
-import warnings
 from typing import Any
 
 import torch
@@ -49,21 +45,16 @@ def _body_model() -> Any:
 
 def default_rest_joints(betas: torch.Tensor | None = None, dtype: torch.dtype = torch.float64
                         ) -> tuple[torch.Tensor, str]:
-    """Rest joints ``(24, 3)`` (metres) for ``betas`` (default zeros) and where they came from.
+    """Rest joints ``(24, 3)`` (metres) of the default body model for ``betas`` (default zeros).
 
-    Uses ``wearpose.body.BodyModel().rest_joints(betas)`` when the body model and its asset load;
-    otherwise warns and returns :func:`template_rest_joints` (which ignores ``betas``).
+    No silent fallback: if the body asset cannot load, its error propagates, because motion
+    converted on another skeleton would be subtly wrong everywhere downstream.
 
     Returns:
-        ``(rest_joints, source)`` where ``source`` is the body asset id or ``"smpl-like-template"``.
+        ``(rest_joints, asset_id)``.
     """
-    try:
-        model = _body_model()
-        b = torch.zeros(model.num_betas, dtype=torch.float64) if betas is None else betas.to(torch.float64)
-        joints = model.rest_joints(b)
-        joints = joints.reshape(-1, 24, 3)[0] if joints.dim() > 2 else joints
-        return joints.to(dtype), str(getattr(model, "asset_id", "body-model"))
-    except Exception as exc:  # noqa: BLE001 - any failure means "no usable body model yet"
-        warnings.warn(f"wearpose.motion: body model unavailable ({type(exc).__name__}: {exc}); "
-                      "using the SMPL-like template rest joints", stacklevel=2)
-        return template_rest_joints(dtype), "smpl-like-template"
+    model = _body_model()
+    b = torch.zeros(model.num_betas, dtype=torch.float64) if betas is None else betas.to(torch.float64)
+    joints = model.rest_joints(b)
+    joints = joints.reshape(-1, 24, 3)[0] if joints.dim() > 2 else joints
+    return joints.to(dtype), str(model.asset_id)

@@ -1,0 +1,66 @@
+"""One door for "give me this motion": a file of any supported format, or a clip of the store."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from wearpose.errors import InputFileError
+from wearpose.motion.amass import read_amass
+from wearpose.motion.bvh import read_bvh
+from wearpose.motion.paths import cache_dir, data_dir
+from wearpose.motion.retarget import retarget_bvh
+from wearpose.motion.sequence import FORMAT_NAME, MotionSequence
+from wearpose.motion.template import default_rest_joints
+
+_BVH = (".bvh", ".gz")
+
+
+def load_motion(spec: str | Path, cache: str | Path | None = None, rest_joints: torch.Tensor | None = None
+                ) -> MotionSequence:
+    """Load a motion from a file or a clip id.
+
+    Args:
+        spec: a ``.bvh``/``.bvh.gz`` file (retargeted to SMPL-24), a ``.npz`` in our
+            MotionSequence format or in AMASS format, a clip id of the prepared store
+            (e.g. ``cmu_daz/05/05_01``), or a clip path relative to the corpus folder.
+        cache: prepared store (default :func:`wearpose.motion.cache_dir`).
+        rest_joints: ``(24, 3)`` rest joints of the body the motion will play on (m); default:
+            the default body model's.
+
+    Raises:
+        InputFileError: nothing matches ``spec`` (the message lists what was tried).
+    """
+    path = Path(spec).expanduser()
+    if rest_joints is None:
+        rest_joints, _ = default_rest_joints()
+    if path.is_file():
+        if path.name.endswith((".bvh", ".bvh.gz")):
+            return retarget_bvh(read_bvh(path), rest_joints, meta={"source_file": str(path)}).sequence
+        if path.suffix == ".npz":
+            try:
+                with np.load(path, allow_pickle=False) as data:
+                    ours = "format" in data.files and str(data["format"]) == FORMAT_NAME
+            except Exception as exc:
+                raise InputFileError(path, f"cannot be read as npz ({exc})", "a MotionSequence or AMASS .npz") from exc
+            return MotionSequence.load(path) if ours else read_amass(path, rest_joints=rest_joints)
+        raise InputFileError(path, f"unsupported extension {path.suffix!r}", ".bvh, .bvh.gz or .npz")
+    tried = [f"file {path}"]
+    store_dir = cache_dir(cache)
+    if (store_dir / "index.json").is_file():
+        from wearpose.motion.store import CorpusStore  # noqa: PLC0415 - only when a store exists
+
+        store = CorpusStore(store_dir)
+        if str(spec) in store.clips():
+            return store.load(str(spec))
+        tried.append(f"clip id in {store_dir}")
+    else:
+        tried.append(f"prepared store {store_dir} (absent)")
+    root = data_dir(must_exist=False)
+    for cand in (root / f"{spec}.bvh.gz", root / f"{spec}.bvh", root / str(spec)):
+        if cand.is_file():
+            return load_motion(cand, rest_joints=rest_joints)
+    tried.append(f"corpus file under {root}")
+    raise InputFileError(path, "no such motion", "a .bvh/.bvh.gz/.npz file or a clip id; tried: " + "; ".join(tried))
