@@ -47,11 +47,16 @@ class SiteOutput:
 
 def _vertex_normals(verts: torch.Tensor, faces: torch.Tensor, num_vertices: int) -> torch.Tensor:
     """Area-weighted vertex normals. verts ``(N, V', 3)``, faces ``(F, 3)`` indexing ``V'``."""
+    N = verts.shape[0]
     v0, v1, v2 = verts[:, faces[:, 0]], verts[:, faces[:, 1]], verts[:, faces[:, 2]]
     fn = torch.cross(v1 - v0, v2 - v0, dim=-1)  # length = 2 * area: area weighting for free
-    n = torch.zeros(verts.shape[0], num_vertices, 3, dtype=verts.dtype, device=verts.device)
+    # Accumulate along dim 0 with the batch folded into rows: index_add on the leading dim of a
+    # contiguous tensor is ~3x faster than on dim 1 for large batches.
+    fn_rows = fn.transpose(0, 1).reshape(faces.shape[0], N * 3)
+    n = torch.zeros(num_vertices, N * 3, dtype=verts.dtype, device=verts.device)
     for k in range(3):
-        n = n.index_add(1, faces[:, k], fn)
+        n = n.index_add(0, faces[:, k], fn_rows)
+    n = n.view(num_vertices, N, 3).transpose(0, 1)
     return n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
 
 
@@ -198,7 +203,7 @@ class BodyModel(nn.Module):
         t = J - (G @ J_rest.unsqueeze(-1)).squeeze(-1)  # (N, 24, 3)
         A = torch.cat([G.reshape(-1, NUM_JOINTS, 9), t], dim=-1)  # (N, 24, 12)
         T = torch.einsum("vj,njk->nvk", w, A)  # (N, V', 12)
-        verts = (T[..., :9].reshape(*T.shape[:2], 3, 3) @ v_shaped.unsqueeze(-1)).squeeze(-1) + T[..., 9:]
+        verts = torch.einsum("nvij,nvj->nvi", T[..., :9].reshape(*T.shape[:2], 3, 3), v_shaped) + T[..., 9:]
         return verts + trans[:, None], J + trans[:, None], G, J_rest
 
     def forward(self, pose: torch.Tensor | None = None, betas: torch.Tensor | None = None,
