@@ -1,5 +1,17 @@
-"""The ``wearpose`` command: thin; every subcommand calls one library function."""
+"""The ``wearpose`` command: thin; every subcommand calls one library function.
+
+Core commands live in :mod:`wearpose.cli.app`; each further command group lives in its own
+``cmd_<name>.py`` module that registers itself on ``app`` when imported (discovered here), so
+features can add commands without editing one shared file.
+"""
+
+import importlib
+import pkgutil
 
 from wearpose.cli.app import app, main
+
+for _m in pkgutil.iter_modules(__path__):
+    if _m.name.startswith("cmd_"):
+        importlib.import_module(f"{__name__}.{_m.name}")
 
 __all__ = ["app", "main"]
