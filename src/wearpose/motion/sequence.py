@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import copy
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +19,7 @@ import torch
 
 from wearpose.body.skeleton import NUM_JOINTS
 from wearpose.errors import InputFileError, ShapeError
+from wearpose.fileio import atomic_savez
 from wearpose.geometry import axis_angle_to_matrix, matrix_to_axis_angle
 
 #: Identifies our motion files; bump :data:`FORMAT_VERSION` on any incompatible change.
@@ -142,15 +141,7 @@ class MotionSequence:
             "trans": self.trans.detach().to(torch.float32).numpy(), "fps": np.array(self.fps, dtype=np.float64),
             "meta": np.array(json.dumps(self.meta, sort_keys=True, default=str)),
         }
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp.npz", dir=path.parent)
-        os.close(fd)
-        try:
-            np.savez(tmp, **arrays)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-        return path
+        return atomic_savez(path, arrays)
 
     @classmethod
     def load(cls, path: str | Path, dtype: torch.dtype = torch.float32) -> MotionSequence:

@@ -15,7 +15,6 @@ import hashlib
 import json
 import multiprocessing
 import os
-import tempfile
 import time
 from collections.abc import Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -24,6 +23,7 @@ from typing import Any
 
 import torch
 
+from wearpose.fileio import atomic_write_text
 from wearpose.errors import ConfigError, InputFileError, WearposeError
 from wearpose.motion.amass import read_amass
 from wearpose.motion.bvh import read_bvh
@@ -134,10 +134,7 @@ def _convert_one(job: dict[str, Any]) -> dict[str, Any]:
 
 
 def _write_json(path: Path, obj: Any) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    with os.fdopen(fd, "w", encoding="utf-8") as f:
-        json.dump(obj, f, indent=1, sort_keys=True)
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(obj, indent=1, sort_keys=True))
 
 
 def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, cache_dir: str | Path | None = None,

@@ -22,8 +22,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -31,6 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from wearpose.fileio import atomic_savez
 from wearpose.errors import InputFileError, ShapeError
 from wearpose.geometry import matrix_to_quat
 from wearpose.recording.checks import check_stream
@@ -107,18 +106,7 @@ def save_recording(rec: Recording, path: str | Path) -> Path:
     Returns:
         the path written.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    arrays = recording_arrays(rec)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp.npz", dir=path.parent)
-    os.close(fd)
-    try:
-        np.savez(tmp, **arrays)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    return atomic_savez(path, recording_arrays(rec))
 
 
 def load_recording(path: str | Path, check_conventions: bool = True) -> Recording:

@@ -1,0 +1,37 @@
+"""Atomic file writes: a reader never sees a half-written file (write to a temporary file in
+the same folder, then rename, which is atomic on POSIX and Windows)."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+
+def _atomic(path: str | Path, suffix: str, write: Callable[[str], None]) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def atomic_savez(path: str | Path, arrays: dict[str, Any], compressed: bool = False) -> Path:
+    """``np.savez`` (or ``savez_compressed``) of ``arrays`` to exactly ``path``, atomically."""
+    save = np.savez_compressed if compressed else np.savez
+    # The temporary name ends in .npz so numpy does not append another suffix.
+    return _atomic(path, ".tmp.npz", lambda tmp: save(tmp, **arrays))
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    return _atomic(path, ".tmp", lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
