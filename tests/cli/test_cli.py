@@ -24,7 +24,7 @@ def _has_corpus() -> bool:
 needs_corpus = pytest.mark.skipif(not _has_corpus(), reason="motion corpus not found (set WEARPOSE_DATA)")
 
 
-@pytest.mark.parametrize("cmd", [["info"], ["demo"], ["view"], ["data", "prepare"], ["data", "info"]])
+@pytest.mark.parametrize("cmd", [["info"], ["demo"], ["view"], ["export"], ["data", "prepare"], ["data", "info"]])
 def test_every_command_has_an_example(cmd: list[str]) -> None:
     res = runner.invoke(app, [*cmd, "--help"])
     assert res.exit_code == 0, res.output

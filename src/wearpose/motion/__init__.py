@@ -16,6 +16,7 @@ from wearpose.motion.retarget import (
     detect_skeleton_map, estimate_hinge_axes, lowest_foot_height, retarget_bvh, solve_tpose,
 )
 from wearpose.motion.sequence import FORMAT_VERSION, MotionSequence
+from wearpose.motion.smpl_bvh import is_smpl_bvh, read_smpl_bvh
 from wearpose.motion.store import CorpusStore, prepare_corpus
 from wearpose.motion.template import default_rest_joints, template_rest_joints
 
@@ -24,7 +25,7 @@ __all__ = [
     "read_bvh", "parse_bvh_text", "BvhMotion", "BvhSkeleton", "bvh_forward_kinematics", "end_site_positions",
     "retarget_bvh", "Retargeted", "SkeletonMap", "TPose", "solve_tpose", "detect_skeleton_map", "estimate_hinge_axes",
     "bone_direction_errors", "lowest_foot_height", "RetargetError", "CMU_DAZ", "BANDAI", "BUILTIN_MAPS",
-    "read_amass", "save_amass",
+    "read_amass", "save_amass", "read_smpl_bvh", "is_smpl_bvh",
     "prepare_corpus", "CorpusStore", "data_dir", "cache_dir",
     "default_rest_joints", "template_rest_joints",
 ]

@@ -13,9 +13,8 @@ from wearpose.motion.bvh import read_bvh
 from wearpose.motion.paths import cache_dir, data_dir
 from wearpose.motion.retarget import retarget_bvh
 from wearpose.motion.sequence import FORMAT_NAME, MotionSequence
+from wearpose.motion.smpl_bvh import is_smpl_bvh, read_smpl_bvh
 from wearpose.motion.template import default_rest_joints
-
-_BVH = (".bvh", ".gz")
 
 
 def load_motion(spec: str | Path, cache: str | Path | None = None, rest_joints: torch.Tensor | None = None
@@ -38,7 +37,10 @@ def load_motion(spec: str | Path, cache: str | Path | None = None, rest_joints: 
         rest_joints, _ = default_rest_joints()
     if path.is_file():
         if path.name.endswith((".bvh", ".bvh.gz")):
-            return retarget_bvh(read_bvh(path), rest_joints, meta={"source_file": str(path)}).sequence
+            motion = read_bvh(path)
+            if is_smpl_bvh(motion):  # our own export: rotations are SMPL's already
+                return read_smpl_bvh(motion, rest_joints)
+            return retarget_bvh(motion, rest_joints, meta={"source_file": str(path)}).sequence
         if path.suffix == ".npz":
             try:
                 with np.load(path, allow_pickle=False) as data:

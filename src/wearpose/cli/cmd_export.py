@@ -1,0 +1,31 @@
+"""``wearpose export``: write a motion as BVH (SMPL skeleton) or AMASS-style npz."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from wearpose.cli.app import app, console
+
+
+@app.command()
+def export(
+    motion: str = typer.Argument(..., help="Clip id, corpus path or motion file (.bvh/.bvh.gz/.npz)."),
+    out: Path = typer.Argument(..., help="Output file: .bvh (SMPL skeleton, cm) or .npz (AMASS-style, Z up)."),
+    body: Optional[str] = typer.Option(None, help="Body asset whose rest skeleton the motion uses: default, smpl or a path."),
+) -> None:
+    """Export a motion to BVH on the SMPL skeleton or to AMASS-style npz.
+
+    Example: wearpose export cmu_daz/05/05_01 out/walk.bvh
+    """
+    from wearpose.body import BodyModel
+    from wearpose.export import export_motion
+    from wearpose.motion import load_motion
+
+    model = BodyModel(body)
+    rest = model.rest_joints()
+    seq = load_motion(motion, rest_joints=rest)
+    path = export_motion(seq, out, model.rest_joints(seq.betas))
+    console.print(f"wrote {path} ({seq.num_frames} frames at {seq.fps:g} fps)")
