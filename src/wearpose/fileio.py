@@ -35,3 +35,8 @@ def atomic_savez(path: str | Path, arrays: dict[str, Any], compressed: bool = Fa
 def atomic_write_text(path: str | Path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     return _atomic(path, ".tmp", lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically."""
+    return _atomic(path, ".tmp", lambda tmp: Path(tmp).write_bytes(data))

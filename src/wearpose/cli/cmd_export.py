@@ -13,10 +13,10 @@ from wearpose.cli.app import app, console
 @app.command()
 def export(
     motion: str = typer.Argument(..., help="Clip id, corpus path or motion file (.bvh/.bvh.gz/.npz)."),
-    out: Path = typer.Argument(..., help="Output file: .bvh (SMPL skeleton, cm) or .npz (AMASS-style, Z up)."),
+    out: Path = typer.Argument(..., help="Output file: .bvh (SMPL skeleton, cm), .npz (AMASS-style, Z up) or .glb (skinned mesh animation)."),
     body: Optional[str] = typer.Option(None, help="Body asset whose rest skeleton the motion uses: default, smpl or a path."),
 ) -> None:
-    """Export a motion to BVH on the SMPL skeleton or to AMASS-style npz.
+    """Export a motion to BVH on the SMPL skeleton, AMASS-style npz or an animated GLB.
 
     Example: wearpose export cmu_daz/05/05_01 out/walk.bvh
     """
@@ -27,5 +27,5 @@ def export(
     model = BodyModel(body)
     rest = model.rest_joints()
     seq = load_motion(motion, rest_joints=rest)
-    path = export_motion(seq, out, model.rest_joints(seq.betas))
+    path = export_motion(seq, out, model)
     console.print(f"wrote {path} ({seq.num_frames} frames at {seq.fps:g} fps)")

@@ -9,25 +9,31 @@ from pathlib import Path
 
 import torch
 
+from wearpose.body import BodyModel
 from wearpose.errors import WearposeError
 from wearpose.export.bvh import write_smpl_bvh
+from wearpose.export.gltf import write_glb
 from wearpose.motion import MotionSequence, save_amass
 
-__all__ = ["export_motion", "write_smpl_bvh"]
+__all__ = ["export_motion", "write_smpl_bvh", "write_glb"]
 
 
-def export_motion(seq: MotionSequence, path: str | Path, rest_joints: torch.Tensor) -> Path:
+def export_motion(seq: MotionSequence, path: str | Path, body: BodyModel) -> Path:
     """Write ``seq`` to ``path`` in the format its extension names.
 
-    ``.bvh``: SMPL-skeleton BVH (cm); ``.npz``: AMASS-style SMPL-H npz (Z-up world, as AMASS).
+    ``.bvh``: SMPL-skeleton BVH (cm); ``.npz``: AMASS-style SMPL-H npz (Z-up world, as AMASS);
+    ``.glb``: skinned mesh + skeletal animation (glTF 2.0 binary).
 
     Args:
-        rest_joints: ``(24, 3)`` rest joints (m) of the body the motion belongs to.
+        body: the body model the motion plays on (rest skeleton for its betas; mesh for GLB).
     """
     path = Path(path)
+    if path.suffix == ".glb":
+        return write_glb(seq, path, body)
+    rest_joints = body.rest_joints(seq.betas.to(body.dtype))
     if path.suffix == ".bvh":
         return write_smpl_bvh(seq, path, rest_joints)
     if path.suffix == ".npz":
         save_amass(seq, path, rest_joints=rest_joints)
         return path
-    raise WearposeError(f"{path}: unknown export format {path.suffix!r}; expected .bvh or .npz")
+    raise WearposeError(f"{path}: unknown export format {path.suffix!r}; expected .bvh, .npz or .glb")
