@@ -483,9 +483,15 @@ def choose_sites(v: np.ndarray, J: np.ndarray, weights: np.ndarray, faces: np.nd
     nbrs = vertex_neighbours(faces, len(v))
     for lr, sx in (("left_", 1.0), ("right_", -1.0)):
         lat = np.array([sx, 0.0, 0.0])
-        sh, el, wr = J[JI[lr + "shoulder"]], J[JI[lr + "elbow"]], J[JI[lr + "wrist"]]
+        cl, sh, el, wr = J[JI[lr + "collar"]], J[JI[lr + "shoulder"]], J[JI[lr + "elbow"]], J[JI[lr + "wrist"]]
         hp, kn, an, ft = J[JI[lr + "hip"]], J[JI[lr + "knee"]], J[JI[lr + "ankle"]], J[JI[lr + "foot"]]
         rules += [
+            # top of the shoulder (EM-POSE's shoulder sensors): over the acromion, which sits
+            # above and ~3 cm medial of the glenohumeral joint centre; the ray goes straight up
+            # from that point. The skin there is skinned to both the collar (shoulder girdle) and
+            # the upper arm, so both segments are allowed; tangent along the clavicle, lateral.
+            (lr + "shoulder", seg(lr + "collar", lr + "shoulder"), sh + 0.03 * (cl - sh) / np.linalg.norm(cl - sh),
+             up, sh - cl),
             # T-pose with palms down: the anatomically lateral side of the upper arm and the
             # dorsal side of forearm and wrist face up (+Y).
             (lr + "upper_arm", seg(lr + "shoulder"), 0.5 * (sh + el), up, el - sh),
@@ -498,6 +504,8 @@ def choose_sites(v: np.ndarray, J: np.ndarray, weights: np.ndarray, faces: np.nd
         ]
     order = ["head", "sternum", "back_upper", "pelvis"] + [
         lr + p for p in ("upper_arm", "forearm", "wrist", "thigh", "shin", "foot") for lr in ("left_", "right_")]
+    # Sites added after the first release go last, so the index of every earlier site is unchanged.
+    order += ["left_shoulder", "right_shoulder"]
     by_name = {r[0]: r for r in rules}
     names, vids, tids = [], [], []
     for n in order:

@@ -124,8 +124,12 @@ def test_sites(asset):
     names = asset.site_names
     expected = {"head", "sternum", "back_upper", "pelvis", "left_upper_arm", "right_upper_arm", "left_forearm",
                 "right_forearm", "left_wrist", "right_wrist", "left_thigh", "right_thigh", "left_shin",
-                "right_shin", "left_foot", "right_foot"}
+                "right_shin", "left_foot", "right_foot", "left_shoulder", "right_shoulder"}
     assert set(names) == expected and len(names) == len(expected)
+    # Sites added later are appended: the index of every earlier site never changes.
+    assert names[:16] == ("head", "sternum", "back_upper", "pelvis", "left_upper_arm", "right_upper_arm",
+                          "left_forearm", "right_forearm", "left_wrist", "right_wrist", "left_thigh", "right_thigh",
+                          "left_shin", "right_shin", "left_foot", "right_foot")
     V = asset.num_vertices
     f = asset.faces
     assert len(asset.site_vertices) == len(names) == len(asset.site_tangent)
@@ -154,9 +158,31 @@ def test_site_normals_point_outwards(asset):
                 "left_upper_arm": (0, 1, 0), "right_upper_arm": (0, 1, 0), "left_forearm": (0, 1, 0),
                 "right_forearm": (0, 1, 0), "left_wrist": (0, 1, 0), "right_wrist": (0, 1, 0),
                 "left_thigh": (1, 0, 0), "right_thigh": (-1, 0, 0), "left_shin": (0, 0, 1), "right_shin": (0, 0, 1),
-                "left_foot": (0, 1, 0), "right_foot": (0, 1, 0)}
+                "left_foot": (0, 1, 0), "right_foot": (0, 1, 0), "left_shoulder": (0, 1, 0), "right_shoulder": (0, 1, 0)}
     for n, vid in zip(asset.site_names, asset.site_vertices):
         tri = v[f[(f == vid).any(axis=1)]]
         nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]).sum(0)
         nrm /= np.linalg.norm(nrm)
         assert nrm @ np.array(expected[n]) > 0.5, (n, nrm)
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_shoulder_sites_on_top_of_the_shoulder(asset, joints, side):
+    """EM-POSE's shoulder sensors: on top of the shoulder over the acromion (above and just
+    medial of the glenohumeral joint), on skin that moves with the shoulder girdle (collar) as
+    well as the arm -- not a second upper-arm site."""
+    x = {n: asset.v_template[v].astype(np.float64) for n, v in zip(asset.site_names, asset.site_vertices)}
+    vid = dict(zip(asset.site_names, asset.site_vertices))[f"{side}_shoulder"]
+    p = x[f"{side}_shoulder"]
+    sh, cl = joints[J[f"{side}_shoulder"]], joints[J[f"{side}_collar"]]
+    sx = 1.0 if side == "left" else -1.0
+    assert 0.02 < p[1] - sh[1] < 0.08  # on top: skin above the joint centre
+    assert 0.0 < sx * (sh[0] - p[0]) < 0.06  # medial of the shoulder joint ...
+    assert sx * (p[0] - cl[0]) > 0.08  # ... but well lateral of the collar joint (not the neck)
+    assert abs(p[2] - sh[2]) < 0.03  # neither on the chest nor on the scapula
+    assert np.linalg.norm(p - x[f"{side}_upper_arm"]) > 0.10
+    w = asset.weights[vid]
+    assert w[J[f"{side}_collar"]] > 0.2 and w[J[f"{side}_collar"]] + w[J[f"{side}_shoulder"]] > 0.99
+    # mirror images of each other
+    other = x["right_shoulder" if side == "left" else "left_shoulder"]
+    assert np.allclose(p * [-1, 1, 1], other, atol=0.005)

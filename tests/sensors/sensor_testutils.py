@@ -30,10 +30,11 @@ def tiny_full_sites_asset() -> BodyAsset:
     """The tiny test asset with every site name of wearpose_anny_v1 (sites on the joint tetrahedra)."""
     a = make_tiny_asset()
     names = ["head", "sternum", "back_upper", "pelvis"] + [
-        lr + p for p in ("upper_arm", "forearm", "wrist", "thigh", "shin", "foot") for lr in ("left_", "right_")]
+        lr + p for p in ("upper_arm", "forearm", "wrist", "thigh", "shin", "foot") for lr in ("left_", "right_")] + [
+        "left_shoulder", "right_shoulder"]
     # joint of each site (SMPL order): head 15, spine3 9, spine2 6, pelvis 0, shoulders 16/17,
-    # elbows 18/19, wrists 20/21, hips 1/2, knees 4/5, ankles 7/8.
-    joints = [15, 9, 6, 0, 16, 17, 18, 19, 20, 21, 1, 2, 4, 5, 7, 8]
+    # elbows 18/19, wrists 20/21, hips 1/2, knees 4/5, ankles 7/8; shoulder sites on the collars 13/14.
+    joints = [15, 9, 6, 0, 16, 17, 18, 19, 20, 21, 1, 2, 4, 5, 7, 8, 13, 14]
     vids = [4 * j for j in joints]
     tids = [4 * j + 1 for j in joints]
     return BodyAsset(v_template=a.v_template, faces=a.faces, shapedirs=a.shapedirs, J_regressor=a.J_regressor,

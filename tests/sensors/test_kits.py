@@ -4,7 +4,7 @@ from wearpose.sensors import KitError, SensorKit, SensorSpec, get_kit, list_kits
 from wearpose.sensors.kits import SENSOR_KINDS
 
 ANNY_SITES = ["head", "sternum", "back_upper", "pelvis"] + [
-    lr + p for p in ("upper_arm", "forearm", "wrist", "thigh", "shin", "foot") for lr in ("left_", "right_")]
+    lr + p for p in ("upper_arm", "forearm", "wrist", "thigh", "shin", "foot", "shoulder") for lr in ("left_", "right_")]
 
 
 def test_registry_contents():
@@ -37,18 +37,23 @@ def test_missing_site_names_site_and_asset():
 
 
 def test_all_kits_fit_the_anny_site_list():
+    import warnings
+
     for k in list_kits():
-        with pytest.warns(UserWarning) if k == "em12" else _nowarn():
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no built-in kit needs a substitution on the embedded asset
             sites, subs = resolve_sites(get_kit(k), ANNY_SITES, "wearpose-anny-v1")
-        assert set(subs) == ({"left_shoulder", "right_shoulder"} if k == "em12" else set())
+        assert subs == {}
+        assert all(sites[s.name] == s.site for s in get_kit(k).sensors)
+    sites, _ = resolve_sites(get_kit("em12"), ANNY_SITES)
+    assert sites["left_shoulder"] == "left_shoulder" and sites["right_shoulder"] == "right_shoulder"
 
 
-class _nowarn:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *a):
-        return False
+def test_fallback_site_is_reported():
+    kit = SensorKit("fb", (SensorSpec("a", "imu", "left_scapula", 60, fallback_sites=("nowhere", "back_upper")),))
+    with pytest.warns(UserWarning, match="left_scapula -> back_upper"):
+        sites, subs = resolve_sites(kit, ANNY_SITES, "wearpose-anny-v1")
+    assert sites == {"a": "back_upper"} and subs == {"a": "left_scapula -> back_upper"}
 
 
 def test_bad_specs_rejected():

@@ -3,7 +3,7 @@
 A kit is pure data: it names *sites* of the body asset (``BodyModel.site_names``), never vertex
 ids, so the same kit works on the embedded asset and on a user's SMPL file as long as both
 define the sites. Sites on the embedded asset ``wearpose_anny_v1``: head, sternum, back_upper,
-pelvis, {left,right}_{upper_arm, forearm, wrist, thigh, shin, foot}.
+pelvis, {left,right}_{upper_arm, forearm, wrist, thigh, shin, foot, shoulder}.
 
 Registered kits (sources):
 
@@ -16,9 +16,13 @@ Registered kits (sources):
   The "back" sensor sits between the source (root) and the head in the code's tracker skeleton
   (root -> back -> head/shoulders), so it maps to ``back_upper``; the source (lower back) maps
   to ``pelvis``.
-  The shoulder sensors have no site on ``wearpose_anny_v1``; until the asset gains
-  ``left_shoulder``/``right_shoulder`` they fall back to the upper-arm sites (recorded in the
-  simulation result's ``site_substitutions`` and warned about). See :func:`resolve_sites`.
+  The shoulder sensors sit on top of the shoulder, over the acromion (sites
+  ``left_shoulder``/``right_shoulder``): the paper counts them with the head among the "static or
+  slow moving sensors" (Sec. 6.1) and the code's tracker skeleton chains back -> shoulder ->
+  upper arm, i.e. a sensor on the shoulder girdle between the back and the upper-arm sensor,
+  not a second upper-arm sensor. Their segment is the collar (:data:`SITE_SEGMENT`).
+  A kit may still name fallback sites for assets that lack a site (``SensorSpec.fallback_sites``,
+  :func:`resolve_sites`); no built-in kit needs one on the embedded asset.
 - ``imu6`` -- DIP / TransPose / PIP: left/right forearm, left/right lower leg (shin), head,
   pelvis (PIP Sec. 3: "mounted on the left/right forearms, left/right lower legs, head, and
   pelvis"; TransPose ``vi_mask = [1961, 5424, 1176, 4662, 411, 3021]``), 60 Hz.
@@ -213,7 +217,7 @@ def _builtin() -> None:
         return [
             SensorSpec(f"{side}_lower_arm", "em6dof", f"{side}_wrist", 120.0),
             SensorSpec(f"{side}_upper_arm", "em6dof", f"{side}_upper_arm", 120.0),
-            SensorSpec(f"{side}_shoulder", "em6dof", f"{side}_shoulder", 120.0, fallback_sites=(f"{side}_upper_arm",)),
+            SensorSpec(f"{side}_shoulder", "em6dof", f"{side}_shoulder", 120.0),
             SensorSpec(f"{side}_upper_leg", "em6dof", f"{side}_thigh", 120.0),
             SensorSpec(f"{side}_lower_leg", "em6dof", f"{side}_shin", 120.0),
         ]
