@@ -9,6 +9,8 @@ Public API:
 - :func:`check_stream` / :func:`check_recording`: does the data look like its declared units?
 - converters: :func:`from_dip_imu`, :func:`from_totalcapture`, :func:`from_empose`,
   :func:`amass_ground_truth`
+- :func:`recording_from_simulation` (also ``Recording.from_simulation``): a
+  :func:`wearpose.sensors.simulate` result as a recording
 - :class:`RecordingError` for operations a recording cannot do (file problems are
   :class:`wearpose.errors.InputFileError`).
 """
@@ -26,6 +28,7 @@ from wearpose.recording.types import (
 )
 from wearpose.recording.checks import ConventionIssue, check_recording, check_stream
 from wearpose.recording.fileformat import FORMAT_NAME, FORMAT_VERSION, load_recording, recording_arrays, save_recording
+from wearpose.recording.simulated import recording_from_simulation
 from wearpose.recording.converters import (
     DIP_IMU_SENSORS,
     DIP_IMU_SIX,
@@ -44,6 +47,7 @@ __all__ = [
     "KINDS", "CHANNELS", "REQUIRED_CHANNELS", "OPTIONAL_CHANNELS",
     "ConventionIssue", "check_stream", "check_recording",
     "FORMAT_NAME", "FORMAT_VERSION", "load_recording", "save_recording", "recording_arrays",
+    "recording_from_simulation",
     "from_dip_imu", "from_totalcapture", "from_empose", "amass_ground_truth",
     "DIP_IMU_SENSORS", "DIP_IMU_SIX", "EMPOSE_SENSORS", "EMPOSE_SITES", "EMPOSE_SIX", "TOTALCAPTURE_SITES",
 ]

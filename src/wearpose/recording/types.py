@@ -456,6 +456,15 @@ class Recording:
             streams.append(SensorStream(info, ts, v[:, j], **ch))
         return cls(streams, **kwargs)
 
+    @classmethod
+    def from_simulation(cls, result: Any, motion: Any = None, subject: dict[str, Any] | str | None = None,
+                        **kwargs: Any) -> Recording:
+        """A recording of a :func:`wearpose.sensors.simulate` result (``motion`` becomes the
+        ground truth); see :func:`wearpose.recording.simulated.recording_from_simulation`."""
+        from wearpose.recording.simulated import recording_from_simulation
+
+        return recording_from_simulation(result, motion, subject, **kwargs)
+
     # ------------------------------------------------------------------ queries
     @property
     def names(self) -> tuple[str, ...]:
