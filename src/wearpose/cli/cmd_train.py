@@ -1,0 +1,54 @@
+"""``wearpose train <method>``: train an estimator on simulated sensors from the prepared corpus."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+from typing import Any, Optional
+
+import typer
+
+from wearpose.cli.app import _emit, app, console
+
+
+@app.command()
+def train(
+    method: str = typer.Argument(..., help="Estimator to train: empose."),
+    sensors: int = typer.Option(12, help="Number of sensors: 12 (kit em12) or 6 (kit em6)."),
+    config: str = typer.Option("cpu", help="Preset: tiny (smoke test), cpu (CPU-sized), paper (supp. Table 5)."),
+    epochs: Optional[int] = typer.Option(None, help="Override the preset's number of epochs."),
+    out: Optional[Path] = typer.Option(None, help="Run directory (default runs/<method><sensors>_<config>)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue from <out>/last.pt."),
+    threads: Optional[int] = typer.Option(None, help="torch CPU threads (default: torch's choice)."),
+    device: str = typer.Option("auto", help="auto (CUDA when available), cpu or cuda[:i]."),
+    hidden: Optional[int] = typer.Option(None, help="Override LSTM width."),
+    width: Optional[int] = typer.Option(None, help="Override the update-MLP width."),
+    iterations: Optional[int] = typer.Option(None, help="Override N, the LGD iterations."),
+    batch_size: Optional[int] = typer.Option(None, help="Override the batch size."),
+    limit: Optional[int] = typer.Option(None, help="Use only the first N training clips (quick runs)."),
+    checkpoint_every: int = typer.Option(100, help="Save last.pt every N optimiser steps (and every epoch)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+) -> None:
+    """Train an estimator.
+
+    Example: wearpose train empose --sensors 12 --config cpu --threads 1 --out runs/empose12_cpu
+    """
+    if method != "empose":
+        raise typer.BadParameter(f"unknown method {method!r}; trainable: empose", param_hint="METHOD")
+    from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
+    from wearpose.estimators.empose.train import train_empose
+
+    cfg = EmposeConfig.preset(config, sensors).override(hidden=hidden, width=width, iterations=iterations,
+                                                        batch_size=batch_size)
+    out = out or Path("runs") / f"{method}{sensors}_{config}"
+    est = EmposeEstimator(cfg)
+    command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    res = train_empose(est, out, epochs=epochs, resume=resume, threads=threads, device=device, limit_train=limit,
+                       checkpoint_every=checkpoint_every, train_command=command, quiet=as_json, console=None if as_json else console)
+    res = {"method": method, "sensors": sensors, "config": cfg.to_dict(), **res}
+
+    def render(r: dict[str, Any]) -> None:
+        console.print(f"done: best val MPJPE {r['best']:.1f} mm; checkpoints in {r['out_dir']}")
+
+    _emit(res, as_json, render)

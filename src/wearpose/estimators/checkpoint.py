@@ -1,0 +1,112 @@
+"""Checkpoints: weights + everything needed to know what they were trained for.
+
+A checkpoint is one ``torch.save`` file (a plain dict, loaded with ``weights_only=True``)::
+
+    format: "wearpose.checkpoint", version: 1
+    method: registry name ("empose")
+    config: dict (the method's config dataclass as a dict)
+    kit: sensor kit name; sensors: list of sensor names in input order
+    body_asset: body asset id the model's differentiable body / training data used
+    data_fingerprint: sha256 of the training clip ids + simulation settings (:func:`fingerprint`)
+    train_command: the command line that trained it
+    weights: state_dict
+    meta: epoch, metrics, timestamps ...
+    train_state: optional optimiser / scheduler / progress state (resume only)
+
+Loading on a different kit or body asset fails with :class:`CheckpointMismatchError` naming both.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import torch
+
+from wearpose.errors import InputFileError, WearposeError
+
+FORMAT = "wearpose.checkpoint"
+VERSION = 1
+
+
+class CheckpointMismatchError(WearposeError, ValueError):
+    """A checkpoint is used with a sensor kit / sensor list / body asset it was not trained for."""
+
+
+def fingerprint(clip_ids: Sequence[str], settings: dict[str, Any]) -> str:
+    """sha256 (hex) of the sorted clip ids and the simulation settings (canonical JSON)."""
+    blob = json.dumps({"clips": sorted(clip_ids), "settings": settings}, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+@dataclass
+class Checkpoint:
+    """In-memory checkpoint (see module doc for the fields)."""
+
+    method: str
+    config: dict[str, Any]
+    kit: str
+    sensors: list[str]
+    body_asset: str
+    weights: dict[str, torch.Tensor]
+    data_fingerprint: str = ""
+    train_command: str = ""
+    meta: dict[str, Any] = field(default_factory=dict)
+    train_state: dict[str, Any] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": FORMAT, "version": VERSION, "method": self.method, "config": self.config, "kit": self.kit,
+                "sensors": list(self.sensors), "body_asset": self.body_asset, "data_fingerprint": self.data_fingerprint,
+                "train_command": self.train_command, "weights": self.weights, "meta": self.meta,
+                "train_state": self.train_state}
+
+    def check(self, *, method: str | None = None, kit: str | None = None, sensors: Sequence[str] | None = None,
+              body_asset: str | None = None, path: str | Path = "<checkpoint>") -> None:
+        """Raise :class:`CheckpointMismatchError` naming both sides of the first mismatch."""
+        if method is not None and method != self.method:
+            raise CheckpointMismatchError(f"{path}: checkpoint is for method {self.method!r}, not {method!r}")
+        if kit is not None and kit != self.kit:
+            raise CheckpointMismatchError(f"{path}: checkpoint was trained for sensor kit {self.kit!r} "
+                                          f"({len(self.sensors)} sensors) but kit {kit!r} was requested")
+        if sensors is not None and list(sensors) != list(self.sensors):
+            raise CheckpointMismatchError(f"{path}: checkpoint expects sensors {list(self.sensors)} (kit {self.kit!r}) "
+                                          f"but got {list(sensors)}")
+        if body_asset is not None and body_asset != self.body_asset:
+            raise CheckpointMismatchError(f"{path}: checkpoint was trained with body asset {self.body_asset!r} "
+                                          f"but body asset {body_asset!r} was given")
+
+
+def save_checkpoint(ckpt: Checkpoint, path: str | Path) -> Path:
+    """Write atomically (temp file + rename) so a killed run never leaves a torn checkpoint."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(ckpt.to_dict(), tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> Checkpoint:
+    """Read a checkpoint written by :func:`save_checkpoint`.
+
+    Raises:
+        InputFileError: missing file, not a torch file, or not a wearpose checkpoint.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputFileError(path, "no such checkpoint file", "a .pt file written by wearpose train / Estimator.save")
+    try:
+        d = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as exc:  # torch raises several types for corrupt files
+        raise InputFileError(path, f"unreadable ({type(exc).__name__}: {exc})", "a .pt file written by wearpose") from exc
+    if not isinstance(d, dict) or d.get("format") != FORMAT:
+        raise InputFileError(path, "not a wearpose checkpoint", f"a dict with format={FORMAT!r}", field="format")
+    if d.get("version") != VERSION:
+        raise InputFileError(path, f"checkpoint version {d.get('version')!r}", f"version {VERSION}", field="version")
+    return Checkpoint(method=d["method"], config=d["config"], kit=d["kit"], sensors=list(d["sensors"]),
+                      body_asset=d["body_asset"], weights=d["weights"], data_fingerprint=d.get("data_fingerprint", ""),
+                      train_command=d.get("train_command", ""), meta=d.get("meta") or {}, train_state=d.get("train_state"))

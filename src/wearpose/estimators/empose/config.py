@@ -1,0 +1,120 @@
+"""``EmposeConfig``: LGD-RNN hyper-parameters (EM-POSE supp. Table 5) and data settings.
+
+Presets (:meth:`EmposeConfig.preset`):
+
+- ``paper``: Table 5 exactly, per sensor count (LSTM 2x512, MLP 512 x 5 layers, N = 4 / 2,
+  alpha = 0.1, batch 12, sequence length 32, 50 epochs, lr 1e-4 (12) / 5e-4 (6), dropout 0.2 /
+  0.0, lambdas (1, 1, 1, 0.01) for 12 and (10, 1, 0.1, 0.01) for 6).
+- ``cpu``: the same model at CPU scale: LSTM 2x256, MLP 256 x 5 layers, N = 3 (12) / 2 (6),
+  batch 32 (more frames per optimiser step amortise Python overhead on CPU), lr 5e-4 with a
+  cosine decay, 20 epochs. Loss weights and dropout as Table 5.
+- ``tiny``: a few-second smoke-test model (CI).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any
+
+from wearpose.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class EmposeConfig:
+    """LGD-RNN and training settings.
+
+    Model: ``hidden`` LSTM width (``rnn_layers`` layers), ``width`` / ``mlp_layers`` of the
+    update network N, ``iterations`` = N LGD steps, ``alpha`` step size (Eq. 5), ``rep`` the pose
+    parameterisation of Omega (``"rot6d"`` or ``"axis_angle"``; the paper writes theta in
+    R^{J*3}, axis-angle).
+    Losses (Sec. 5.3): ``lambda_pose``, ``lambda_shape``, ``lambda_joints``, ``lambda_rec``;
+    ``supervise_initial`` adds the loss on Omega^(0) (the paper sums n = 1..N only).
+    Data: ``sensors`` 12 / 6 (kits ``em12`` / ``em6``), ``rate`` Hz, ``seq_len`` frames per
+    training window, ``window_stride`` frames between window starts, ``train_noise`` the EM error
+    model of the training simulation (``"default"`` / ``"none"``), ``offsets`` subject offsets
+    (``"random"`` synthetic subjects per sequence, or ``"none"`` = identity, the "no [R|t]"
+    ablation), ``seed``.
+    Optimisation: ``lr``, ``lr_schedule`` (``constant`` / ``cosine``), ``lr_min_factor``,
+    ``batch_size``, ``epochs``, ``grad_clip`` (max global grad norm, 0 = off), ``val_clips``
+    (validation clips used each epoch, 0 = all).
+    """
+
+    sensors: int = 12
+    hidden: int = 512
+    rnn_layers: int = 2
+    width: int = 512
+    mlp_layers: int = 5
+    iterations: int = 4
+    alpha: float = 0.1
+    rep: str = "rot6d"
+    dropout_input: float = 0.2
+    dropout_mlp: float = 0.2
+    lambda_pose: float = 1.0
+    lambda_shape: float = 1.0
+    lambda_joints: float = 1.0
+    lambda_rec: float = 0.01
+    supervise_initial: bool = False
+    rate: float = 30.0
+    seq_len: int = 32
+    window_stride: int = 16
+    train_noise: str = "default"
+    offsets: str = "random"
+    seed: int = 0
+    lr: float = 1e-4
+    lr_schedule: str = "constant"
+    lr_min_factor: float = 0.1
+    batch_size: int = 12
+    epochs: int = 50
+    grad_clip: float = 1.0
+    val_clips: int = 0
+
+    def __post_init__(self) -> None:
+        if self.sensors not in (6, 12):
+            raise ConfigError(f"EmposeConfig.sensors: expected 6 or 12, got {self.sensors!r}")
+        if self.rep not in ("rot6d", "axis_angle"):
+            raise ConfigError(f"EmposeConfig.rep: expected 'rot6d' or 'axis_angle', got {self.rep!r}")
+        if self.iterations < 0 or self.mlp_layers < 1 or self.rnn_layers < 1:
+            raise ConfigError("EmposeConfig: iterations >= 0, mlp_layers >= 1 and rnn_layers >= 1 required")
+        if self.lr_schedule not in ("constant", "cosine"):
+            raise ConfigError(f"EmposeConfig.lr_schedule: expected 'constant' or 'cosine', got {self.lr_schedule!r}")
+        if self.train_noise not in ("default", "none") or self.offsets not in ("random", "none"):
+            raise ConfigError("EmposeConfig: train_noise must be 'default'/'none' and offsets 'random'/'none'")
+
+    @property
+    def kit(self) -> str:
+        return f"em{self.sensors}"
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> EmposeConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"EmposeConfig: unknown fields {unknown}; known: {sorted(known)}")
+        return cls(**d)
+
+    def override(self, **kw: Any) -> EmposeConfig:
+        """A copy with the non-None keyword values replaced."""
+        return replace(self, **{k: v for k, v in kw.items() if v is not None})
+
+    @classmethod
+    def preset(cls, name: str, sensors: int = 12) -> EmposeConfig:
+        """``paper`` (Table 5), ``cpu`` or ``tiny`` for ``sensors`` = 12 or 6."""
+        if sensors == 12:
+            paper = cls(sensors=12)
+        elif sensors == 6:
+            paper = cls(sensors=6, iterations=2, dropout_input=0.0, dropout_mlp=0.0, lambda_pose=10.0,
+                        lambda_joints=0.1, lr=5e-4)
+        else:
+            raise ConfigError(f"sensors: expected 6 or 12, got {sensors!r}")
+        if name == "paper":
+            return paper
+        if name == "cpu":
+            return replace(paper, hidden=256, width=256, iterations=3 if sensors == 12 else 2, batch_size=32,
+                           lr=5e-4, lr_schedule="cosine", epochs=20, val_clips=60)
+        if name == "tiny":
+            return replace(paper, hidden=32, width=32, mlp_layers=2, iterations=1, batch_size=4, seq_len=8,
+                           window_stride=8, lr=3e-3, epochs=2, dropout_input=0.0, dropout_mlp=0.0, val_clips=2)
+        raise ConfigError(f"unknown EM-POSE config preset {name!r}; expected paper, cpu or tiny")

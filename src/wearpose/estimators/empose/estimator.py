@@ -1,0 +1,222 @@
+"""``EmposeEstimator``: the LGD-RNN behind the :class:`~wearpose.estimators.Estimator` protocol.
+
+Input: EM 6-DoF sensors of kit ``em12`` / ``em6`` relative to the EM source (DESIGN, EM
+canonical form) at the trained rate, plus the subject's sensor offsets ``O_p`` in
+``recording.subject["offsets"]`` (``{"sensors": [...], "R": (S, 3, 3), "t": (S, 3)}``; EM-POSE
+assumes calibrated offsets, Sec. 5.3). Missing offsets fall back to identity with a warning.
+
+Masked input: a dropped sensor sample is held at its last valid value, and frames where any
+sensor was dropped are marked ``valid = False`` in the output (EM-POSE evaluates only frames
+with all sensors, Sec. 6.2).
+
+Output frame: ``extras["frame"] = "em_source"``: the root orientation is relative to the EM
+source frame (the source rides on the lower back); no translation is estimated (Sec. 5.1).
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from wearpose.errors import ShapeError
+from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
+from wearpose.estimators.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from wearpose.estimators.empose.config import EmposeConfig
+from wearpose.estimators.empose.data import hold_invalid
+from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, decode_omega, sensor_features
+from wearpose.estimators.registry import register_estimator
+
+
+def _sites(kit_name: str, body: Any) -> tuple[list[str], str]:
+    from wearpose.sensors import get_kit, resolve_sites
+
+    kit = get_kit(kit_name)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sites, _ = resolve_sites(kit, body.site_names, body.asset_id)
+    return [sites[n] for n in kit.sensor_names], sites["<em_source>"]
+
+
+@register_estimator("empose")
+class EmposeEstimator(Estimator):
+    """LGD-RNN estimator (see module doc).
+
+    Args:
+        config: :class:`EmposeConfig`.
+        body: :class:`~wearpose.body.BodyModel` (default: the embedded asset).
+        device: torch device.
+    """
+
+    name = "empose"
+    causal = True
+    lookahead = 0
+
+    def __init__(self, config: EmposeConfig | None = None, body: Any = None, device: str | torch.device = "cpu") -> None:
+        from wearpose.body import BodyModel
+        from wearpose.sensors import get_kit
+
+        self.config = config or EmposeConfig.preset("cpu", 12)
+        self.device = torch.device(device)
+        self.body = (body or BodyModel()).to(self.device)
+        self.kit_name = self.config.kit
+        self.sensor_names = get_kit(self.kit_name).sensor_names
+        self.body_asset_id = self.body.asset_id
+        self.fps = float(self.config.rate)
+        sites, src = _sites(self.kit_name, self.body)
+        self.sensors = VirtualSensors(self.body, sites, src)
+        self.model = LGDRNN(self.config, len(self.sensor_names)).to(self.device)
+        self.data_fingerprint = ""
+        self.train_command = ""
+        self.meta: dict[str, Any] = {}
+        self._state: tuple[torch.Tensor, torch.Tensor] | None = None
+        self._last: tuple[torch.Tensor, torch.Tensor] | None = None
+        self._offsets: tuple[torch.Tensor, torch.Tensor] | None = None
+
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
+        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name,
+                          sensors=list(self.sensor_names), body_asset=self.body_asset_id,
+                          weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
+                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
+                          meta={**self.meta, **(meta or {})}, train_state=train_state)
+
+    def save(self, path: str | Path) -> Path:
+        return save_checkpoint(self.checkpoint(), path)
+
+    @classmethod
+    def from_checkpoint(cls, ckpt: Checkpoint, *, kit: str | None = None, body: Any = None,
+                        device: str | torch.device = "cpu", path: str | Path = "<checkpoint>") -> EmposeEstimator:
+        ckpt.check(method=cls.name, kit=kit, body_asset=getattr(body, "asset_id", None), path=path)
+        if body is None:
+            from wearpose.body import BodyModel
+
+            body = BodyModel()
+            ckpt.check(body_asset=body.asset_id, path=path)
+        est = cls(EmposeConfig.from_dict(ckpt.config), body=body, device=device)
+        est.model.load_state_dict(ckpt.weights)
+        est.data_fingerprint, est.train_command, est.meta = ckpt.data_fingerprint, ckpt.train_command, dict(ckpt.meta)
+        return est
+
+    @classmethod
+    def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
+             map_location: str | torch.device = "cpu") -> EmposeEstimator:
+        return cls.from_checkpoint(load_checkpoint(path, map_location), kit=kit, body=body, device=map_location, path=path)
+
+    def fit(self, *args: Any, **kwargs: Any) -> Any:
+        """Train (see :func:`wearpose.estimators.empose.train.train_empose`)."""
+        from wearpose.estimators.empose.train import train_empose
+
+        return train_empose(self, *args, **kwargs)
+
+    # ------------------------------------------------------------------ inputs
+    def _offsets_from(self, recording: Any) -> tuple[torch.Tensor, torch.Tensor]:
+        S = len(self.sensor_names)
+        off = (recording.subject or {}).get("offsets") if recording is not None else None
+        if not off:
+            warnings.warn("EM-POSE: recording has no subject offsets (subject['offsets']); using identity "
+                          "offsets (the 'no [R|t]' setting), expect a large error", stacklevel=3)
+            return torch.eye(3).expand(S, 3, 3).clone(), torch.zeros(S, 3)
+        names = list(off.get("sensors", self.sensor_names))
+        idx = [names.index(n) for n in self.sensor_names if n in names]
+        if len(idx) != S:
+            raise ShapeError(f"subject offsets name sensors {names}; estimator needs {list(self.sensor_names)}")
+        R = torch.as_tensor(np.asarray(off["R"], dtype=np.float32))[idx]
+        t = torch.as_tensor(np.asarray(off["t"], dtype=np.float32))[idx]
+        return R, t
+
+    def set_offsets(self, R: torch.Tensor, t: torch.Tensor) -> None:
+        """Subject offsets for :meth:`step`: ``R`` ``(S, 3, 3)``, ``t`` ``(S, 3)`` m (kit order)."""
+        self._offsets = (torch.as_tensor(R, dtype=torch.float32), torch.as_tensor(t, dtype=torch.float32))
+
+    def _check_recording(self, recording: Any) -> Any:
+        missing = [n for n in self.sensor_names if n not in recording.names]
+        if missing:
+            raise ShapeError(f"recording lacks sensors {missing} of kit {self.kit_name!r} "
+                             f"(has {list(recording.names)})")
+        for n in self.sensor_names:
+            info = recording.sensor(n).info
+            if info.kind != "em6dof" or (info.reference or "source") != "source":
+                raise ShapeError(f"sensor {n!r}: EM-POSE needs kind 'em6dof' relative to the EM source, got kind "
+                                 f"{info.kind!r} reference {info.reference!r}")
+            if abs(float(info.rate) - self.fps) > 1e-3 * self.fps:
+                raise ShapeError(f"sensor {n!r} runs at {info.rate} Hz; this checkpoint was trained at {self.fps} Hz "
+                                 f"(resample the recording first)")
+        return recording.on_common_grid(self.sensor_names)
+
+    # ------------------------------------------------------------------ offline
+    @torch.no_grad()
+    def estimate(self, recording: Any, chunk: int = 2048) -> PoseTrack:
+        """Offline estimate (the causal network run over the whole sequence).
+
+        Returns a :class:`PoseTrack` with ``trans=None`` and ``extras["frame"] = "em_source"``;
+        ``extras["rec_loss"]`` ``(T,)`` is L_r of the final estimate.
+        """
+        grid = self._check_recording(recording)
+        valid = torch.as_tensor(grid.valid)
+        p = torch.as_tensor(grid.channels["position"], dtype=torch.float32)
+        R = torch.as_tensor(grid.channels["orientation"], dtype=torch.float32)
+        p, R = hold_invalid(p, R, valid)
+        offR, offt = self._offsets_from(recording)
+        self.model.eval()
+        dev = self.device
+        x = sensor_features(p, R).to(dev)
+        omega0, _ = self.model.initial(x[None])
+        omega0 = omega0[0]
+        T, S = p.shape[:2]
+        rots, betas, rec = [], [], []
+        for a in range(0, T, chunk):
+            b = min(T, a + chunk)
+            n = b - a
+            outs = self.model.refine(omega0[a:b], x[a:b], p[a:b].to(dev), R[a:b].to(dev),
+                                     offR.to(dev).expand(n, S, 3, 3), offt.to(dev).expand(n, S, 3), self.sensors,
+                                     train=False)
+            rots.append(outs[-1]["local_rot"].detach())
+            betas.append(outs[-1]["betas"].detach())
+            rec.append(outs[-1]["rec"].detach())
+        local_rot, b_all = torch.cat(rots).cpu(), torch.cat(betas).cpu()
+        ok = valid.all(1)
+        beta = (b_all[ok] if bool(ok.any()) else b_all).mean(0)  # one shape per sequence (Sec. 5.3)
+        return PoseTrack(local_rot, beta, None, ok, self.fps,
+                         extras={"frame": "em_source", "rec_loss": torch.cat(rec).cpu(), "method": self.name,
+                                 "betas_per_frame": b_all})
+
+    # ------------------------------------------------------------------ online
+    def reset(self) -> None:
+        self._state = None
+        self._last = None
+
+    @torch.no_grad()
+    def step(self, frame: SensorFrame) -> PoseFrame:
+        """One frame: LSTM state carried over, N LGD updates on this frame (offsets from
+        :meth:`set_offsets`, identity with a warning if never set)."""
+        if self._offsets is None:
+            self._offsets = self._offsets_from(None)
+        names = list(frame.names)
+        try:
+            idx = [names.index(n) for n in self.sensor_names]
+        except ValueError:
+            raise ShapeError(f"frame has sensors {names}; estimator needs {list(self.sensor_names)}") from None
+        v = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
+        p = torch.as_tensor(np.asarray(frame.channels["position"])[idx], dtype=torch.float32)
+        R = torch.as_tensor(np.asarray(frame.channels["orientation"])[idx], dtype=torch.float32)
+        if self._last is not None:
+            p = torch.where(v[:, None], p, self._last[0])
+            R = torch.where(v[:, None, None], R, self._last[1])
+        else:  # nothing to hold yet: neutral values
+            p = torch.where(v[:, None], p, torch.zeros_like(p))
+            R = torch.where(v[:, None, None], R, torch.eye(3).expand_as(R))
+        self._last = (p, R)
+        self.model.eval()
+        dev = self.device
+        x = sensor_features(p, R).to(dev)
+        omega0, self._state = self.model.initial(x[None, None], self._state)
+        offR, offt = self._offsets
+        outs = self.model.refine(omega0[0], x[None], p[None].to(dev), R[None].to(dev), offR[None].to(dev),
+                                 offt[None].to(dev), self.sensors, train=False)
+        rot, b = decode_omega(outs[-1]["omega"].detach(), self.model.rep)
+        return PoseFrame(rot[0].cpu(), b[0].cpu(), None, bool(v.all()), frame.timestamp,
+                         extras={"frame": "em_source", "rec_loss": float(outs[-1]["rec"][0])})

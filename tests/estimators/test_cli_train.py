@@ -1,0 +1,47 @@
+"""``wearpose train``: help, argument errors, and a tiny run on the prepared corpus (if present)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from wearpose.cli import app
+
+runner = CliRunner()
+
+
+def _has_store() -> bool:
+    try:
+        from wearpose.motion import CorpusStore
+
+        return len(CorpusStore().clips(split="train")) > 0 and len(CorpusStore().clips(split="val")) > 0
+    except Exception:
+        return False
+
+
+def test_train_help_has_an_example() -> None:
+    res = runner.invoke(app, ["train", "--help"])
+    assert res.exit_code == 0, res.output
+    assert "Example: wearpose train empose" in res.output
+
+
+def test_train_rejects_unknown_method(tmp_path: Path) -> None:
+    res = runner.invoke(app, ["train", "birae", "--out", str(tmp_path / "r")])
+    assert res.exit_code != 0 and "empose" in res.output
+
+
+@pytest.mark.skipif(not _has_store(), reason="no prepared corpus store (wearpose data prepare)")
+def test_tiny_cli_run_on_the_corpus(tmp_path: Path) -> None:
+    n = torch.get_num_threads()
+    try:
+        res = runner.invoke(app, ["train", "empose", "--config", "tiny", "--limit", "3", "--epochs", "1", "--threads", "1",
+                                  "--out", str(tmp_path / "run"), "--json"])
+    finally:
+        torch.set_num_threads(n)
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output[res.output.index("{"):])
+    assert out["method"] == "empose" and out["steps"] >= 1 and (tmp_path / "run" / "best.pt").is_file()
