@@ -145,6 +145,12 @@ def test_checkpoint_round_trip_and_mismatch_errors(tmp_path: Path, body: BodyMod
     save_checkpoint(ck, tmp_path / "other_body.pt")
     with pytest.raises(CheckpointMismatchError, match=r"smpl-neutral-v1.*wearpose-anny-v1"):
         EmposeEstimator.load(tmp_path / "other_body.pt", body=body)
+    ck = load_checkpoint(path)
+    assert ck.meta["sites"]["right_shoulder"] == "right_shoulder"  # the asset's own shoulder site, no substitution
+    ck.meta["sites"]["head"] = "sternum"
+    save_checkpoint(ck, tmp_path / "other_sites.pt")
+    with pytest.raises(CheckpointMismatchError, match="sternum -> head"):
+        EmposeEstimator.load(tmp_path / "other_sites.pt", body=body)
 
 
 # --------------------------------------------------------------------------- learning

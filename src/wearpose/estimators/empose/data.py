@@ -22,7 +22,6 @@ ids and all simulation settings, so epochs never re-simulate.
 
 from __future__ import annotations
 
-import math
 import warnings
 import zlib
 from dataclasses import dataclass
@@ -167,10 +166,21 @@ def num_batches(num_windows: int, batch_size: int) -> int:
     return num_windows // batch_size if num_windows >= batch_size else int(num_windows > 0)
 
 
-def data_settings(cfg: EmposeConfig, body_asset: str) -> dict[str, Any]:
-    """Everything that changes the simulated data (part of the fingerprint)."""
+def kit_sites(kit: str, body: Any) -> dict[str, str]:
+    """Sensor (and ``"<em_source>"``) -> body site actually used on ``body`` (substitutions applied)."""
+    from wearpose.sensors import get_kit, resolve_sites
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return resolve_sites(get_kit(kit), body.site_names, body.asset_id)[0]
+
+
+def data_settings(cfg: EmposeConfig, body: Any) -> dict[str, Any]:
+    """Everything that changes the simulated data (part of the fingerprint), including the
+    sites the sensors resolve to (an asset can gain a site without changing its id)."""
     return {"version": DATA_VERSION, "kit": cfg.kit, "rate": cfg.rate, "noise": cfg.train_noise,
-            "offsets": cfg.offsets, "seed": cfg.seed, "body_asset": body_asset, "root_frame": "em_source"}
+            "offsets": cfg.offsets, "seed": cfg.seed, "body_asset": body.asset_id, "root_frame": "em_source",
+            "sites": kit_sites(cfg.kit, body)}
 
 
 def build_split(split: str, cfg: EmposeConfig, body: Any, *, store: Any = None, limit: int | None = None,
@@ -192,7 +202,7 @@ def build_split(split: str, cfg: EmposeConfig, body: Any, *, store: Any = None, 
     ids = store.clips(split=split)
     if limit:
         ids = ids[:limit]
-    settings = data_settings(cfg, body.asset_id)
+    settings = data_settings(cfg, body)
     fp = fingerprint(ids, {**settings, "split": split})
     root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "empose"
     path = root / f"{split}-{fp[:16]}.pt"
@@ -233,22 +243,10 @@ def build_split(split: str, cfg: EmposeConfig, body: Any, *, store: Any = None, 
 
 
 def recording_from_clip(r: dict[str, Any], cfg: EmposeConfig) -> Any:
-    """A :class:`~wearpose.recording.Recording` of a :func:`simulate_clip` result: EM sensors in
-    the source frame, the subject's offsets in ``subject["offsets"]`` (what a calibration gives
-    the estimator), ground truth the resampled motion."""
-    from wearpose.recording import Recording, SensorInfo
+    """The :class:`~wearpose.recording.Recording` of a :func:`simulate_clip` result
+    (:meth:`Recording.from_simulation`): EM sensors in the source frame, the applied offsets in
+    ``subject["offsets"]`` (what a calibration gives the estimator), the resampled motion as
+    ground truth."""
+    from wearpose.recording import Recording
 
-    sim = r["sim"]
-    infos = [SensorInfo(name=s.name, kind="em6dof", site=sim[s.name].site, rate=cfg.rate, reference="source",
-                        source="em_source", source_site=sim.kit.em_source_site) for s in sim.kit.sensors]
-    T = r["position"].shape[0]
-    return Recording.from_stacked(infos, torch.arange(T, dtype=torch.float64) / cfg.rate,
-                                  {"position": r["position"], "orientation": r["orientation"]}, valid=r["valid"].numpy(),
-                                  ground_truth=r["motion"], subject={"offsets": {
-                                      "sensors": list(sim.kit.sensor_names), "R": r["off_R"].tolist(),
-                                      "t": r["off_t"].tolist()}}, meta={"source": "wearpose.sensors.simulate",
-                                                                        "seed": sim.seed})
-
-
-def math_isclose(a: float, b: float) -> bool:
-    return math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-6)
+    return Recording.from_simulation(r["sim"], r["motion"])

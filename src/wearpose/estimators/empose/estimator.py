@@ -24,7 +24,7 @@ import torch
 
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
-from wearpose.estimators.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, load_checkpoint, save_checkpoint
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.empose.data import hold_invalid
 from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, decode_omega, sensor_features
@@ -67,6 +67,7 @@ class EmposeEstimator(Estimator):
         self.body_asset_id = self.body.asset_id
         self.fps = float(self.config.rate)
         sites, src = _sites(self.kit_name, self.body)
+        self.sites = {**dict(zip(self.sensor_names, sites)), "<em_source>": src}
         self.sensors = VirtualSensors(self.body, sites, src)
         self.model = LGDRNN(self.config, len(self.sensor_names)).to(self.device)
         self.data_fingerprint = ""
@@ -82,7 +83,7 @@ class EmposeEstimator(Estimator):
                           sensors=list(self.sensor_names), body_asset=self.body_asset_id,
                           weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
                           data_fingerprint=self.data_fingerprint, train_command=self.train_command,
-                          meta={**self.meta, **(meta or {})}, train_state=train_state)
+                          meta={**self.meta, "sites": self.sites, **(meta or {})}, train_state=train_state)
 
     def save(self, path: str | Path) -> Path:
         return save_checkpoint(self.checkpoint(), path)
@@ -97,6 +98,12 @@ class EmposeEstimator(Estimator):
             body = BodyModel()
             ckpt.check(body_asset=body.asset_id, path=path)
         est = cls(EmposeConfig.from_dict(ckpt.config), body=body, device=device)
+        want = ckpt.meta.get("sites")
+        if want and want != est.sites:
+            diff = {k: f"{want.get(k)} -> {est.sites.get(k)}" for k in sorted(set(want) | set(est.sites))
+                    if want.get(k) != est.sites.get(k)}
+            raise CheckpointMismatchError(f"{path}: body asset {est.body_asset_id!r} puts the sensors of kit "
+                                          f"{est.kit_name!r} on other sites than at training time (trained -> now): {diff}")
         est.model.load_state_dict(ckpt.weights)
         est.data_fingerprint, est.train_command, est.meta = ckpt.data_fingerprint, ckpt.train_command, dict(ckpt.meta)
         return est
@@ -116,6 +123,8 @@ class EmposeEstimator(Estimator):
     def _offsets_from(self, recording: Any) -> tuple[torch.Tensor, torch.Tensor]:
         S = len(self.sensor_names)
         off = (recording.subject or {}).get("offsets") if recording is not None else None
+        if off and not all(k in off for k in ("rotation", "translation_mean_m")):
+            raise ShapeError(f"subject['offsets'] needs 'rotation' (S, 3, 3) and 'translation_mean_m' (S, 3); got keys {sorted(off)}")
         if not off:
             warnings.warn("EM-POSE: recording has no subject offsets (subject['offsets']); using identity "
                           "offsets (the 'no [R|t]' setting), expect a large error", stacklevel=3)
@@ -124,8 +133,10 @@ class EmposeEstimator(Estimator):
         idx = [names.index(n) for n in self.sensor_names if n in names]
         if len(idx) != S:
             raise ShapeError(f"subject offsets name sensors {names}; estimator needs {list(self.sensor_names)}")
-        R = torch.as_tensor(np.asarray(off["R"], dtype=np.float32))[idx]
-        t = torch.as_tensor(np.asarray(off["t"], dtype=np.float32))[idx]
+        # Keys of wearpose.recording (from_empose / from_simulation): rotation (S, 3, 3) sensor ->
+        # site frame, translation_mean_m (S, 3) in the site frame.
+        R = torch.as_tensor(np.asarray(off["rotation"], dtype=np.float32))[idx]
+        t = torch.as_tensor(np.asarray(off["translation_mean_m"], dtype=np.float32))[idx]
         return R, t
 
     def set_offsets(self, R: torch.Tensor, t: torch.Tensor) -> None:
