@@ -98,3 +98,21 @@ def test_needs_ground_truth(calib_motion, body):
     sim = simulate(calib_motion.slice(0, 30), "em6", body, seed=0, noise="none")
     with pytest.raises(CalibrationError, match="ground_truth"):
         calibrate(sim_to_recording(sim), "empose-offsets", body=body)
+
+
+def test_from_simulation_recording_and_subject_offsets(calib_motion, subject, body, tmp_path):
+    # The recording type the rest of wearpose writes for simulations (float32 channels).
+    from wearpose.calibration import CalibrationResult, store_calibration
+    from wearpose.recording import Recording, load_recording
+
+    sim = simulate(calib_motion, "em12", body, seed=5, noise="none", offsets=subject)
+    rec = Recording.from_simulation(sim, calib_motion)
+    res = calibrate(rec, "empose-offsets", body=body)
+    truth = torch.tensor(rec.subject["offsets"]["translation_mean_m"], dtype=torch.float64)
+    assert (res.translation - truth).norm(dim=-1).max() < 5e-4  # float32 channels: sub-millimetre
+    assert torch.rad2deg(geodesic_angle(res.rotation, torch.tensor(rec.subject["offsets"]["rotation"]))).max() < 0.05
+    stored = load_recording(store_calibration(rec, res).save(tmp_path / "calib.npz"))
+    assert stored.subject["offsets"]["origin"].startswith("calibrated")
+    assert "offsets_previous" in stored.subject
+    back = CalibrationResult.from_dict(stored.meta["calibration"])
+    assert torch.allclose(back.translation_cov, res.translation_cov)

@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from calib_testutils import posed_motion, sim_to_recording
+from calib_testutils import posed_motion
 from wearpose.calibration import CalibrationError, apply_miposer, calibrate, em_to_world, miposer_tpose
 from wearpose.geometry import axis_angle_to_matrix, geodesic_angle
 from wearpose.sensors import simulate
@@ -82,8 +82,10 @@ def test_single_wrist_variant(body, motion):
 
 
 def test_calibrate_recording_and_errors(body, motion):
+    from wearpose.recording import Recording
+
     sim = simulate(motion, "miposer", body, seed=2, noise="none")
-    rec = sim_to_recording(sim)
+    rec = Recording.from_simulation(sim, motion)  # VIO at 60 Hz, wrist EM at 120 Hz relative to the head
     res = calibrate(rec, "miposer-tpose", body=body, window=(0.1, 0.9))
     assert res.sensors == ("head_vio", "left_wrist_em", "right_wrist_em")
     assert abs(res.scale - 1.0) < 1e-6 and res.translation.shape == (3, 3)

@@ -215,11 +215,21 @@ def _empose(rec: Any, body: Any, sensors: Sequence[str] | None, window: tuple[fl
     return res
 
 
-def store_calibration(recording: Any, result: CalibrationResult) -> Any:
-    """A copy of ``recording`` with ``meta["calibration"] = result.to_dict()`` (saved with the file)."""
+def store_calibration(recording: Any, result: CalibrationResult, *, subject_offsets: bool = True) -> Any:
+    """A copy of ``recording`` with ``meta["calibration"] = result.to_dict()`` (saved with the file).
+
+    An ``empose-offsets`` result is also written to ``subject["offsets"]`` (unless
+    ``subject_offsets=False``), the place the EM-POSE estimator and the converters use for a
+    subject's offsets; the previous value, if any, is kept under ``subject["offsets_previous"]``.
+    """
     meta = copy.deepcopy(recording.meta)
     meta["calibration"] = result.to_dict()
-    return replace(recording, meta=meta)
+    subject = copy.deepcopy(recording.subject)
+    if result.method == "empose-offsets" and subject_offsets:
+        if "offsets" in subject:
+            subject["offsets_previous"] = subject["offsets"]
+        subject["offsets"] = result.to_subject_offsets()
+    return replace(recording, meta=meta, subject=subject)
 
 
 def apply_calibration(recording: Any, result: CalibrationResult) -> Any:

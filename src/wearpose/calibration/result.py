@@ -102,6 +102,20 @@ class CalibrationResult:
         return EMOffsets(self.rotation.clone(), self.translation.clone(),
                          None if self.translation_cov is None else self.translation_cov.clone())
 
+    def to_subject_offsets(self) -> dict[str, Any]:
+        """``empose-offsets`` result -> the ``Recording.subject["offsets"]`` dict that
+        :func:`wearpose.recording.from_empose` and ``Recording.from_simulation`` write and the
+        EM-POSE estimator reads (``sensors``, ``rotation`` (S, 3, 3), ``translation_mean_m``
+        (S, 3), ``translation_cov_m2`` (S, 3, 3), ``origin``)."""
+        if self.method != "empose-offsets":
+            raise CalibrationError(f"to_subject_offsets: needs an 'empose-offsets' calibration, this one is {self.method!r}")
+        d: dict[str, Any] = {"sensors": list(self.sensors), "rotation": self.rotation.tolist(),
+                             "translation_mean_m": self.translation.tolist()}
+        if self.translation_cov is not None:
+            d["translation_cov_m2"] = self.translation_cov.tolist()
+        d["origin"] = "calibrated: wearpose.calibration empose-offsets (EM-POSE supp. Eq. 1-3)"
+        return d
+
     # ------------------------------------------------------------------ JSON
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON form (nested lists of floats); inverse of :meth:`from_dict`."""
