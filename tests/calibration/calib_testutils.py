@@ -93,3 +93,20 @@ def sim_to_recording(sim, *, ground_truth=None, world: torch.Tensor | None = Non
                     ch["magnetic_field"] = d.magnetic_field.double().numpy()
         streams.append(SensorStream(info, d.timestamps.double().numpy(), d.valid.numpy(), **ch))
     return Recording(streams, ground_truth=ground_truth, meta={"source": "simulate", "seed": sim.seed})
+
+
+def tpose_then(motion: MotionSequence, hold: float = 1.0, blend: float = 0.5, pose: str = "tpose") -> MotionSequence:
+    """``hold`` s of the calibration pose (facing +Z at the clip's first position), a ``blend`` s
+    slerp into the clip's first frame (root orientation included), then the clip. float64."""
+    from wearpose.geometry import slerp_matrix
+
+    fps = motion.fps
+    m = motion.to(torch.float64)
+    nh, nb = int(round(hold * fps)), int(round(blend * fps))
+    base = calibration_pose(pose)
+    first = m.pose[0]
+    w = _smoothstep(torch.arange(1, nb + 1, dtype=torch.float64) / (nb + 1))
+    blend_pose = slerp_matrix(base.expand(nb, 24, 3, 3), first.expand(nb, 24, 3, 3), w[:, None].expand(nb, 24))
+    pose_all = torch.cat([base.expand(nh, 24, 3, 3), blend_pose, m.pose])
+    trans = torch.cat([m.trans[:1].expand(nh + nb, 3), m.trans])
+    return MotionSequence(pose_all, m.betas, trans, fps, dict(m.meta))

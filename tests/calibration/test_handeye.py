@@ -7,10 +7,8 @@ import math
 
 import numpy as np
 import pytest
-import torch
 from scipy.spatial.transform import Rotation
 
-from calib_testutils import sim_to_recording
 from wearpose.calibration import DegenerateCalibrationError, axyb_closed_form, calibrate, handeye_transforms, solve_axyb
 from wearpose.recording import Recording, SensorInfo, SensorStream
 

@@ -13,7 +13,7 @@ import torch
 from calib_testutils import posed_motion, sim_to_recording, tilt_yaw
 from wearpose.calibration import (
     CalibrationError, CalibrationResult, DegenerateCalibrationError, apply_calibration, bone_orientations, calibrate,
-    heading_reset, segment_calibration, store_calibration,
+    segment_calibration, store_calibration,
 )
 from wearpose.geometry import geodesic_angle
 from wearpose.recording import load_recording
@@ -196,3 +196,57 @@ def test_result_is_stored_with_the_recording(body, tmp_path):
         CalibrationResult.from_dict({**res.to_dict(), "version": 99})
     with pytest.raises(CalibrationError, match="shape"):
         CalibrationResult("tpose", ("a",), rotation=torch.eye(3).expand(2, 3, 3))
+
+
+def test_from_dict_fuzz_only_raises_calibration_error(body):
+    # Whatever JSON a user's file holds, reading it fails with CalibrationError, nothing else.
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    sim = _sim(body, "tpose", seconds=1.5)
+    good = calibrate(sim_to_recording(sim, raw_imu=True), "tpose", body=body, window=WINDOW).to_dict()
+    json_leaf = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(allow_nan=True), st.text(max_size=5))
+    json_val = st.recursive(json_leaf, lambda c: st.one_of(st.lists(c, max_size=4), st.dictionaries(st.text(max_size=5), c, max_size=3)),
+                            max_leaves=12)
+
+    @settings(max_examples=150, deadline=None)
+    @given(key=st.sampled_from(sorted(good)), value=json_val)
+    def check(key, value):
+        d = dict(good)
+        d[key] = value
+        try:
+            CalibrationResult.from_dict(d)
+        except CalibrationError:
+            pass
+
+    check()
+
+
+@pytest.mark.corpus
+def test_tpose_on_corpus_clip(body, record_property):
+    """1 s T-pose, then a real clip (CMU), skin-frame IMUs in a yawed and tilted world."""
+    from calib_testutils import tpose_then
+    from wearpose.motion import CorpusStore
+
+    try:
+        store = CorpusStore()
+        clips = store.clips(split="test", source="cmu_daz")
+    except Exception as exc:  # noqa: BLE001 - no prepared corpus on this machine
+        pytest.skip(f"no prepared motion corpus: {exc}")
+    if not clips:
+        pytest.skip("no cmu_daz test clips in the prepared corpus")
+    motion = tpose_then(store.load(clips[0]))
+    sim = simulate(motion, "imu6", body, seed=3, noise="none", imu_orientation="site")
+    rec = sim_to_recording(sim, world=C_WORLD, raw_imu=True)
+    res = calibrate(rec, "tpose", body=body, window=WINDOW)
+    assert geodesic_angle(res.world_rotation[0], C_WORLD.T) < math.radians(0.01)
+    names = list(sim.kit.sensor_names)
+    B = bone_orientations(torch.stack([torch.from_numpy(rec.sensor(n).orientation) for n in names], 1), res)
+    truth = _truth(sim)
+    err = torch.rad2deg(geodesic_angle(B, truth))
+    fig = {"clip": clips[0], "median_deg": dict(zip(names, [round(float(x), 2) for x in err.median(0).values])),
+           "max_deg": dict(zip(names, [round(float(x), 2) for x in err.max(0).values]))}
+    record_property("tpose_corpus", json.dumps(fig))
+    print("T-pose calibration on a corpus clip, noise-free, vs true bones:", json.dumps(fig))
+    assert torch.rad2deg(geodesic_angle(B, _rigid_reference(sim, truth))).max() < 0.01
+    assert err.median() < 1.0

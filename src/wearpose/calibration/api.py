@@ -10,7 +10,6 @@ calibration into a recording of bone orientations.
 from __future__ import annotations
 
 import copy
-import math
 from dataclasses import replace
 from typing import Any, Sequence
 
@@ -209,6 +208,10 @@ def _empose(rec: Any, body: Any, sensors: Sequence[str] | None, window: tuple[fl
         raise CalibrationError(f"calibrate(empose-offsets): source site {src!r} is not a site of body asset {body.asset_id!r} "
                                f"(sites: {list(body.site_names)})")
     sites = [s.info.site for s in streams]
+    unknown = [f"{s.name} ({s.info.site!r})" for s in streams if s.info.site not in body.site_names]
+    if unknown:
+        raise CalibrationError(f"calibrate(empose-offsets): sensor(s) {unknown} have no site of body asset {body.asset_id!r}; "
+                               f"set SensorInfo.site to one of {list(body.site_names)}")
     res = empose_offsets(R, p, mm, body, sites, source_site=src, valid=v, names=[s.name for s in streams], **kwargs)
     if window is not None:
         res.params["window"] = list(window)

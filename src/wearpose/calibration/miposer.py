@@ -40,7 +40,7 @@ from typing import Any, Sequence
 import torch
 
 from wearpose.body.skeleton import JOINT_INDEX
-from wearpose.calibration._common import E_Y, F64, CalibrationError, best_yaw, chordal_mean, rotation_y, t64
+from wearpose.calibration._common import F64, CalibrationError, best_yaw, chordal_mean, rotation_y, t64
 from wearpose.calibration.result import CalibrationResult
 
 #: Target SMPL joint of each MI-Poser sensor role (App. A: joints 15, 20, 21).

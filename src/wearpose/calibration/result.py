@@ -143,15 +143,26 @@ class CalibrationResult:
         unknown = sorted(set(d) - known)
         if unknown:
             raise CalibrationError(f"calibration: unknown key(s) {unknown}; expected only {sorted(known)}")
+        sensors = d.get("sensors")
+        if not isinstance(sensors, list) or not all(isinstance(x, str) for x in sensors):
+            raise CalibrationError(f"calibration/sensors: {str(sensors)[:60]!r}, expected a list of sensor names")
+        for key in ("extras", "quality", "params"):
+            if d.get(key) is not None and not isinstance(d.get(key), dict):
+                raise CalibrationError(f"calibration/{key}: expected a JSON object, got {type(d.get(key)).__name__}")
+        scale = d.get("scale")
+        if scale is not None and (isinstance(scale, bool) or not isinstance(scale, (int, float))):
+            raise CalibrationError(f"calibration/scale: {scale!r}, expected a number or null")
         arrays = {}
-        for name in _ARRAYS:
-            v = d.get(name)
+        for name in list(_ARRAYS) + [f"extras/{k}" for k in (d.get("extras") or {})]:
+            v = d["extras"][name[7:]] if name.startswith("extras/") else d.get(name)
             try:
                 arrays[name] = None if v is None else torch.as_tensor(np.asarray(v, dtype=np.float64))
-            except (TypeError, ValueError) as exc:
+            except (TypeError, ValueError, OverflowError) as exc:
                 raise CalibrationError(f"calibration/{name}: not a numeric array ({exc})") from None
-        return cls(method=d.get("method"), sensors=tuple(d.get("sensors") or ()), scale=d.get("scale"),
-                   extras={k: torch.as_tensor(np.asarray(v, dtype=np.float64)) for k, v in (d.get("extras") or {}).items()},
+        extras = {k[7:]: arrays.pop(k) for k in list(arrays) if k.startswith("extras/")}
+        if any(v is None for v in extras.values()):
+            raise CalibrationError("calibration/extras: values must be numeric arrays, not null")
+        return cls(method=d.get("method"), sensors=tuple(sensors), scale=scale, extras=extras,
                    quality=dict(d.get("quality") or {}), params=dict(d.get("params") or {}), **arrays)
 
 
