@@ -77,6 +77,13 @@ class EmposeEstimator(Estimator):
         self._last: tuple[torch.Tensor, torch.Tensor] | None = None
         self._offsets: tuple[torch.Tensor, torch.Tensor] | None = None
 
+    def to(self, device: str | torch.device) -> EmposeEstimator:
+        """Move the network and the differentiable body (used inside L_r) to ``device``."""
+        self.device = torch.device(device)
+        self.model.to(self.device)
+        self.body.to(self.device)
+        return self
+
     # ------------------------------------------------------------------ checkpoints
     def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
         return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name,
@@ -194,6 +201,36 @@ class EmposeEstimator(Estimator):
         return PoseTrack(local_rot, beta, None, ok, self.fps,
                          extras={"frame": "em_source", "rec_loss": torch.cat(rec).cpu(), "method": self.name,
                                  "betas_per_frame": b_all})
+
+    @torch.no_grad()
+    def to_world(self, track: PoseTrack, source_R: torch.Tensor, source_p: torch.Tensor) -> PoseTrack:
+        """Place a source-frame track in the world, given the EM source's world pose.
+
+        The body is posed in the source frame (``extras["frame"] == "em_source"``); the rigid
+        transform that takes the estimated source *site* (:meth:`BodyModel.sites` of the
+        estimate) onto the given source pose moves the whole body: root orientation
+        ``R_w R_root`` and translation ``R_w (J_0 - p_site) + p_src - J_0`` (SMPL rotates about the
+        rest root joint ``J_0``), with ``R_w = R_src R_site^T``.
+
+        Args:
+            track: an :meth:`estimate` result.
+            source_R: ``(T, 3, 3)`` source frame -> world; source_p: ``(T, 3)`` m, world (e.g. the
+                simulator's ``em_source``, or a tracked source).
+
+        Returns:
+            a new :class:`PoseTrack` with ``trans`` set and ``extras["frame"] = "world"``.
+        """
+        src = self.sites["<em_source>"]
+        pose = track.local_rot.to(self.device)
+        so = self.body.sites(pose, track.betas.to(self.device), None, [src])
+        R_site, p_site = so.rotations[:, 0].cpu(), so.positions[:, 0].cpu()
+        R_w = source_R.to(R_site) @ R_site.transpose(-1, -2)
+        J0 = self.body.rest_joints(track.betas.to(self.device))[0].cpu()
+        trans = (R_w @ (J0 - p_site).unsqueeze(-1)).squeeze(-1) + source_p.to(R_site) - J0
+        rot = track.local_rot.clone()
+        rot[:, 0] = R_w @ rot[:, 0]
+        return PoseTrack(rot, track.betas.clone(), trans, track.valid.clone(), track.fps, track.uncertainty,
+                         {**track.extras, "frame": "world"})
 
     # ------------------------------------------------------------------ online
     def reset(self) -> None:

@@ -110,13 +110,14 @@ def train_empose(est: EmposeEstimator, out_dir: str | Path, *, epochs: int | Non
     elif train_command:
         est.train_command = train_command
     est.meta.update({"train_clips": len(tr.clip_ids), "train_frames": tr.num_frames, "val_clips": len(va.clip_ids)})
+    from wearpose.estimators.train import resolve_device
+
+    est.to(resolve_device(device))  # network and body together: L_r runs the body inside the model
     task = EmposeTask(est, tr, va)
     s = TrainSettings(out_dir=Path(out_dir), epochs=epochs or cfg.epochs, lr=cfg.lr, lr_schedule=cfg.lr_schedule,
                       lr_min_factor=cfg.lr_min_factor, grad_clip=cfg.grad_clip, resume=resume, threads=threads,
                       device=device, checkpoint_every=checkpoint_every, max_steps=max_steps, quiet=quiet)
-    res = train(task, s, console)
-    est.model.to(est.device)
-    return res
+    return train(task, s, console)
 
 
 def evaluate_empose(checkpoint: str | Path | EmposeEstimator, split: str = "test", limit: int | None = None, *,
