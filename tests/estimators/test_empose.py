@@ -109,6 +109,7 @@ def test_presets_follow_table5() -> None:
         (512, 512, 5, 4, 0.1, 12, 32)
     assert (p12.lr, p12.dropout_input, p12.dropout_mlp, p12.lambda_pose, p12.lambda_joints, p12.lambda_rec) == \
         (1e-4, 0.2, 0.2, 1.0, 1.0, 0.01)
+    assert p12.rep == "axis_angle" and EmposeConfig.preset("cpu", 12).rep == "rot6d"
     assert (p6.iterations, p6.lr, p6.dropout_mlp, p6.lambda_pose, p6.lambda_joints, p6.kit) == (2, 5e-4, 0.0, 10.0, 0.1, "em6")
     assert EmposeConfig.preset("cpu", 12).override(hidden=64).hidden == 64
     with pytest.raises(ConfigError):
@@ -154,9 +155,10 @@ def test_checkpoint_round_trip_and_mismatch_errors(tmp_path: Path, body: BodyMod
 
 
 # --------------------------------------------------------------------------- learning
-def test_loss_decreases_on_a_fixed_batch(tmp_path: Path, body: BodyModel) -> None:
+@pytest.mark.parametrize("rep", ["rot6d", "axis_angle"])
+def test_loss_decreases_on_a_fixed_batch(tmp_path: Path, body: BodyModel, rep: str) -> None:
     torch.manual_seed(0)
-    cfg = tiny_cfg()
+    cfg = tiny_cfg(rep=rep)
     data = build_split("train", cfg, body, store=FakeStore(tmp_path, {"train": 3}), cache_root=tmp_path / "c")
     batch = data.batch(data.windows(cfg.seq_len, cfg.seq_len)[:4], cfg.seq_len)
     est = EmposeEstimator(cfg, body=body)

@@ -4,8 +4,11 @@ Presets (:meth:`EmposeConfig.preset`):
 
 - ``paper``: Table 5 exactly, per sensor count (LSTM 2x512, MLP 512 x 5 layers, N = 4 / 2,
   alpha = 0.1, batch 12, sequence length 32, 50 epochs, lr 1e-4 (12) / 5e-4 (6), dropout 0.2 /
-  0.0, lambdas (1, 1, 1, 0.01) for 12 and (10, 1, 0.1, 0.01) for 6).
+  0.0, lambdas (1, 1, 1, 0.01) for 12 and (10, 1, 0.1, 0.01) for 6), and the pose in
+  axis-angle as Sec. 5.1 writes it (theta_t in R^{J*3}).
 - ``cpu``: the same model at CPU scale: LSTM 2x256, MLP 256 x 5 layers, N = 3 (12) / 2 (6),
+  pose in 6D (DESIGN's network convention: continuous, no wrap-around at pi for the additive
+  update),
   batch 32 (more frames per optimiser step amortise Python overhead on CPU), lr 5e-4 with a
   cosine decay, 20 epochs. Loss weights and dropout as Table 5.
 - ``tiny``: a few-second smoke-test model (CI).
@@ -110,7 +113,7 @@ class EmposeConfig:
         else:
             raise ConfigError(f"sensors: expected 6 or 12, got {sensors!r}")
         if name == "paper":
-            return paper
+            return replace(paper, rep="axis_angle")
         if name == "cpu":
             return replace(paper, hidden=256, width=256, iterations=3 if sensors == 12 else 2, batch_size=32,
                            lr=5e-4, lr_schedule="cosine", epochs=20, val_clips=60)
