@@ -242,3 +242,16 @@ def test_estimate_rejects_wrong_sensors_and_rate(body: BodyModel) -> None:
     clip60 = simulate_clip(synthetic_motion(2, T=12), cfg.override(rate=60.0), body, seed=1)
     with pytest.raises(ShapeError, match="60"):
         est.estimate(recording_from_clip(clip60, cfg.override(rate=60.0)))
+
+
+def test_missing_offsets_warn_and_fall_back_to_identity(body: BodyModel) -> None:
+    cfg = tiny_cfg()
+    est = EmposeEstimator(cfg, body=body)
+    rec = recording_from_clip(simulate_clip(synthetic_motion(5, T=10), cfg, body, seed=1), cfg)
+    rec.subject.pop("offsets")
+    with pytest.warns(UserWarning, match="no subject offsets"):
+        track = est.estimate(rec)
+    assert track.num_frames == 10
+    rec.subject["offsets"] = {"R": [[0.0]]}
+    with pytest.raises(ShapeError, match="translation_mean_m"):
+        est.estimate(rec)
