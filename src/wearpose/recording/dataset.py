@@ -55,7 +55,24 @@ OFFSETS_CHOICES = ("random", "none")
 #: most of its work (the next run skips what the index lists).
 INDEX_FLUSH_S = 30.0
 #: With ``workers=None``, batches with more motion than this (seconds) run in a process pool.
-AUTO_PARALLEL_MOTION_S = 600.0
+#: Why: one process simulates em12 at ~100x real time (files included; benchmarks/simulate.py),
+#: while each pool worker first pays ~5 s (torch import + body model; ~10 s for two on a busy
+#: 2-core machine), so below ~20 min of motion a pool does not pay for itself.
+AUTO_PARALLEL_MOTION_S = 1200.0
+
+
+def idle_cores() -> int:
+    """CPU cores not busy with other work: core count minus the 1-minute load average, >= 1.
+
+    Workers on busy cores only slow each other down (measured: with another job holding one of
+    two cores, two workers took 1.6x longer than one process).
+    """
+    n = os.cpu_count() or 1
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):  # not on every platform
+        load = 0.0
+    return max(1, min(n, int(round(n - load))))
 
 
 def clip_seed(base_seed: int, clip_id: str) -> int:
@@ -174,9 +191,10 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         offsets: ``"random"`` (a synthetic subject's sensor offsets per clip) or ``"none"``.
         rate: every sensor at this rate, Hz (default: the kit's rates).
         limit: only the first ``limit`` selected clips (sorted by id).
-        workers: processes; ``1`` runs in this process. Default: every CPU core when the clips
-            to simulate hold more than :data:`AUTO_PARALLEL_MOTION_S` of motion, else 1 (a
-            pool's start-up costs more than it saves on small batches).
+        workers: processes; ``1`` runs in this process. Default: the idle cores
+            (:func:`idle_cores`) when the clips to simulate hold more than
+            :data:`AUTO_PARALLEL_MOTION_S` of motion, else 1 (a pool's start-up costs more than
+            it saves on small batches).
         source_pose: store the EM source's world pose in each recording's meta.
         body: body asset (``None``: the embedded one; ``"smpl"`` or a path).
         overwrite: replace a set simulated in ``out_dir`` with other settings (the recordings
@@ -275,11 +293,8 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
     skipped = len(ids) - len(todo)
 
     if workers is None:
-        # Each worker process pays a fixed start-up (torch import + body model, ~5 s per process,
-        # ~10 s for two on a loaded 2-core machine) while simulation runs ~60x real time per
-        # core: below ~10 min of motion one process is faster than a pool.
         todo_s = sum(float(store.entry(j["id"]).get("seconds", 0.0)) for j in todo)
-        n_workers = (os.cpu_count() or 1) if todo_s > AUTO_PARALLEL_MOTION_S else 1
+        n_workers = idle_cores() if todo_s > AUTO_PARALLEL_MOTION_S else 1
     else:
         n_workers = max(1, int(workers))
     n_workers = min(n_workers, max(1, len(todo)))
@@ -419,4 +434,4 @@ def load_index(out_dir: str | Path) -> dict[str, Any]:
     return idx
 
 
-__all__ = ["simulate_corpus", "clip_seed", "is_noncommercial", "load_index"]
+__all__ = ["simulate_corpus", "clip_seed", "is_noncommercial", "load_index", "idle_cores"]
