@@ -299,6 +299,7 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         n_workers = max(1, int(workers))
     n_workers = min(n_workers, max(1, len(todo)))
     stats = {"simulated": 0, "sensor_frames": 0, "bytes": 0}
+    n_failed = [0]  # a list: updated from the nested finish()
     last_flush = [time.perf_counter()]
 
     def write_index() -> None:
@@ -316,6 +317,7 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         else:
             failures[cid] = res["error"]
             clips.pop(cid, None)
+            n_failed[0] += 1
         if time.perf_counter() - last_flush[0] > INDEX_FLUSH_S:
             write_index()
             last_flush[0] = time.perf_counter()
@@ -328,44 +330,49 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
     # Biggest clips first, so that the workers finish together.
     todo.sort(key=lambda j: -int(store.entry(j["id"]).get("frames", 0)))
     t_sim = time.perf_counter()
-    with Progress(*columns, console=Console(stderr=True), disable=not progress or not todo) as bar:
-        task = bar.add_task("simulate", total=len(todo), failed="")
+    try:
+        with Progress(*columns, console=Console(stderr=True), disable=not progress or not todo) as bar:
+            task = bar.add_task("simulate", total=len(todo), failed="")
 
-        def advance() -> None:
-            n_bad = sum(1 for j in todo if j["id"] in failures)
-            bar.update(task, advance=1, failed=f"[red]{n_bad} failed" if n_bad else "")
+            def advance() -> None:
+                bar.update(task, advance=1, failed=f"[red]{n_failed[0]} failed" if n_failed[0] else "")
 
-        if n_workers <= 1:
-            import torch
+            if n_workers <= 1:
+                import warnings
 
-            import warnings
+                import torch
 
-            threads = torch.get_num_threads()
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    _init_worker(body, quiet=False)
-                    for job in todo:
-                        finish(job, _simulate_one(job))
+                threads = torch.get_num_threads()
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        _init_worker(body, quiet=False)
+                        for job in todo:
+                            finish(job, _simulate_one(job))
+                            advance()
+                finally:
+                    torch.set_num_threads(threads)
+            else:
+                # "spawn": forking a parent that already ran torch can deadlock its OpenMP pool.
+                ctx = multiprocessing.get_context("spawn")
+                with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_init_worker,
+                                         initargs=(body,)) as ex:
+                    futures = {ex.submit(_simulate_one, {k: v for k, v in job.items() if k != "_row"}): job for job in todo}
+                    for fut in as_completed(futures):
+                        job = futures[fut]
+                        try:
+                            res = fut.result()
+                        except Exception as exc:  # noqa: BLE001 - a crashed worker (e.g. out of memory) fails its clip only
+                            res = {"id": job["id"], "ok": False, "error": f"worker crashed: {type(exc).__name__}: {exc} (a worker "
+                                   "process died: out of memory, or a script without `if __name__ == '__main__':` that "
+                                   "'spawn' cannot re-import; workers=1 runs in this process)"}
+                        finish(job, res)
                         advance()
-            finally:
-                torch.set_num_threads(threads)
-        else:
-            # "spawn": forking a parent that already ran torch can deadlock its OpenMP pool.
-            ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_init_worker,
-                                     initargs=(body,)) as ex:
-                futures = {ex.submit(_simulate_one, {k: v for k, v in job.items() if k != "_row"}): job for job in todo}
-                for fut in as_completed(futures):
-                    job = futures[fut]
-                    try:
-                        res = fut.result()
-                    except Exception as exc:  # noqa: BLE001 - a crashed worker (e.g. out of memory) fails its clip only
-                        res = {"id": job["id"], "ok": False, "error": f"worker crashed: {type(exc).__name__}: {exc}"}
-                    finish(job, res)
-                    advance()
+    finally:
+        # Also on Ctrl-C or an unexpected error: the finished clips stay indexed, so the next
+        # run skips them.
+        write_index()
     sim_s = time.perf_counter() - t_sim
-    write_index()
     run_failures = {j["id"]: failures[j["id"]] for j in todo if j["id"] in failures}
     return {
         "out": str(out), "index": str(index_path), "kit": kit_obj.name, "split": split, "selected": len(ids),
