@@ -236,3 +236,21 @@ def test_g_and_sensor_frame_diagnosed_by_name(tmp_path):
     rec.sensors[0].info = SensorInfo("wrist", "imu", rate=60.0, acc_unit="g", acc_frame="sensor", acc_gravity="included")
     ok = load_recording(rec.save(tmp_path / "declared.npz")).to_canonical()
     np.testing.assert_allclose(ok.sensor("wrist").acceleration[:100], 0.0, atol=0.1)  # 0.002 g noise
+
+
+def test_z_up_orientations_diagnosed(tmp_path):
+    """Orientations from a Z-up world declared as Y-up: gravity's reaction lines up with Z."""
+    from recording_testutils import rotations
+
+    n = 240
+    R = np.repeat(rotations(1, seed=5, speed=1.0), n, axis=0)
+    f_world_zup = np.tile([0.0, 0.0, 9.81], (n, 1))  # +1 g along Z: the device's world is Z up
+    f_sensor = np.einsum("nji,nj->ni", R, f_world_zup)
+    info = SensorInfo("wrist", "imu", rate=60.0, acc_frame="sensor", acc_gravity="included")  # world_up y_up
+    rec = Recording([SensorStream(info, np.arange(n) / 60, np.ones(n, bool), orientation=R, acceleration=f_sensor)])
+    with pytest.raises(InputFileError) as ei:
+        load_recording(rec.save(tmp_path / "zup.npz"))
+    assert "look like a z-up world" in ei.value.problem and "world_up 'z_up'" in ei.value.expected
+    rec.sensors[0].info = SensorInfo("wrist", "imu", rate=60.0, acc_frame="sensor", acc_gravity="included", world_up="z_up")
+    ok = load_recording(rec.save(tmp_path / "declared.npz")).to_canonical()
+    np.testing.assert_allclose(ok.sensor("wrist").acceleration, 0.0, atol=1e-4)

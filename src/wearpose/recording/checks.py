@@ -170,4 +170,17 @@ def _check_acceleration(s: SensorStream) -> list[ConventionIssue]:
             issues.append(ConventionIssue(s.name, "acceleration",
                                           "at rest the reading points along world up without rotating by the orientation; looks like the world frame",
                                           "sensor-frame acceleration as declared, or declare acc_frame 'world'"))
+        else:
+            # Orientations (or world-frame readings) in the other up-axis convention: the reading
+            # lines up with the *other* axis instead of the declared one.
+            other_name = "z_up" if info.world_up == "y_up" else "y_up"
+            other = np.array([0.0, 0.0, 1.0]) if info.world_up == "y_up" else np.array([0.0, 1.0, 0.0])
+            world_d = d if info.acc_frame == "world" else np.einsum("nij,nj->ni", s.orientation[st].astype(np.float64), d)
+            cos_decl, cos_other = float(np.median(world_d @ up)), float(np.median(world_d @ other))
+            if cos_decl < 0.9 and cos_other > 0.97:
+                issues.append(ConventionIssue(s.name, "orientation",
+                                              f"at rest gravity's reaction points along the {other_name.replace('_', '-')} axis of the world, "
+                                              f"not along the declared {info.world_up.replace('_', '-')} axis; orientations look like a "
+                                              f"{other_name.replace('_', '-')} world",
+                                              f"orientations in a {info.world_up.replace('_', '-')} world, or declare world_up '{other_name}'"))
     return issues
