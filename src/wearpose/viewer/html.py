@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from wearpose.body import PARENTS, BodyModel, forward_kinematics
+from wearpose.errors import ShapeError
 
 _TOPK = 4
 
@@ -26,13 +27,9 @@ def _b64(a: np.ndarray, dtype: str) -> str:
     return base64.b64encode(np.ascontiguousarray(a, dtype=dtype).tobytes()).decode("ascii")
 
 
-def skinning_payload(body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor,
-                     site_names: Sequence[str] | None = None) -> dict:
-    """Arrays the page needs, as a JSON-able dict.
-
-    Args:
-        pose: ``(T, 24, 3, 3)`` local rotations; betas ``(S,)``; trans ``(T, 3)`` m.
-    """
+def _track(body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor, label: str,
+           shift: float) -> dict:
+    """Per-track arrays: shaped rest mesh, per-frame skinning transforms and joints."""
     with torch.no_grad():
         pose = pose.to(body.dtype)
         b = betas.to(body.dtype)
@@ -40,8 +37,29 @@ def skinning_payload(body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, t
         J_rest = body.rest_joints(b)  # (24, 3)
         G, J = forward_kinematics(pose, J_rest)  # (T, 24, 3, 3), (T, 24, 3)
         J = J + trans.to(body.dtype)[:, None]
+        J[..., 0] += shift  # side-by-side display offset along +X, metres
         t = J - (G @ J_rest.unsqueeze(-1)).squeeze(-1)
         A = torch.cat([G.reshape(*G.shape[:2], 9), t], dim=-1)  # (T, 24, 12)
+    return {"label": label, "verts": _b64(v_shaped.cpu().numpy(), "<f4"), "A": _b64(A.cpu().numpy(), "<f4"),
+            "joints": _b64(J.cpu().numpy(), "<f4")}
+
+
+def skinning_payload(body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor,
+                     site_names: Sequence[str] | None = None,
+                     compare: Sequence[tuple[str, torch.Tensor, torch.Tensor, torch.Tensor]] = (),
+                     label: str = "motion", spacing: float = 1.0) -> dict:
+    """Arrays the page needs, as a JSON-able dict.
+
+    Args:
+        pose: ``(T, 24, 3, 3)`` local rotations; betas ``(S,)``; trans ``(T, 3)`` m.
+        compare: further tracks ``(label, pose, betas, trans)`` with the same ``T``, drawn beside
+            the first one, each ``spacing`` metres further along +X (e.g. ground truth).
+    """
+    tracks = [_track(body, pose, betas, trans, label, 0.0)]
+    for k, (lab, p2, b2, t2) in enumerate(compare, start=1):
+        if p2.shape[0] != pose.shape[0]:
+            raise ShapeError(f"compare track {lab!r} has {p2.shape[0]} frames, the main track {pose.shape[0]}")
+        tracks.append(_track(body, p2, b2, t2, lab, spacing * k))
     w = body.weights.cpu().numpy()
     idx = np.argsort(-w, axis=1)[:, :_TOPK]
     wk = np.take_along_axis(w, idx, axis=1)
@@ -49,16 +67,16 @@ def skinning_payload(body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, t
     names, vids, _ = body.site_ids(site_names) if body.site_names else ((), np.zeros(0, np.int64), None)
     return {
         "V": body.num_vertices, "F": int(body.faces.shape[0]), "T": int(pose.shape[0]),
-        "verts": _b64(v_shaped.cpu().numpy(), "<f4"), "faces": _b64(body.faces.cpu().numpy(), "<u4"),
-        "widx": _b64(idx, "<u1"), "w": _b64(wk, "<f4"), "A": _b64(A.cpu().numpy(), "<f4"),
-        "joints": _b64(J.cpu().numpy(), "<f4"), "parents": list(PARENTS),
+        "tracks": tracks, "faces": _b64(body.faces.cpu().numpy(), "<u4"),
+        "widx": _b64(idx, "<u1"), "w": _b64(wk, "<f4"), "parents": list(PARENTS),
         "sites": [int(v) for v in vids], "site_names": list(names),
     }
 
 
 def write_html(path: str | Path, body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor,
                fps: float, title: str = "wearpose", site_names: Sequence[str] | None = None,
-               info: dict | None = None) -> Path:
+               info: dict | None = None, label: str = "motion",
+               compare: Sequence[tuple[str, torch.Tensor, torch.Tensor, torch.Tensor]] = ()) -> Path:
     """Write a page that plays ``pose``/``trans`` on ``body``; returns the path.
 
     Args:
@@ -67,8 +85,10 @@ def write_html(path: str | Path, body: BodyModel, pose: torch.Tensor, betas: tor
         fps: playback rate (frames per second of the motion).
         site_names: sensor sites to draw (default: all sites of the asset).
         info: extra key/values shown in the page header (e.g. metrics).
+        label: name of the main track; ``compare``: further ``(label, pose, betas, trans)``
+            tracks drawn beside it (e.g. ground truth next to an estimate).
     """
-    payload = skinning_payload(body, pose, betas, trans, site_names)
+    payload = skinning_payload(body, pose, betas, trans, site_names, compare=compare, label=label)
     payload.update({"fps": float(fps), "title": title, "info": info or {}})
     html = _TEMPLATE.replace("__PAYLOAD__", json.dumps(payload)).replace("__TITLE__", title)
     path = Path(path)
@@ -96,8 +116,8 @@ label{white-space:nowrap}
 <script>
 const P = __PAYLOAD__;
 function dec(s, T){const b=atob(s);const u=new Uint8Array(b.length);for(let i=0;i<b.length;i++)u[i]=b.charCodeAt(i);return new T(u.buffer);}
-const V=P.V,F=P.F,T=P.T, rest=dec(P.verts,Float32Array), faces=dec(P.faces,Uint32Array),
- widx=dec(P.widx,Uint8Array), w=dec(P.w,Float32Array), A=dec(P.A,Float32Array), J=dec(P.joints,Float32Array);
+const V=P.V,F=P.F,T=P.T, faces=dec(P.faces,Uint32Array), widx=dec(P.widx,Uint8Array), w=dec(P.w,Float32Array);
+const TR=P.tracks.map(t=>({label:t.label,rest:dec(t.verts,Float32Array),A:dec(t.A,Float32Array),J:dec(t.joints,Float32Array)}));
 document.getElementById('title').textContent=P.title;
 document.getElementById('info').textContent=Object.entries(P.info).map(([k,v])=>k+': '+v).join('  ');
 const slider=document.getElementById('t'); slider.max=T-1;
@@ -112,7 +132,7 @@ document.getElementById('play').onclick=()=>{playing=!playing;document.getElemen
 slider.oninput=()=>{frame=+slider.value;t0=performance.now()-frame*1000/P.fps;draw();};
 for(const id of ['mesh','skel','site'])document.getElementById(id).onchange=draw;
 const pv=new Float32Array(V*3);
-function skin(f){const a=A.subarray(f*288,(f+1)*288);
+function skin(tr,f){const a=tr.A.subarray(f*288,(f+1)*288),rest=tr.rest;
  for(let v=0;v<V;v++){let x=0,y=0,z=0;const rx=rest[3*v],ry=rest[3*v+1],rz=rest[3*v+2];
   for(let k=0;k<4;k++){const wt=w[4*v+k];if(wt===0)continue;const m=12*widx[4*v+k];
    x+=wt*(a[m]*rx+a[m+1]*ry+a[m+2]*rz+a[m+9]);y+=wt*(a[m+3]*rx+a[m+4]*ry+a[m+5]*rz+a[m+10]);z+=wt*(a[m+6]*rx+a[m+7]*ry+a[m+8]*rz+a[m+11]);}
@@ -120,14 +140,19 @@ function skin(f){const a=A.subarray(f*288,(f+1)*288);
 function draw(){
  const W=cv.width=cv.clientWidth, H=cv.height=cv.clientHeight;
  ctx.fillStyle='#1d1f24';ctx.fillRect(0,0,W,H);
- skin(frame);
- const j0=3*24*frame, cx=J[j0], cy=J[j0+1]-0.1, cz=J[j0+2];
+ const j0=3*24*frame; let cx=0,cy=0,cz=0;
+ for(const tr of TR){cx+=tr.J[j0]/TR.length;cy+=(tr.J[j0+1]-0.1)/TR.length;cz+=tr.J[j0+2]/TR.length;}
  const cy_=Math.cos(yaw),sy=Math.sin(yaw),cp=Math.cos(pitch),sp=Math.sin(pitch),s=H/dist*1.2;
  function proj(x,y,z){x-=cx;y-=cy;z-=cz;const X=cy_*x-sy*z,Z0=sy*x+cy_*z;const Y=cp*y-sp*Z0,Z=sp*y+cp*Z0;return [W/2+X*s,H/2-Y*s,Z];}
  // floor grid at y=0
  ctx.strokeStyle='#3a3d45';ctx.lineWidth=1;
  for(let i=-5;i<=5;i++){let a=proj(cx+i*0.5,0,cz-2.5),b=proj(cx+i*0.5,0,cz+2.5);ctx.beginPath();ctx.moveTo(a[0],a[1]);ctx.lineTo(b[0],b[1]);ctx.stroke();
   a=proj(cx-2.5,0,cz+i*0.5);b=proj(cx+2.5,0,cz+i*0.5);ctx.beginPath();ctx.moveTo(a[0],a[1]);ctx.lineTo(b[0],b[1]);ctx.stroke();}
+ for(const tr of TR){drawTrack(tr,proj);}
+ slider.value=frame;document.getElementById('frame').textContent=`${frame+1}/${T}  ${(frame/P.fps).toFixed(2)} s`;
+ cv.dataset.frame=frame;}
+function drawTrack(tr,proj){
+ skin(tr,frame);const J=tr.J,j0=3*24*frame;
  const sv=new Float32Array(V*3);for(let v=0;v<V;v++){const p=proj(pv[3*v],pv[3*v+1],pv[3*v+2]);sv[3*v]=p[0];sv[3*v+1]=p[1];sv[3*v+2]=p[2];}
  if(document.getElementById('mesh').checked){
   const depth=new Float32Array(F),order=new Uint32Array(F);
@@ -145,8 +170,7 @@ function draw(){
    ctx.beginPath();ctx.moveTo(a[0],a[1]);ctx.lineTo(b[0],b[1]);ctx.stroke();}}
  if(document.getElementById('site').checked){ctx.fillStyle='#40c0ff';
   for(const v of P.sites){ctx.beginPath();ctx.arc(sv[3*v],sv[3*v+1],5,0,7);ctx.fill();}}
- slider.value=frame;document.getElementById('frame').textContent=`${frame+1}/${T}  ${(frame/P.fps).toFixed(2)} s`;
- cv.dataset.frame=frame;}
+ if(TR.length>1){const h=proj(J[j0+45],J[j0+46]+0.35,J[j0+47]);ctx.fillStyle='#ddd';ctx.font='14px sans-serif';ctx.textAlign='center';ctx.fillText(tr.label,h[0],h[1]);}}
 function tick(now){if(playing){const f=Math.floor((now-t0)*P.fps/1000)%T;if(f!==frame){frame=f;draw();}}requestAnimationFrame(tick);}
 draw();requestAnimationFrame(tick);
 </script></body></html>
