@@ -17,6 +17,7 @@ def train(
     method: str = typer.Argument(..., help="Estimator to train: empose."),
     sensors: int = typer.Option(12, help="Number of sensors: 12 (kit em12) or 6 (kit em6)."),
     config: str = typer.Option("cpu", help="Preset: tiny (smoke test), cpu (CPU-sized), paper (supp. Table 5)."),
+    model: str = typer.Option("lgd", help="empose network: lgd (LGD-RNN), or a Table 2 baseline: resnet, birnn."),
     epochs: Optional[int] = typer.Option(None, help="Override the preset's number of epochs."),
     out: Optional[Path] = typer.Option(None, help="Run directory (default runs/<method><sensors>_<config>)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from <out>/last.pt."),
@@ -36,17 +37,19 @@ def train(
     """
     if method != "empose":
         raise typer.BadParameter(f"unknown method {method!r}; trainable: empose", param_hint="METHOD")
-    from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
+    from wearpose.estimators.empose.baselines import baseline_config, estimator_class
     from wearpose.estimators.empose.train import train_empose
 
-    cfg = EmposeConfig.preset(config, sensors).override(hidden=hidden, width=width, iterations=iterations,
+    if model not in ("lgd", "resnet", "birnn"):
+        raise typer.BadParameter(f"unknown model {model!r}; expected lgd, resnet or birnn", param_hint="--model")
+    cfg = baseline_config(config, sensors, model).override(hidden=hidden, width=width, iterations=iterations,
                                                         batch_size=batch_size)
-    out = out or Path("runs") / f"{method}{sensors}_{config}"
-    est = EmposeEstimator(cfg)
+    out = out or Path("runs") / f"{method if model == 'lgd' else model}{sensors}_{config}"
+    est = estimator_class(model)(cfg)
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     res = train_empose(est, out, epochs=epochs, resume=resume, threads=threads, device=device, limit_train=limit,
                        checkpoint_every=checkpoint_every, train_command=command, quiet=as_json, console=None if as_json else console)
-    res = {"method": method, "sensors": sensors, "config": cfg.to_dict(), **res}
+    res = {"method": method, "model": model, "sensors": sensors, "config": cfg.to_dict(), **res}
 
     def render(r: dict[str, Any]) -> None:
         console.print(f"done: best val MPJPE {r['best']:.1f} mm; checkpoints in {r['out_dir']}")

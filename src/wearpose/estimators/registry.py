@@ -10,7 +10,9 @@ from wearpose.errors import ConfigError
 T = TypeVar("T")
 
 #: Built-in estimators, imported on first use: name -> "module:Class".
-_BUILTIN: dict[str, str] = {"empose": "wearpose.estimators.empose.estimator:EmposeEstimator"}
+_BUILTIN: dict[str, str] = {"empose": "wearpose.estimators.empose.estimator:EmposeEstimator",
+                            "empose-resnet": "wearpose.estimators.empose.baselines:ResNetEstimator",
+                            "empose-birnn": "wearpose.estimators.empose.baselines:BiRNNEstimator"}
 _REGISTRY: dict[str, type] = {}
 
 

@@ -40,6 +40,10 @@ class EmposeConfig:
     Optimisation: ``lr``, ``lr_schedule`` (``constant`` / ``cosine``), ``lr_min_factor``,
     ``batch_size``, ``epochs``, ``grad_clip`` (max global grad norm, 0 = off), ``val_clips``
     (validation clips used each epoch, 0 = all).
+    Network: ``model`` = ``"lgd"`` (LGD-RNN, default) or a learned baseline of Table 2,
+    ``"resnet"`` / ``"birnn"`` (:mod:`wearpose.estimators.empose.baselines`; ``width`` /
+    ``mlp_layers`` are the ResNet's width / residual blocks, ``hidden`` / ``rnn_layers`` the
+    BiRNN's).
     """
 
     sensors: int = 12
@@ -70,6 +74,7 @@ class EmposeConfig:
     epochs: int = 50
     grad_clip: float = 1.0
     val_clips: int = 0
+    model: str = "lgd"
 
     def __post_init__(self) -> None:
         if self.sensors not in (6, 12):
@@ -82,6 +87,8 @@ class EmposeConfig:
             raise ConfigError(f"EmposeConfig.lr_schedule: expected 'constant' or 'cosine', got {self.lr_schedule!r}")
         if self.train_noise not in ("default", "none") or self.offsets not in ("random", "none"):
             raise ConfigError("EmposeConfig: train_noise must be 'default'/'none' and offsets 'random'/'none'")
+        if self.model not in ("lgd", "resnet", "birnn"):
+            raise ConfigError(f"EmposeConfig.model: expected 'lgd', 'resnet' or 'birnn', got {self.model!r}")
 
     @property
     def kit(self) -> str:

@@ -113,7 +113,8 @@ def train_empose(est: EmposeEstimator, out_dir: str | Path, *, epochs: int | Non
     from wearpose.estimators.train import resolve_device
 
     est.to(resolve_device(device))  # network and body together: L_r runs the body inside the model
-    task = EmposeTask(est, tr, va)
+    # Estimators with another network (the Table 2 baselines) bring their own task.
+    task = est.make_task(tr, va) if hasattr(est, "make_task") else EmposeTask(est, tr, va)
     s = TrainSettings(out_dir=Path(out_dir), epochs=epochs or cfg.epochs, lr=cfg.lr, lr_schedule=cfg.lr_schedule,
                       lr_min_factor=cfg.lr_min_factor, grad_clip=cfg.grad_clip, resume=resume, threads=threads,
                       device=device, checkpoint_every=checkpoint_every, max_steps=max_steps, quiet=quiet)

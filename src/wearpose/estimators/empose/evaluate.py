@@ -1,0 +1,181 @@
+"""EM-POSE Table 2 on our data: several EM-POSE-family checkpoints (LGD-RNN and the learned
+baselines) evaluated on the same simulated held-out recordings.
+
+Protocol (the one of :func:`wearpose.estimators.empose.train.evaluate_empose`, which evaluates a
+single LGD-RNN checkpoint; :func:`evaluate_models` gives it identical numbers and simulates each
+clip only once for all models):
+
+- clips: the corpus ``split`` (default ``test``; sorted ids, first ``limit``);
+- each clip is resampled to the checkpoints' rate and simulated with the kit's EM error model
+  ``noise`` (default ``"default"``) and a random synthetic subject (offsets ``O_p``) seeded in the
+  ``"eval"`` namespace (:func:`~wearpose.estimators.empose.data.clip_seed`), i.e. subjects never
+  drawn for training; the recording carries those offsets (the calibrated ``O_p`` EM-POSE
+  assumes; the baselines ignore them);
+- only frames where every sensor is valid count (EM-POSE Sec. 6.2);
+- ground truth: the clip's pose with the root expressed in the EM source frame (like every
+  estimate) and its betas; joints from the same body model, zero translation;
+- metrics (:mod:`wearpose.evaluate`) on the 15 major joints: MPJPE (root-aligned), PA-MPJPE
+  (Procrustes-aligned), MPJAE (root-relative global rotations); mean and standard deviation over
+  all evaluated frames of all clips, in mm and degrees.
+
+:func:`table2_markdown` renders the result in the structure of the paper's Table 2 (rows
+ResNet, BiRNN, LGD-RNN), :func:`write_table2` writes ``.md`` + ``.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+import time
+from pathlib import Path
+from typing import Any, Mapping
+
+import torch
+
+from wearpose.errors import ConfigError
+
+#: Paper's Table 2 (real test set, 12 sensors), for context in the report: mean, std.
+PAPER_TABLE2_12 = {
+    "ResNet": {"mpjpe_mm": (41.5, 27.6), "pa_mpjpe_mm": (30.9, 21.7), "mpjae_deg": (14.6, 9.8)},
+    "BiRNN": {"mpjpe_mm": (37.3, 24.1), "pa_mpjpe_mm": (28.5, 18.6), "mpjae_deg": (14.1, 9.1)},
+    "LGD-RNN": {"mpjpe_mm": (31.8, 21.0), "pa_mpjpe_mm": (24.8, 16.4), "mpjae_deg": (13.3, 9.2)},
+}
+
+
+def _stats(xs: list[torch.Tensor], k: float) -> tuple[float, float]:
+    x = torch.cat(xs) * k if xs else torch.zeros(0)
+    return (float(x.mean()), float(x.std())) if x.numel() else (math.nan, math.nan)
+
+
+def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: int | None = None, *,
+                    noise: str = "default", seed: int = 0, store: Any = None, progress: Any = None
+                    ) -> dict[str, Any]:
+    """Evaluate several checkpoints on the same simulated recordings (module doc).
+
+    Args:
+        checkpoints: display name -> checkpoint path (any EM-POSE model, loaded with
+            :func:`~wearpose.estimators.empose.baselines.load_any`) or a loaded estimator. All
+            must share kit, rate and body asset.
+        split: corpus split (``test`` for the held-out numbers).
+        limit: first ``limit`` clips only.
+        noise: EM error model of the simulation (``"default"`` / ``"none"``).
+        seed: base seed of the evaluation subjects and noise.
+        store: a :class:`~wearpose.motion.CorpusStore` (default: the prepared cache).
+        progress: optional ``progress(done, total)``.
+
+    Returns:
+        ``{"split", "clips", "frames", "noise", "seed", "kit", "joints", "models": {name: {
+        "mpjpe_mm", "mpjpe_std_mm", "pa_mpjpe_mm", "pa_mpjpe_std_mm", "mpjae_deg", "mpjae_std_deg",
+        "frames", "method", "checkpoint", "epoch", "val_mpjpe_mm", "data_fingerprint",
+        "train_command", "seconds"}}}``.
+    """
+    from wearpose.body.skeleton import MAJOR_JOINTS
+    from wearpose.estimators.empose.baselines import load_any
+    from wearpose.estimators.empose.data import clip_seed, recording_from_clip, simulate_clip
+    from wearpose.evaluate import mpjae, mpjpe, pa_mpjpe
+    from wearpose.motion import CorpusStore
+
+    if not checkpoints:
+        raise ConfigError("evaluate_models: no checkpoints given")
+    ests = {name: (c if not isinstance(c, (str, Path)) else load_any(c)) for name, c in checkpoints.items()}
+    first = next(iter(ests.values()))
+    for name, e in ests.items():
+        if (e.kit_name, e.fps, e.body_asset_id) != (first.kit_name, first.fps, first.body_asset_id):
+            raise ConfigError(f"evaluate_models: {name!r} is for kit {e.kit_name} at {e.fps} Hz on body "
+                              f"{e.body_asset_id}, but the first model is for kit {first.kit_name} at {first.fps} Hz "
+                              f"on body {first.body_asset_id}; one table needs one setting")
+    store = store or CorpusStore()
+    ids = store.clips(split=split)[: limit or None]
+    errs: dict[str, dict[str, list[torch.Tensor]]] = {n: {"pe": [], "pa": [], "ae": []} for n in ests}
+    secs = {n: 0.0 for n in ests}
+    frames = 0
+    for i, cid in enumerate(ids):
+        # One simulation per clip for all models (same subject, same noise draw).
+        r = simulate_clip(store.load(cid), first.config, first.body, clip_seed(cid, seed, "eval"), noise=noise,
+                          offsets="random")
+        rec = recording_from_clip(r, first.config)
+        for name, est in ests.items():
+            t0 = time.perf_counter()
+            track = est.estimate(rec)
+            secs[name] += time.perf_counter() - t0
+            with torch.no_grad():
+                pj = est.body(track.local_rot, track.betas, None, return_vertices=False).joints
+            ok = track.valid
+            errs[name]["pe"].append(mpjpe(pj, r["joints"], MAJOR_JOINTS)[ok])
+            errs[name]["pa"].append(pa_mpjpe(pj, r["joints"], MAJOR_JOINTS)[ok])
+            errs[name]["ae"].append(mpjae(track.local_rot, r["pose"])[ok])
+        frames += int(ok.sum())
+        if progress is not None:
+            progress(i + 1, len(ids))
+    models: dict[str, Any] = {}
+    for name, est in ests.items():
+        (m1, s1), (m2, s2), (m3, s3) = (_stats(errs[name]["pe"], 1000.0), _stats(errs[name]["pa"], 1000.0),
+                                        _stats(errs[name]["ae"], 180.0 / math.pi))
+        src = checkpoints[name]
+        models[name] = {"mpjpe_mm": m1, "mpjpe_std_mm": s1, "pa_mpjpe_mm": m2, "pa_mpjpe_std_mm": s2,
+                        "mpjae_deg": m3, "mpjae_std_deg": s3, "frames": sum(int(x.numel()) for x in errs[name]["pe"]),
+                        "method": est.name, "checkpoint": str(src) if isinstance(src, (str, Path)) else None,
+                        "epoch": est.meta.get("epoch"), "val_mpjpe_mm": est.meta.get("val_mpjpe_mm"),
+                        "data_fingerprint": est.data_fingerprint, "train_command": est.train_command,
+                        "config": est.config.to_dict(),
+                        "parameters": sum(p.numel() for p in est.model.parameters()), "seconds": secs[name]}
+    return {"split": split, "clips": len(ids), "frames": frames, "noise": noise, "seed": seed, "kit": first.kit_name,
+            "rate_hz": first.fps, "body_asset": first.body_asset_id, "joints": "15 major (DIP/EM-POSE)",
+            "subjects": "random synthetic offsets per clip, evaluation seed namespace (never drawn for training)",
+            "models": models}
+
+
+def table2_markdown(result: Mapping[str, Any], digits: int = 1) -> str:
+    """Markdown table in the structure of EM-POSE Table 2: one row per model, ``mean ± std`` of
+    MPJPE [mm], PA-MPJPE [mm], MPJAE [°], the best mean per column in bold; then the setting."""
+    models = result["models"]
+    cols = [("mpjpe_mm", "mpjpe_std_mm", "MPJPE [mm]"), ("pa_mpjpe_mm", "pa_mpjpe_std_mm", "PA-MPJPE [mm]"),
+            ("mpjae_deg", "mpjae_std_deg", "MPJAE [°]")]
+    n_s = {"em12": 12, "em6": 6}.get(result.get("kit", ""), "")
+    best = {k: min((m[k] for m in models.values() if not math.isnan(m[k])), default=math.nan) for k, _, _ in cols}
+    lines = ["| Model | " + " | ".join(c[2] for c in cols) + " |", "| --- | " + " | ".join("---" for _ in cols) + " |"]
+    for name, m in models.items():
+        cells = []
+        for k, ks, _ in cols:
+            s = f"{m[k]:.{digits}f} ± {m[ks]:.{digits}f}"
+            cells.append(f"**{s}**" if m[k] == best[k] else s)
+        lines.append(f"| {name} {n_s} | " + " | ".join(cells) + " |")
+    lines.append("")
+    lines.append(f"Split `{result['split']}` ({result['clips']} clips, {result['frames']} frames with all sensors "
+                 f"valid), kit `{result['kit']}` at {result.get('rate_hz', 0):g} Hz, simulated EM noise "
+                 f"`{result['noise']}`, {result.get('subjects', '')}, seed {result['seed']}; "
+                 f"{result['joints']} joints; mean ± std over frames.")
+    return "\n".join(lines)
+
+
+def write_table2(result: Mapping[str, Any], path_stem: str | Path, extra: Mapping[str, Any] | None = None) -> tuple[Path, Path]:
+    """Write ``<stem>.md`` (title, table, per-model training details, the paper's numbers for
+    context) and ``<stem>.json`` (``result`` plus ``extra`` and the machine)."""
+    stem = Path(path_stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    md = ["# EM-POSE Table 2 on simulated data (12 sensors)", "",
+          "Produced by `benchmarks/empose_eval.py` "
+          "(`wearpose.estimators.empose.evaluate.evaluate_models`).", "", table2_markdown(result), "",
+          "## Models", "", "| Model | method | checkpoint | epoch | val MPJPE [mm] | parameters | estimate time [s] |",
+          "| --- | --- | --- | --- | --- | --- | --- |"]
+    for name, m in result["models"].items():
+        v = m.get("val_mpjpe_mm")
+        md.append(f"| {name} | {m['method']} | `{m.get('checkpoint')}` | {m.get('epoch')} | "
+                  f"{'' if v is None else f'{v:.2f}'} | {m.get('parameters')} | {m.get('seconds', 0):.1f} |")
+    md += ["", "Training commands:", ""]
+    for name, m in result["models"].items():
+        md.append(f"- {name}: `{m.get('train_command') or '?'}`")
+    md += ["", "For context, the paper's Table 2 (12 sensors, *real* test set, GPU-trained full-size models; "
+           "not comparable number for number):", "", "| Model | MPJPE [mm] | PA-MPJPE [mm] | MPJAE [°] |",
+           "| --- | --- | --- | --- |"]
+    for name, m in PAPER_TABLE2_12.items():
+        md.append(f"| {name} 12 | " + " | ".join(f"{a} ± {b}" for a, b in m.values()) + " |")
+    if extra and extra.get("note"):
+        md += ["", str(extra["note"])]
+    (stem.with_suffix(".md")).write_text("\n".join(md) + "\n", encoding="utf-8")
+    blob = {**result, **(dict(extra) if extra else {}), "paper_table2_12": PAPER_TABLE2_12,
+            "machine": {"python": platform.python_version(), "torch": torch.__version__,
+                        "processor": platform.processor() or platform.machine(), "threads": torch.get_num_threads()}}
+    (stem.with_suffix(".json")).write_text(json.dumps(blob, indent=2, default=str) + "\n", encoding="utf-8")
+    return stem.with_suffix(".md"), stem.with_suffix(".json")
