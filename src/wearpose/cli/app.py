@@ -159,30 +159,48 @@ DEFAULT_DEMO_CLIP = "cmu_daz/05/05_01"  # a walk from the test split
 @app.command()
 def demo(
     clip: str = typer.Option(DEFAULT_DEMO_CLIP, help="Clip id, corpus path or motion file to run the demo on."),
-    out: Path = typer.Option(Path("out/demo"), help="Output folder (HTML page, round-trip files, metrics JSON)."),
-    body: Optional[str] = typer.Option(None, help="Body asset: default, smpl or a file path."),
+    out: Path = typer.Option(Path("out/demo"), help="Output folder (HTML page, files, metrics JSON)."),
+    mode: str = typer.Option("auto", help="sensors (simulated EM sensors -> shipped EM-POSE -> pose), roundtrip "
+                                          "(file round trip of the motion), or auto (sensors when weights are shipped)."),
+    body: Optional[str] = typer.Option(None, help="Body asset for the roundtrip mode: default, smpl or a file path."),
     as_json: bool = typer.Option(False, "--json", help="Print the metrics as JSON."),
 ) -> None:
-    """Play a corpus clip on the body and check it against itself after a file round trip.
+    """Sensors -> pose on a held-out clip (or a motion file round trip), with metrics and a page.
 
-    Reads the clip (BVH retargeted to SMPL-24, or the prepared store), writes it as a wearpose
-    MotionSequence and as AMASS npz, reads both back, evaluates every metric of the round-tripped
-    motion against the original (all should be ~0) and writes an HTML page showing the motion.
+    sensors: the clip is turned into 12 simulated EM sensors (default noise, an unseen subject),
+    the shipped LGD-RNN estimates the pose, and MPJPE / PA-MPJPE / MPJAE against the ground truth
+    are printed; the page shows the estimate beside the ground truth.
+    roundtrip: the clip is written as a wearpose MotionSequence and as AMASS npz, read back and
+    compared with the original (all metrics ~0).
 
     Example: wearpose demo --clip bandai/bandai-B/dataset-2_walk_feminine_001
     """
-    from wearpose.cli.demo import run_roundtrip_demo
+    from wearpose.cli.demo import run_roundtrip_demo, run_sensor_demo
+    from wearpose.weights import list_weights
 
-    result = run_roundtrip_demo(clip, out, body=body)
+    if mode not in ("auto", "sensors", "roundtrip"):
+        raise typer.BadParameter(f"--mode must be auto, sensors or roundtrip, got {mode!r}")
+    if mode == "auto":
+        mode = "sensors" if "empose12_cpu" in list_weights() else "roundtrip"
+    result = run_sensor_demo(clip, out) if mode == "sensors" else run_roundtrip_demo(clip, out, body=body)
+    result["mode"] = mode
 
     def render(r: dict[str, Any]) -> None:
-        t = Table(title=f"{r['clip']}: round trip vs original ({r['frames']} frames, {r['fps']:g} fps)")
-        t.add_column("metric")
-        for name in r["metrics"]:
-            t.add_column(name)
-        keys = sorted({k for m in r["metrics"].values() for k in m})
-        for k in keys:
-            t.add_row(k, *[f"{m.get(k, float('nan')):.3g}" for m in r["metrics"].values()])
+        if r["mode"] == "sensors":
+            t = Table(title=f"{r['clip']}: EM-POSE ({r['weights']}) from 12 simulated EM sensors, "
+                            f"{r['frames']} frames at {r['fps']:g} fps")
+            t.add_column("metric")
+            t.add_column("value")
+            for k, v in r["metrics"].items():
+                t.add_row(k, f"{v:.2f}")
+        else:
+            t = Table(title=f"{r['clip']}: round trip vs original ({r['frames']} frames, {r['fps']:g} fps)")
+            t.add_column("metric")
+            for name in r["metrics"]:
+                t.add_column(name)
+            keys = sorted({k for m in r["metrics"].values() for k in m})
+            for k in keys:
+                t.add_row(k, *[f"{m.get(k, float('nan')):.3g}" for m in r["metrics"].values()])
         console.print(t)
         console.print(f"page: {r['html']}  (open in a browser)")
 

@@ -154,7 +154,7 @@ function draw(){
 function drawTrack(tr,proj){
  skin(tr,frame);const J=tr.J,j0=3*24*frame;
  const sv=new Float32Array(V*3);for(let v=0;v<V;v++){const p=proj(pv[3*v],pv[3*v+1],pv[3*v+2]);sv[3*v]=p[0];sv[3*v+1]=p[1];sv[3*v+2]=p[2];}
- if(document.getElementById('mesh').checked){
+ if(document.getElementById('mesh').checked){ctx.lineWidth=1;  // the skeleton of a previous track left it at 3
   const depth=new Float32Array(F),order=new Uint32Array(F);
   for(let f=0;f<F;f++){depth[f]=sv[3*faces[3*f]+2]+sv[3*faces[3*f+1]+2]+sv[3*faces[3*f+2]+2];order[f]=f;}
   order.sort((a,b)=>depth[a]-depth[b]);
