@@ -15,6 +15,7 @@ thread by default (``--threads``).
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -56,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {d}/{t} clips ({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
 
     res = evaluate_models(ckpts, a.split, a.limit, noise=a.noise, seed=a.seed, progress=prog)
-    extra = {"command": "python " + " ".join([sys.argv[0], *(argv if argv is not None else sys.argv[1:])]),
+    extra = {"command": "python " + shlex.join([sys.argv[0], *(argv if argv is not None else sys.argv[1:])]),
              "wall_seconds": time.time() - t0, "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if a.note:
         extra["note"] = a.note
