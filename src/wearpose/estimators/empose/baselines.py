@@ -306,13 +306,12 @@ class BiRNNEstimator(BaselineEstimator):
 
 
 def estimator_class(model: str) -> type[EmposeEstimator]:
-    """``lgd`` / ``resnet`` / ``birnn`` -> the estimator class."""
-    return {"lgd": EmposeEstimator, "resnet": ResNetEstimator, "birnn": BiRNNEstimator}[model] if model in \
-        ESTIMATOR_NAMES else _bad_model(model)
-
-
-def _bad_model(model: str) -> Any:
-    raise ConfigError(f"model: expected lgd, resnet or birnn, got {model!r}")
+    """``lgd`` / ``resnet`` / ``birnn`` -> the estimator class (ConfigError otherwise)."""
+    classes: dict[str, type[EmposeEstimator]] = {"lgd": EmposeEstimator, "resnet": ResNetEstimator,
+                                                 "birnn": BiRNNEstimator}
+    if model not in classes:
+        raise ConfigError(f"model: expected lgd, resnet or birnn, got {model!r}")
+    return classes[model]
 
 
 def load_any(path: Any, **kw: Any) -> EmposeEstimator:
