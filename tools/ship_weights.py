@@ -57,7 +57,7 @@ def main() -> None:
     }
     if args.eval:
         res = json.loads(args.eval.read_text())
-        rows = res.get("rows", res)
+        rows = res.get("models", res)
         card["test"] = rows.get(args.eval_row, rows) if args.eval_row else rows
     out.with_suffix(".json").write_text(json.dumps(card, indent=2) + "\n")
     print(f"wrote {out} ({card['size_bytes'] / 1e6:.1f} MB) and {out.with_suffix('.json')}")

@@ -72,3 +72,19 @@ def test_view_of_a_missing_clip_fails_clearly(tmp_path: Path) -> None:
                         env={"WEARPOSE_CACHE": str(tmp_path / "nostore")})
     assert res.exit_code != 0
     assert "no such motion" in str(res.exception)
+
+
+@pytest.mark.corpus
+@needs_corpus
+def test_sensor_demo_with_shipped_weights(tmp_path: Path) -> None:
+    """The main job: simulated 12 EM sensors on a held-out clip -> shipped LGD-RNN -> pose."""
+    from wearpose.cli.demo import run_sensor_demo
+    from wearpose.weights import card
+
+    r = run_sensor_demo("cmu_daz/05/05_01", tmp_path, max_seconds=2.0)
+    assert r["frames"] == 60 and r["fps"] == 30.0
+    # A held-out walk (test split); the card reports ~15 mm MPJPE over the whole test split.
+    assert r["metrics"]["mpjpe_mm"] < 40.0, r["metrics"]
+    assert r["metrics"]["mpjae_deg"] < 15.0, r["metrics"]
+    assert "non-commercial" in card("empose12_cpu")["licence"]
+    assert (tmp_path / "recording.npz").is_file() and Path(r["html"]).stat().st_size > 100_000
