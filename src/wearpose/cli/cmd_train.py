@@ -27,6 +27,8 @@ def train(
     width: Optional[int] = typer.Option(None, help="Override the update-MLP width."),
     iterations: Optional[int] = typer.Option(None, help="Override N, the LGD iterations."),
     batch_size: Optional[int] = typer.Option(None, help="Override the batch size."),
+    offsets: Optional[str] = typer.Option(None, help="Subject offsets in training data: random (default) or none "
+                                                     "(EM-POSE's 'no [R|t]' ablation)."),
     limit: Optional[int] = typer.Option(None, help="Use only the first N training clips (quick runs)."),
     checkpoint_every: int = typer.Option(100, help="Save last.pt every N optimiser steps (and every epoch)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
@@ -42,8 +44,10 @@ def train(
 
     if model not in ("lgd", "resnet", "birnn"):
         raise typer.BadParameter(f"unknown model {model!r}; expected lgd, resnet or birnn", param_hint="--model")
+    if offsets not in (None, "random", "none"):
+        raise typer.BadParameter(f"expected random or none, got {offsets!r}", param_hint="--offsets")
     cfg = baseline_config(config, sensors, model).override(hidden=hidden, width=width, iterations=iterations,
-                                                        batch_size=batch_size)
+                                                        batch_size=batch_size, offsets=offsets)
     out = out or Path("runs") / f"{method if model == 'lgd' else model}{sensors}_{config}"
     est = estimator_class(model)(cfg)
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])

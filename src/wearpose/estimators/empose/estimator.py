@@ -129,6 +129,10 @@ class EmposeEstimator(Estimator):
     # ------------------------------------------------------------------ inputs
     def _offsets_from(self, recording: Any) -> tuple[torch.Tensor, torch.Tensor]:
         S = len(self.sensor_names)
+        if self.config.offsets == "none":
+            # The "no [R|t]" ablation was trained with sensors on the skin sites themselves: it has
+            # no notion of offsets, so it reconstructs with identity ones whatever the recording says.
+            return torch.eye(3).expand(S, 3, 3).clone(), torch.zeros(S, 3)
         off = (recording.subject or {}).get("offsets") if recording is not None else None
         if off and not all(k in off for k in ("rotation", "translation_mean_m")):
             raise ShapeError(f"subject['offsets'] needs 'rotation' (S, 3, 3) and 'translation_mean_m' (S, 3); got keys {sorted(off)}")
