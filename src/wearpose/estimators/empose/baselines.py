@@ -45,7 +45,7 @@ from torch import nn
 from wearpose.errors import ConfigError, WearposeError
 from wearpose.estimators.base import PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.empose.config import EmposeConfig
-from wearpose.estimators.empose.data import EmposeData, hold_invalid
+from wearpose.estimators.empose.data import EmposeData, frame_measurements, hold_invalid
 from wearpose.estimators.empose.estimator import EmposeEstimator
 from wearpose.body.skeleton import NUM_JOINTS
 from wearpose.estimators.empose.model import (
@@ -264,22 +264,7 @@ class ResNetEstimator(BaselineEstimator):
         """One frame, independent of the past except for holding dropped samples at the last
         valid value (neutral values before any). Returns a :class:`PoseFrame` (root in the EM
         source frame, the frame's own betas)."""
-        from wearpose.errors import ShapeError
-
-        names = list(frame.names)
-        try:
-            idx = [names.index(n) for n in self.sensor_names]
-        except ValueError:
-            raise ShapeError(f"frame has sensors {names}; estimator needs {list(self.sensor_names)}") from None
-        v = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
-        p = torch.as_tensor(np.asarray(frame.channels["position"])[idx], dtype=torch.float32)
-        R = torch.as_tensor(np.asarray(frame.channels["orientation"])[idx], dtype=torch.float32)
-        if self._last is not None:
-            p = torch.where(v[:, None], p, self._last[0])
-            R = torch.where(v[:, None, None], R, self._last[1])
-        else:
-            p = torch.where(v[:, None], p, torch.zeros_like(p))
-            R = torch.where(v[:, None, None], R, torch.eye(3).expand_as(R))
+        p, R, v = frame_measurements(frame, self.sensor_names, self._last)
         self._last = (p, R)
         self.model.eval()
         omega = self.model(sensor_features(p, R)[None].to(self.device)).cpu()

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Sequence
 
+import numpy as np
 import torch
 
 from wearpose.estimators.checkpoint import fingerprint
@@ -66,6 +67,34 @@ def hold_invalid(position: torch.Tensor, orientation: torch.Tensor, valid: torch
         p[:, never] = 0.0
         R[:, never] = torch.eye(3, dtype=R.dtype)
     return p, R
+
+
+def frame_measurements(frame: Any, sensor_names: Sequence[str],
+                       last: tuple[torch.Tensor, torch.Tensor] | None
+                       ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """One :class:`~wearpose.estimators.base.SensorFrame` as EM input in kit order, online.
+
+    Dropped samples are held at ``last`` (the previous returned values), or neutral (zero
+    position, identity orientation) before any: the online twin of :func:`hold_invalid`.
+
+    Returns:
+        ``p`` ``(S, 3)`` m, ``R`` ``(S, 3, 3)`` (source frame), ``valid`` ``(S,)`` bool.
+
+    Raises:
+        ShapeError: the frame lacks one of ``sensor_names``.
+    """
+    from wearpose.errors import ShapeError
+
+    names = list(frame.names)
+    try:
+        idx = [names.index(n) for n in sensor_names]
+    except ValueError:
+        raise ShapeError(f"frame has sensors {names}; estimator needs {list(sensor_names)}") from None
+    v = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
+    p = torch.as_tensor(np.asarray(frame.channels["position"])[idx], dtype=torch.float32)
+    R = torch.as_tensor(np.asarray(frame.channels["orientation"])[idx], dtype=torch.float32)
+    hold_p, hold_R = last if last is not None else (torch.zeros_like(p), torch.eye(3).expand_as(R))
+    return torch.where(v[:, None], p, hold_p), torch.where(v[:, None, None], R, hold_R), v
 
 
 def simulate_clip(motion: Any, cfg: EmposeConfig, body: Any, seed: int, noise: str | None = None,

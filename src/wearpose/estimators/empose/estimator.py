@@ -26,7 +26,7 @@ from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, load_checkpoint, save_checkpoint
 from wearpose.estimators.empose.config import EmposeConfig
-from wearpose.estimators.empose.data import hold_invalid
+from wearpose.estimators.empose.data import frame_measurements, hold_invalid
 from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, decode_omega, sensor_features
 from wearpose.estimators.registry import register_estimator
 
@@ -247,20 +247,7 @@ class EmposeEstimator(Estimator):
         :meth:`set_offsets`, identity with a warning if never set)."""
         if self._offsets is None:
             self._offsets = self._offsets_from(None)
-        names = list(frame.names)
-        try:
-            idx = [names.index(n) for n in self.sensor_names]
-        except ValueError:
-            raise ShapeError(f"frame has sensors {names}; estimator needs {list(self.sensor_names)}") from None
-        v = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
-        p = torch.as_tensor(np.asarray(frame.channels["position"])[idx], dtype=torch.float32)
-        R = torch.as_tensor(np.asarray(frame.channels["orientation"])[idx], dtype=torch.float32)
-        if self._last is not None:
-            p = torch.where(v[:, None], p, self._last[0])
-            R = torch.where(v[:, None, None], R, self._last[1])
-        else:  # nothing to hold yet: neutral values
-            p = torch.where(v[:, None], p, torch.zeros_like(p))
-            R = torch.where(v[:, None, None], R, torch.eye(3).expand_as(R))
+        p, R, v = frame_measurements(frame, self.sensor_names, self._last)
         self._last = (p, R)
         self.model.eval()
         dev = self.device
