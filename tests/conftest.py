@@ -53,5 +53,17 @@ def make_tiny_asset(seed: int = 0, num_betas: int = 10, posedirs: bool = False) 
 
 
 @pytest.fixture
+def one_torch_thread():
+    """Run a test with one torch thread: suites of many tiny tensor ops are dominated by
+    thread hand-offs on a loaded 2-core machine. Directories opt in from their conftest."""
+    import torch
+
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture
 def tiny_asset() -> BodyAsset:
     return make_tiny_asset()

@@ -14,9 +14,5 @@ def body() -> BodyModel:
 
 
 @pytest.fixture(autouse=True)
-def _one_thread():
-    # Many small tensor ops: thread hand-offs dominate on a loaded machine.
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
+def _one_thread(one_torch_thread):  # noqa: ARG001 - the shared fixture does the work
     yield
-    torch.set_num_threads(n)

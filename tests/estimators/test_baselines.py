@@ -29,19 +29,6 @@ from wearpose.estimators.empose.model import UNOBSERVED_JOINTS, sensor_features
 from wearpose.estimators.empose.train import evaluate_empose, train_empose
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-@pytest.fixture(scope="module")
-def body() -> BodyModel:
-    return BodyModel()
-
-
 def tiny(model: str, **kw) -> EmposeConfig:
     return baseline_config("tiny", 12, model).override(**kw)
 

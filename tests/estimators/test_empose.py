@@ -27,19 +27,6 @@ from wearpose.geometry import axis_angle_to_matrix
 from wearpose.motion import MotionSequence
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-@pytest.fixture(scope="module")
-def body() -> BodyModel:
-    return BodyModel()
-
-
 def synthetic_motion(seed: int, T: int = 40, fps: float = 30.0) -> MotionSequence:
     """Smooth random motion: per-joint sinusoids of small amplitude, random root yaw and shape."""
     g = torch.Generator().manual_seed(seed)
