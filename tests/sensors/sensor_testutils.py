@@ -43,3 +43,9 @@ def tiny_full_sites_asset() -> BodyAsset:
                      meta={"asset_id": "tiny-all-sites"})
 
 
+
+
+def rand_R(*shape: int, seed: int = 0) -> torch.Tensor:
+    """Random rotations ``(*shape, 3, 3)``, float64, seeded."""
+    g = torch.Generator().manual_seed(seed)
+    return axis_angle_to_matrix(torch.randn(*shape, 3, generator=g, dtype=torch.float64))

@@ -9,12 +9,9 @@ from wearpose.geometry import axis_angle_to_matrix, geodesic_angle
 from wearpose.sensors import EMNoise, EMOffsets, apply_offsets, random_subject_offsets, relative_to_source, simulate_em
 from wearpose.sensors.em import MAXWELL_MEDIAN, dropout_mask, gauss_markov
 
+from sensor_testutils import rand_R
+
 D = torch.float64
-
-
-def rand_R(*shape, seed=0):
-    g = torch.Generator().manual_seed(seed)
-    return axis_angle_to_matrix(torch.randn(*shape, 3, generator=g, dtype=D))
 
 
 def test_eq4_offsets():

@@ -4,15 +4,12 @@ import math
 
 import torch
 
-from wearpose.geometry import axis_angle_to_matrix, geodesic_angle
+from wearpose.geometry import geodesic_angle
 from wearpose.sensors import VioNoise, empose_normalize, root_relative_orientations, simulate_vio
 
+from sensor_testutils import rand_R
+
 D = torch.float64
-
-
-def rand_R(*shape, seed=0):
-    g = torch.Generator().manual_seed(seed)
-    return axis_angle_to_matrix(torch.randn(*shape, 3, generator=g, dtype=D))
 
 
 def test_birae_root_relative():
