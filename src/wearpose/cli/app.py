@@ -160,35 +160,37 @@ DEFAULT_DEMO_CLIP = "cmu_daz/05/05_01"  # a walk from the test split
 def demo(
     clip: str = typer.Option(DEFAULT_DEMO_CLIP, help="Clip id, corpus path or motion file to run the demo on."),
     out: Path = typer.Option(Path("out/demo"), help="Output folder (HTML page, files, metrics JSON)."),
-    mode: str = typer.Option("auto", help="sensors (simulated EM sensors -> shipped EM-POSE -> pose), roundtrip "
-                                          "(file round trip of the motion), or auto (sensors when weights are shipped)."),
+    mode: str = typer.Option("auto", help="sensors (simulated sensors of --kit -> shipped estimator -> pose), "
+                                          "roundtrip (file round trip of the motion), or auto (sensors when "
+                                          "weights are shipped)."),
+    kit: str = typer.Option("em12", help="Sensor kit of the sensors mode: em12, em6 (EM-POSE), imu6 (PIP), "
+                                         "mimu6 (BiRAE), miposer (MI-Poser)."),
     body: Optional[str] = typer.Option(None, help="Body asset for the roundtrip mode: default, smpl or a file path."),
     as_json: bool = typer.Option(False, "--json", help="Print the metrics as JSON."),
 ) -> None:
     """Sensors -> pose on a held-out clip (or a motion file round trip), with metrics and a page.
 
-    sensors: the clip is turned into 12 simulated EM sensors (default noise, an unseen subject),
-    the shipped LGD-RNN estimates the pose, and MPJPE / PA-MPJPE / MPJAE against the ground truth
-    are printed; the page shows the estimate beside the ground truth.
+    sensors: the clip is turned into simulated sensors of --kit (default noise, an unseen
+    subject), the shipped estimator for that kit estimates the pose, and its metrics against the
+    ground truth are printed; the page shows the estimate beside the ground truth.
     roundtrip: the clip is written as a wearpose MotionSequence and as AMASS npz, read back and
     compared with the original (all metrics ~0).
 
-    Example: wearpose demo --clip bandai/bandai-B/dataset-2_walk_feminine_001
+    Example: wearpose demo --kit em12 --clip bandai/bandai-B/dataset-2_walk_feminine_001
     """
-    from wearpose.cli.demo import run_roundtrip_demo, run_sensor_demo
+    from wearpose.cli.demo import kit_demo, run_roundtrip_demo
     from wearpose.weights import list_weights
 
     if mode not in ("auto", "sensors", "roundtrip"):
         raise typer.BadParameter(f"--mode must be auto, sensors or roundtrip, got {mode!r}")
     if mode == "auto":
-        mode = "sensors" if "empose12_cpu" in list_weights() else "roundtrip"
-    result = run_sensor_demo(clip, out) if mode == "sensors" else run_roundtrip_demo(clip, out, body=body)
+        mode = "sensors" if (kit != "em12" or "empose12_cpu" in list_weights()) else "roundtrip"
+    result = kit_demo(kit)(clip, out) if mode == "sensors" else run_roundtrip_demo(clip, out, body=body)
     result["mode"] = mode
 
     def render(r: dict[str, Any]) -> None:
         if r["mode"] == "sensors":
-            t = Table(title=f"{r['clip']}: EM-POSE ({r['weights']}) from 12 simulated EM sensors, "
-                            f"{r['frames']} frames at {r['fps']:g} fps")
+            t = Table(title=r.get("title", f"{r['clip']}: {kit}"))
             t.add_column("metric")
             t.add_column("value")
             for k, v in r["metrics"].items():

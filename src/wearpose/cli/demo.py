@@ -22,6 +22,38 @@ from wearpose.evaluate import compute_all
 from wearpose.motion import MotionSequence, load_motion, read_amass, save_amass
 from wearpose.viewer import write_html
 
+#: ``wearpose demo --kit K`` -> "module:function". Each function has the signature
+#: ``fn(clip: str, out: Path) -> dict`` and returns at least ``{"clip", "frames", "fps", "html",
+#: "title", "metrics": {name: float}}`` (metrics in report units, names ending in the unit, e.g.
+#: ``mpjpe_mm``). Each method's subpackage owns its ``demo.py``; a kit whose module is absent from
+#: this build is reported as unavailable.
+KIT_DEMOS: dict[str, str] = {
+    "em12": "wearpose.cli.demo:run_sensor_demo",
+    "em6": "wearpose.cli.demo:run_sensor_demo_em6",
+    "imu6": "wearpose.estimators.pip.demo:run_demo",
+    "mimu6": "wearpose.estimators.birae.demo:run_demo",
+    "miposer": "wearpose.estimators.miposer.demo:run_demo",
+}
+
+
+def kit_demo(kit: str) -> Any:
+    """The demo function for ``kit`` (ConfigError naming the available kits when absent)."""
+    import importlib
+    import importlib.util
+
+    from wearpose.errors import ConfigError
+
+    if kit not in KIT_DEMOS:
+        raise ConfigError(f"--kit {kit!r}: no demo for this kit; expected one of {', '.join(KIT_DEMOS)}")
+    mod, fn = KIT_DEMOS[kit].split(":")
+    try:
+        found = importlib.util.find_spec(mod) is not None
+    except ModuleNotFoundError:
+        found = False
+    if not found:
+        raise ConfigError(f"--kit {kit!r}: the estimator for this kit ({mod}) is not part of this build yet")
+    return getattr(importlib.import_module(mod), fn)
+
 
 def _evaluate(body: BodyModel, ref: MotionSequence, other: MotionSequence) -> dict[str, float]:
     with torch.no_grad():
@@ -114,6 +146,13 @@ def run_sensor_demo(clip: str, out: str | Path, weights: str = "empose12_cpu", m
                       compare=[("ground truth", gt.pose, gt.betas, gt.trans)],
                       info={"MPJPE (mm)": f"{metrics['mpjpe_mm']:.1f}", "MPJAE (deg)": f"{metrics['mpjae_deg']:.1f}"})
     result = {"clip": clip, "frames": gt.num_frames, "fps": gt.fps, "weights": weights,
+              "title": f"{clip}: EM-POSE ({weights}) from {len(est.sensor_names)} simulated EM sensors, "
+                       f"{gt.num_frames} frames at {gt.fps:g} fps",
               "weights_licence": card(weights).get("licence", ""), "html": str(html), "metrics": metrics}
     (out / "metrics.json").write_text(json.dumps(result, indent=2))
     return result
+
+
+def run_sensor_demo_em6(clip: str, out: str | Path) -> dict[str, Any]:
+    """:func:`run_sensor_demo` with the shipped 6-sensor weights."""
+    return run_sensor_demo(clip, out, weights="empose6_cpu")

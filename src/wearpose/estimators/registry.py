@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from typing import Callable, TypeVar
 
 from wearpose.errors import ConfigError
@@ -10,9 +11,19 @@ from wearpose.errors import ConfigError
 T = TypeVar("T")
 
 #: Built-in estimators, imported on first use: name -> "module:Class".
-_BUILTIN: dict[str, str] = {"empose": "wearpose.estimators.empose.estimator:EmposeEstimator",
-                            "empose-resnet": "wearpose.estimators.empose.baselines:ResNetEstimator",
-                            "empose-birnn": "wearpose.estimators.empose.baselines:BiRNNEstimator"}
+#: A name whose module is not present in this build is not listed (see :func:`list_estimators`);
+#: each method's subpackage owns its lines here.
+_BUILTIN: dict[str, str] = {
+    "empose": "wearpose.estimators.empose.estimator:EmposeEstimator",
+    "empose-resnet": "wearpose.estimators.empose.baselines:ResNetEstimator",
+    "empose-birnn": "wearpose.estimators.empose.baselines:BiRNNEstimator",
+    "empose-twostage": "wearpose.estimators.empose.twostage:TwoStageEstimator",
+    "empose-lbfgs": "wearpose.estimators.empose.optimization:LbfgsEstimator",
+    "pip": "wearpose.estimators.pip.estimator:PipEstimator",
+    "birae": "wearpose.estimators.birae.estimator:BiraeEstimator",
+    "miposer": "wearpose.estimators.miposer.estimator:MiposerEstimator",
+    "imuposer": "wearpose.estimators.miposer.baselines:ImuPoserEstimator",
+}
 _REGISTRY: dict[str, type] = {}
 
 
@@ -24,13 +35,21 @@ def register_estimator(name: str) -> Callable[[type[T]], type[T]]:
     return deco
 
 
+def _available(target: str) -> bool:
+    try:
+        return importlib.util.find_spec(target.split(":")[0]) is not None
+    except ModuleNotFoundError:  # parent package absent
+        return False
+
+
 def list_estimators() -> tuple[str, ...]:
-    return tuple(sorted(set(_BUILTIN) | set(_REGISTRY)))
+    """Names of the estimators available in this build (built-in ones whose module exists, plus registered)."""
+    return tuple(sorted({n for n, t in _BUILTIN.items() if _available(t)} | set(_REGISTRY)))
 
 
 def get_estimator(name: str) -> type:
     """The estimator class registered as ``name`` (ConfigError listing the known names)."""
-    if name not in _REGISTRY and name in _BUILTIN:
+    if name not in _REGISTRY and name in _BUILTIN and _available(_BUILTIN[name]):
         mod, cls = _BUILTIN[name].split(":")
         _REGISTRY.setdefault(name, getattr(importlib.import_module(mod), cls))
     try:
