@@ -1,4 +1,10 @@
-"""``wearpose train <method>``: train an estimator on simulated sensors from the prepared corpus."""
+"""``wearpose train <method>``: train an estimator on simulated sensors from the prepared corpus.
+
+``train`` is a command group: each method adds its own command to :data:`train_app` from its
+own module (``cli/cmd_train_<method>.py``: ``@train_app.command("pip")``), so methods never
+edit each other's options. Every ``wearpose train`` command runs unchanged under ``torchrun``
+(DistributedDataParallel, see :mod:`wearpose.estimators.train`).
+"""
 
 from __future__ import annotations
 
@@ -11,10 +17,14 @@ import typer
 
 from wearpose.cli.app import _emit, app, console
 
+train_app = typer.Typer(help="Train an estimator on simulated sensors from the prepared corpus "
+                             "(one command per method; each runs unchanged under torchrun).",
+                        no_args_is_help=True)
+app.add_typer(train_app, name="train")
 
-@app.command()
-def train(
-    method: str = typer.Argument(..., help="Estimator to train: empose."),
+
+@train_app.command("empose")
+def train_empose_cmd(
     sensors: int = typer.Option(12, help="Number of sensors: 12 (kit em12) or 6 (kit em6)."),
     config: str = typer.Option("cpu", help="Preset: tiny (smoke test), cpu (CPU-sized), paper (supp. Table 5)."),
     model: str = typer.Option("lgd", help="empose network: lgd (LGD-RNN), or a Table 2 baseline: resnet, birnn."),
@@ -33,12 +43,11 @@ def train(
     checkpoint_every: int = typer.Option(100, help="Save last.pt every N optimiser steps (and every epoch)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
-    """Train an estimator.
+    """Train EM-POSE (LGD-RNN or a Table 2 baseline) on virtual EM sensors.
 
     Example: wearpose train empose --sensors 12 --config cpu --threads 1 --out runs/empose12_cpu
     """
-    if method != "empose":
-        raise typer.BadParameter(f"unknown method {method!r}; trainable: empose", param_hint="METHOD")
+    method = "empose"
     from wearpose.estimators.empose.baselines import baseline_config, estimator_class
     from wearpose.estimators.empose.train import train_empose
 
