@@ -25,13 +25,15 @@ def _has_store() -> bool:
 
 def test_train_help_has_an_example() -> None:
     res = runner.invoke(app, ["train", "--help"])
+    assert res.exit_code == 0 and "empose" in res.output, res.output
+    res = runner.invoke(app, ["train", "empose", "--help"])
     assert res.exit_code == 0, res.output
     assert "Example: wearpose train empose" in res.output
 
 
 def test_train_rejects_unknown_method(tmp_path: Path) -> None:
-    res = runner.invoke(app, ["train", "birae", "--out", str(tmp_path / "r")])
-    assert res.exit_code != 0 and "empose" in res.output
+    res = runner.invoke(app, ["train", "no-such-method", "--out", str(tmp_path / "r")])
+    assert res.exit_code != 0 and "no-such-method" in res.output
 
 
 @pytest.mark.skipif(not _has_store(), reason="no prepared corpus store (wearpose data prepare)")
