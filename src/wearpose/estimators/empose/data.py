@@ -22,6 +22,8 @@ ids and all simulation settings, so epochs never re-simulate.
 
 from __future__ import annotations
 
+import os
+
 import warnings
 import zlib
 from dataclasses import dataclass
@@ -265,7 +267,8 @@ def build_split(split: str, cfg: EmposeConfig, body: Any, *, store: Any = None, 
     d.update(betas=torch.stack(betas), off_R=torch.stack(offR), off_t=torch.stack(offt),
              starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
+    # A per-process temporary name: torchrun ranks may build the same split at the same time.
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
     torch.save({**d, "clip_ids": ids, "fingerprint": fp}, tmp)
     tmp.replace(path)
     return EmposeData(**d, clip_ids=ids, fingerprint=fp, settings=settings)
