@@ -1,0 +1,215 @@
+"""Stream a :class:`~wearpose.recording.Recording` to the server at real time, optionally with
+injected faults, and measure what comes back (used by ``wearpose stream replay`` and
+``benchmarks/stream.py``).
+
+Faults (:class:`Faults`, all seeded):
+
+- ``malformed``: probability per frame of sending one extra malformed message after it
+  (truncated/over-long binary, bad magic, bad JSON, wrong sensor count, NaN in a valid sensor,
+  unknown type, unknown subject); the real frame is still sent, so none is lost by design.
+- ``dropout``: probability per sensor and frame of starting a dropout burst of
+  ``dropout_frames`` (uniform range) frames: those samples are sent invalid (masked).
+- ``reorder``: probability per frame of sending it one frame period late, after its successor.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from dataclasses import asdict, dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from wearpose.stream.client import StreamClient
+from wearpose.stream.packets import (
+    CHANNEL_FLOATS,
+    HEADER,
+    FramePacket,
+    Hello,
+    PosePacket,
+    encode_frame_binary,
+    pack_channels,
+)
+
+
+@dataclass
+class Faults:
+    malformed: float = 0.0
+    dropout: float = 0.0
+    dropout_frames: tuple[int, int] = (1, 30)
+    reorder: float = 0.0
+    seed: int = 0
+
+
+@dataclass
+class _Stream:
+    """A recording's frames stacked for sending: ``data`` ``(T, S, F)``, ``valid`` ``(T, S)``."""
+
+    names: tuple[str, ...]
+    channels: tuple[str, ...]
+    timestamps: np.ndarray
+    valid: np.ndarray
+    data: np.ndarray
+    rate: float
+
+
+def stack_recording(recording: Any) -> _Stream:
+    """Every sensor of ``recording`` on its common grid, channels shared by all sensors."""
+    grid = recording.on_common_grid()
+    channels = tuple(c for c in CHANNEL_FLOATS if c in grid.channels and not np.isnan(
+        grid.channels[c][grid.valid]).all())
+    T, S = grid.valid.shape
+    data = np.concatenate([np.asarray(grid.channels[c], np.float32).reshape(T, S, -1) for c in channels], axis=2)
+    dt = np.diff(grid.timestamps)
+    rate = float(1.0 / np.median(dt)) if len(dt) else 1.0
+    return _Stream(tuple(grid.names), channels, np.asarray(grid.timestamps, np.float64), grid.valid.copy(), data, rate)
+
+
+def _summary_ms(x: list[float] | np.ndarray) -> dict[str, float | None]:
+    a = np.asarray(x, dtype=np.float64)
+    a = a[np.isfinite(a)]
+    if not len(a):
+        return {"median": None, "p99": None, "max": None, "n": 0}
+    return {"median": round(float(np.median(a)), 3), "p99": round(float(np.percentile(a, 99)), 3),
+            "max": round(float(a.max()), 3), "n": int(len(a))}
+
+
+def _malformed(kind: int, good: bytes, hello: Hello, rng: np.random.Generator) -> str | bytes:
+    """One malformed message of type ``kind % 8`` derived from a good binary frame."""
+    kind %= 8
+    if kind == 0:
+        return good[: int(rng.integers(1, HEADER.size))]  # truncated header
+    if kind == 1:
+        return good + b"\x00\x00\x00\x00"  # payload one float too long
+    if kind == 2:
+        return b"XX" + good[2:]  # bad magic
+    if kind == 3:
+        return '{"type": "frame", "subject": ' + str(hello.subject) + ', "seq": '  # cut JSON
+    if kind == 4:
+        return ('{"type": "frame", "v": 1, "subject": %d, "seq": 0, "t": 0.0, "valid": [1]}' % hello.subject)
+    if kind == 5:
+        bad = bytearray(good)
+        bad[HEADER.size:HEADER.size + 4] = np.float32(np.nan).tobytes()  # NaN in sensor 0 (sent valid)
+        bad[20:28] = (0xFFFFFFFFFFFFFFFF >> (64 - len(hello.sensors))).to_bytes(8, "little")
+        return bytes(bad)
+    if kind == 6:
+        return '{"type": "teleport", "subject": %d}' % hello.subject
+    bad = bytearray(good)
+    bad[4:6] = (65535 if hello.subject != 65535 else 65534).to_bytes(2, "little")  # unknown subject
+    return bytes(bad)
+
+
+async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "binary", realtime: bool = True,
+                 speed: float = 1.0, duration: float | None = None, faults: Faults | None = None,
+                 progress: Callable[[int, int], None] | None = None, client: StreamClient | None = None
+                 ) -> dict[str, Any]:
+    """Stream ``recording`` as subject ``subject`` and collect its poses.
+
+    Args:
+        recording: a :class:`~wearpose.recording.Recording` (all sensors on one grid).
+        url: server ``ws://host:port``.
+        fmt: ``"binary"`` or ``"json"`` packets (poses come back in the same format).
+        realtime: pace frames at the recording's rate times ``speed`` (else as fast as possible).
+        duration: seconds of stream to send, looping the recording (default: once through).
+        faults: injected faults (module doc).
+        progress: ``(frames sent, total)`` callback, called about once a second.
+        client: an open :class:`StreamClient` to use (several subjects on one connection).
+
+    Returns:
+        dict: ``frames_sent``, ``poses_received``, ``frames_expected`` (sent minus those the
+        server's stride skips), ``frames_lost`` (expected without a pose), latency summaries in
+        ms (``latency_ms`` end to end = send -> pose received; ``server_ms`` frame arrival ->
+        pose sent, of which ``compute_ms`` is the estimator's step; ``transport_ms`` = end to end
+        minus server), ``send_lag_ms`` (how late the sender was against the schedule), the
+        server's final ``server_stats``, ``faults`` and ``invalid_pose_frames``.
+    """
+    faults = faults or Faults()
+    rng = np.random.default_rng(faults.seed)
+    st = stack_recording(recording)
+    T, S = st.valid.shape
+    N = T if duration is None else max(1, int(round(duration * st.rate)))
+    sent: dict[int, float] = {}
+    recv: dict[int, tuple[float, PosePacket]] = {}
+
+    def on_pose(t: float, p: PosePacket) -> None:
+        if p.subject == subject:
+            recv[p.seq] = (t, p)
+
+    own = client is None
+    c = client or StreamClient(url)
+    if own:
+        await c.connect()
+    prev_on_pose = c.on_pose
+    c.on_pose = on_pose if prev_on_pose is None else (lambda t, p: (prev_on_pose(t, p), on_pose(t, p)))
+    hello = Hello(subject, st.names, st.channels, st.rate, fmt, dict(recording.subject or {}))
+    try:
+        ready = await c.hello(hello)
+        off_until = np.zeros(S, dtype=np.int64)
+        n_malformed = n_reordered = n_dropped_samples = 0
+        lag: list[float] = []
+        held: FramePacket | None = None
+        period = 1.0 / (st.rate * speed)
+        t0 = time.perf_counter() + 0.05
+        last_progress = t0
+        for k in range(N):
+            if realtime:
+                target = t0 + k * period
+                now = time.perf_counter()
+                if target > now:
+                    await asyncio.sleep(target - now)
+                lag.append(max(0.0, time.perf_counter() - target) * 1e3)
+            i = k % T
+            valid = st.valid[i].copy()
+            if faults.dropout > 0:
+                start = (rng.random(S) < faults.dropout) & (off_until <= k)
+                lo, hi = faults.dropout_frames
+                off_until[start] = k + rng.integers(lo, hi + 1, size=int(start.sum()))
+                n_dropped_samples += int((valid & (off_until > k)).sum())
+                valid &= off_until <= k
+            data = st.data[i].copy()
+            data[~valid] = np.nan
+            ts = float(st.timestamps[0] + k / st.rate)
+            pkt = FramePacket(subject, k, ts, valid, data)
+            if held is None and k + 1 < N and faults.reorder > 0 and rng.random() < faults.reorder:
+                held, n_reordered = pkt, n_reordered + 1  # sent after its successor
+            else:
+                sent[k] = time.perf_counter()
+                await c.send_frame(pkt)
+                if held is not None:
+                    sent[held.seq] = time.perf_counter()
+                    await c.send_frame(held)
+                    held = None
+            if faults.malformed > 0 and rng.random() < faults.malformed:
+                await c.send_raw(_malformed(int(rng.integers(0, 8)), encode_frame_binary(pkt), hello, rng))
+                n_malformed += 1
+            if progress is not None and time.perf_counter() - last_progress > 1.0:
+                last_progress = time.perf_counter()
+                progress(k + 1, N)
+            if not realtime and k % 64 == 63:
+                await asyncio.sleep(0)  # let the reader run
+        if held is not None:
+            sent[held.seq] = time.perf_counter()
+            await c.send_frame(held)
+        server_stats = await c.bye(subject)
+    finally:
+        c.on_pose = prev_on_pose
+        if own:
+            await c.close()
+    stride = int(ready.get("stride", 1))
+    expected = [s for s in sent if s % stride == 0]
+    got = [s for s in expected if s in recv]
+    e2e = [(recv[s][0] - sent[s]) * 1e3 for s in got]
+    srv = [recv[s][1].server_ms for s in got]
+    comp = [recv[s][1].compute_ms for s in got]
+    return {
+        "subject": subject, "format": fmt, "rate_hz": st.rate, "sensors": len(st.names), "channels": list(st.channels),
+        "frames_sent": len(sent), "frames_expected": len(expected), "poses_received": len(recv),
+        "frames_lost": len(expected) - len(got), "invalid_pose_frames": sum(1 for s in got if not recv[s][1].valid),
+        "latency_ms": _summary_ms(e2e), "server_ms": _summary_ms(srv), "compute_ms": _summary_ms(comp),
+        "transport_ms": _summary_ms(np.asarray(e2e) - np.asarray(srv)),
+        "queue_ms": _summary_ms(np.asarray(srv) - np.asarray(comp)),
+        "send_lag_ms": _summary_ms(lag) if lag else None,
+        "injected": {"malformed": n_malformed, "reordered": n_reordered, "dropped_sensor_samples": n_dropped_samples},
+        "faults": asdict(faults), "ready": ready, "server_stats": server_stats,
+    }

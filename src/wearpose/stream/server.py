@@ -1,0 +1,502 @@
+"""The real-time streaming server: sensor frames in, poses out, over WebSocket.
+
+One :class:`StreamServer` accepts any number of connections. A *device* connection declares
+each subject with a ``hello`` (sensor names, channels, rate; see :mod:`wearpose.stream.packets`)
+and then sends that subject's frames (JSON or binary); the server runs one estimator instance
+per subject (``reset()`` at hello, then ``step(frame)`` per frame) and sends each pose back to
+the device connection and to every *subscriber* connection (``{"type": "subscribe"}``, e.g. the
+live viewer).
+
+What the server does with imperfect input (all counted in ``stats``):
+
+- **Out-of-order / late frames**: a per-subject reorder buffer (:class:`ReorderBuffer`) releases
+  frames in sequence order. A missing frame is waited for until a frame ``reorder_window``
+  sequence numbers newer has arrived (the *lateness bound*: 4 frames = 33 ms at 120 Hz by
+  default); then it is given up (``lost``) and never invented. A frame arriving after it was
+  given up, or after newer frames were estimated, is ``late`` and dropped.
+- **Dropped sensors**: the frame's validity bits reach the estimator as ``SensorFrame.valid``
+  with NaN values (masked, not invented); ``masked_sensor_samples`` counts them.
+- **Malformed messages**: logged (rate-limited), counted (``malformed``), skipped; the
+  connection and the stream keep running.
+- **Estimator slower than the sensor rate**: frames queue (never dropped); ``queue_max`` and the
+  ``server_ms`` of every pose show it.
+
+The estimator's ``step`` runs in a thread pool, off the event loop, so network I/O keeps
+flowing while a frame is being estimated; each subject's frames are estimated in order.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import http
+import json
+import logging
+import signal
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from wearpose.estimators.base import Estimator, SensorFrame
+from wearpose.stream.packets import (
+    MAX_MESSAGE_BYTES,
+    FramePacket,
+    Hello,
+    PacketError,
+    PosePacket,
+    decode_frame_binary,
+    decode_frame_json,
+    encode_pose_binary,
+    encode_pose_json,
+    frame_channels,
+    peek_subject,
+)
+
+log = logging.getLogger("wearpose.stream")
+
+#: Default lateness bound, frames (see module doc).
+REORDER_WINDOW = 4
+#: Latency samples kept per subject for the stats percentiles.
+STATS_SAMPLES = 20000
+
+
+class ReorderBuffer:
+    """Releases sequence-numbered items in order, waiting at most ``window`` frames for a gap.
+
+    The first item pushed sets the start of the sequence. Counters: ``late`` (arrived after
+    its slot was passed), ``duplicate`` (already buffered), ``lost`` (gaps given up).
+    """
+
+    def __init__(self, window: int = REORDER_WINDOW) -> None:
+        if window < 1:
+            raise ValueError(f"reorder window must be >= 1 frame, got {window}")
+        self.window = window
+        self.next: int | None = None
+        self.buf: dict[int, Any] = {}
+        self.late = self.duplicate = self.lost = 0
+
+    def push(self, seq: int, item: Any) -> list[Any]:
+        """Add one item; returns the items now ready, in sequence order."""
+        if self.next is None:
+            self.next = seq
+        if seq < self.next:
+            self.late += 1
+            return []
+        if seq in self.buf:
+            self.duplicate += 1
+            return []
+        self.buf[seq] = item
+        out = self._drain()
+        while self.buf and max(self.buf) - self.next >= self.window:
+            first = min(self.buf)
+            self.lost += first - self.next
+            self.next = first
+            out += self._drain()
+        return out
+
+    def flush(self) -> list[Any]:
+        """Release everything buffered (end of stream); gaps count as lost."""
+        out: list[Any] = []
+        while self.buf:
+            first = min(self.buf)
+            self.lost += first - self.next
+            self.next = first
+            out += self._drain()
+        return out
+
+    def _drain(self) -> list[Any]:
+        out = []
+        while self.next in self.buf:
+            out.append(self.buf.pop(self.next))
+            self.next += 1
+        return out
+
+
+def _summary(x: deque) -> dict[str, float | None]:
+    if not x:
+        return {"median": None, "p99": None, "max": None}
+    a = np.asarray(x, dtype=np.float64)
+    return {"median": round(float(np.median(a)), 4), "p99": round(float(np.percentile(a, 99)), 4),
+            "max": round(float(a.max()), 4)}
+
+
+@dataclass
+class _Subject:
+    hello: Hello
+    owner: Any  # the device connection
+    estimator: Estimator | None = None
+    stride: int = 1
+    reorder: ReorderBuffer = field(default_factory=ReorderBuffer)
+    queue: asyncio.Queue = field(default_factory=asyncio.Queue)
+    worker: asyncio.Task | None = None
+    ready: asyncio.Event = field(default_factory=asyncio.Event)
+    counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
+        ("received", "estimated", "published", "malformed", "masked_sensor_samples", "decimated", "estimator_errors",
+         "queue_max"), 0))
+    compute_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_SAMPLES))
+    server_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_SAMPLES))
+
+    def stats(self) -> dict[str, Any]:
+        r = self.reorder
+        return {**self.counts, "late": r.late, "duplicate": r.duplicate, "lost": r.lost, "queue_now": self.queue.qsize(),
+                "reorder_window": r.window, "stride": self.stride, "rate_hz": self.hello.rate,
+                "estimator": getattr(self.estimator, "name", None),
+                "compute_ms": _summary(self.compute_ms), "server_ms": _summary(self.server_ms)}
+
+
+_END = object()  # queue sentinel: the subject's stream ended
+
+
+class StreamServer:
+    """WebSocket pose server (module doc). Use ``async with StreamServer(...) as s:`` or
+    :meth:`start` / :meth:`stop`; :func:`run_server` is the blocking entry of ``wearpose serve``.
+
+    Args:
+        estimator_factory: ``() -> Estimator`` (a fresh instance per subject; loading may be slow,
+            it runs in the pool).
+        host, port: where to listen (port 0 picks a free one; see :attr:`port`).
+        reorder_window: lateness bound in frames.
+        stride: estimate every ``stride``-th frame (by sequence number) and skip the others
+            (counted ``decimated``): ``"auto"`` = round(stream rate / estimator rate), for a
+            network trained at a lower rate than the sensors stream. Default 1: every frame.
+        workers: threads running estimator steps (subjects estimate in parallel up to this).
+    """
+
+    def __init__(self, estimator_factory: Callable[[], Estimator], host: str = "127.0.0.1", port: int = 8765, *,
+                 reorder_window: int = REORDER_WINDOW, stride: int | str = 1, workers: int = 2) -> None:
+        if stride != "auto" and (not isinstance(stride, int) or stride < 1):
+            raise ValueError(f"stride: expected a positive integer or 'auto', got {stride!r}")
+        self.factory = estimator_factory
+        self.host, self.port = host, port
+        self.reorder_window = reorder_window
+        self.stride = stride
+        self.pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers, thread_name_prefix="wearpose-est")
+        self.subjects: dict[int, _Subject] = {}
+        self.subscribers: dict[Any, tuple[str, set[int] | None]] = {}
+        self.connections: set[Any] = set()
+        self.malformed = 0
+        self.finished: dict[str, dict[str, Any]] = {}  # stats of subjects whose stream ended
+        self.started = time.time()
+        self._server: Any = None
+        self._closing = False
+
+    # ------------------------------------------------------------------ lifecycle
+    async def start(self) -> StreamServer:
+        from websockets.asyncio.server import serve
+
+        # No per-message compression: it costs latency and float payloads hardly compress.
+        self._server = await serve(self._handle, self.host, self.port, compression=None, max_size=MAX_MESSAGE_BYTES,
+                                   process_request=self._http, ping_interval=None)
+        self.port = self._server.sockets[0].getsockname()[1]
+        log.info("wearpose stream server on ws://%s:%d", self.host, self.port)
+        return self
+
+    async def stop(self, drain_timeout: float = 10.0) -> None:
+        """Clean shutdown: stop accepting, finish the frames already received, close connections."""
+        self._closing = True
+        if self._server is not None:
+            self._server.close(close_connections=False)
+        ends = [self._end_subject(k) for k in list(self.subjects)]
+        if ends:
+            await asyncio.wait_for(asyncio.gather(*ends, return_exceptions=True), drain_timeout)
+        for ws in list(self.connections):
+            await ws.close(1001, "server shutting down")
+        if self._server is not None:
+            await self._server.wait_closed()
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+    async def __aenter__(self) -> StreamServer:
+        return await self.start()
+
+    async def __aexit__(self, *exc: Any) -> None:
+        await self.stop()
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.host}:{self.port}"
+
+    def stats(self) -> dict[str, Any]:
+        """Counters and latency summaries (what ``{"type": "stats"}`` and ``GET /stats`` return)."""
+        return {"type": "stats", "uptime_s": round(time.time() - self.started, 3), "connections": len(self.connections),
+                "subscribers": len(self.subscribers), "malformed_total": self.malformed,
+                "subjects": {str(k): s.stats() for k, s in self.subjects.items()}, "finished": dict(self.finished)}
+
+    def _http(self, connection: Any, request: Any) -> Any:
+        if request.path == "/stats":
+            resp = connection.respond(http.HTTPStatus.OK, json.dumps(self.stats()) + "\n")
+            resp.headers["Content-Type"] = "application/json"
+            return resp
+        return None  # anything else: the WebSocket handshake
+
+    # ------------------------------------------------------------------ connections
+    async def _handle(self, ws: Any) -> None:
+        from websockets.exceptions import ConnectionClosed
+
+        self.connections.add(ws)
+        try:
+            async for msg in ws:
+                t_arr = time.perf_counter()
+                try:
+                    if isinstance(msg, str):
+                        await self._on_text(ws, msg, t_arr)
+                    else:
+                        self._on_binary(msg, t_arr)
+                except PacketError as exc:
+                    self._malformed(exc, ws)
+        except ConnectionClosed:
+            pass
+        finally:
+            self.connections.discard(ws)
+            self.subscribers.pop(ws, None)
+            owned = [k for k, s in self.subjects.items() if s.owner is ws]
+            for k in owned:  # the device went away: estimate what arrived, then forget the subject
+                await self._end_subject(k)
+
+    def _malformed(self, exc: Exception, ws: Any, subject: int | None = None) -> None:
+        self.malformed += 1
+        if subject is not None and subject in self.subjects:
+            self.subjects[subject].counts["malformed"] += 1
+        if self.malformed <= 20 or self.malformed % 100 == 0:  # a flood of bad packets must not flood the log
+            log.warning("malformed message #%d from %s skipped: %s", self.malformed, getattr(ws, "remote_address", "?"), exc)
+
+    async def _on_text(self, ws: Any, msg: str, t_arr: float) -> None:
+        try:
+            d = json.loads(msg)
+        except json.JSONDecodeError as exc:
+            raise PacketError(f"text message is not JSON ({exc.msg} at char {exc.pos})") from None
+        if not isinstance(d, dict) or not isinstance(d.get("type"), str):
+            raise PacketError("text message: expected a JSON object with a 'type'")
+        kind = d["type"]
+        if kind == "frame":
+            subject = d.get("subject")
+            s = self.subjects.get(subject) if isinstance(subject, int) else None
+            if s is None:
+                raise PacketError(f"frame for unknown subject {subject!r} (send a hello first)")
+            try:
+                self._on_frame(s, decode_frame_json(d, s.hello), t_arr)
+            except PacketError as exc:
+                self._malformed(exc, ws, subject)
+        elif kind == "hello":
+            await self._on_hello(ws, Hello.from_dict(d))
+        elif kind == "bye":
+            subject = d.get("subject")
+            if subject not in self.subjects:
+                raise PacketError(f"bye for unknown subject {subject!r}")
+            stats = await self._end_subject(subject)
+            await ws.send(json.dumps({"type": "bye", "subject": subject, "stats": stats}))
+        elif kind == "subscribe":
+            subs = d.get("subjects")
+            fmt = d.get("format", "json")
+            if fmt not in ("json", "binary") or not (subs is None or isinstance(subs, list)):
+                raise PacketError("subscribe: expected format 'json'|'binary' and subjects null or a list of ids")
+            self.subscribers[ws] = (fmt, None if subs is None else set(subs))
+            for k, s in self.subjects.items():
+                await ws.send(self._subject_message(k, s))
+        elif kind == "stats":
+            await ws.send(json.dumps(self.stats()))
+        else:
+            raise PacketError(f"unknown message type {kind!r}; expected hello, frame, bye, subscribe or stats")
+
+    def _on_binary(self, msg: bytes, t_arr: float) -> None:
+        subject = peek_subject(msg)
+        s = self.subjects.get(subject)
+        if s is None:
+            raise PacketError(f"binary frame for unknown subject {subject} (send a hello first)")
+        try:
+            self._on_frame(s, decode_frame_binary(msg, s.hello), t_arr)
+        except PacketError as exc:
+            self.subjects[subject].counts["malformed"] += 1
+            raise exc
+
+    # ------------------------------------------------------------------ subjects
+    async def _on_hello(self, ws: Any, hello: Hello) -> None:
+        if self._closing:
+            await ws.send(json.dumps({"type": "error", "subject": hello.subject, "error": "server shutting down"}))
+            return
+        if hello.subject in self.subjects:
+            await self._end_subject(hello.subject)  # a new hello restarts the subject's stream
+        s = _Subject(hello, ws, reorder=ReorderBuffer(self.reorder_window))
+        self.subjects[hello.subject] = s
+        loop = asyncio.get_running_loop()
+        try:
+            s.estimator = await loop.run_in_executor(self.pool, self._make_estimator, hello)
+        except Exception as exc:  # noqa: BLE001 - a bad hello must not take the server down
+            self.subjects.pop(hello.subject, None)
+            log.warning("subject %d refused: %s", hello.subject, exc)
+            await ws.send(json.dumps({"type": "error", "subject": hello.subject, "error": str(exc)}))
+            return
+        est = s.estimator
+        s.stride = max(1, round(hello.rate / est.fps)) if self.stride == "auto" else int(self.stride)
+        s.worker = asyncio.create_task(self._work(hello.subject, s))
+        s.ready.set()
+        est_rate = hello.rate / s.stride
+        note = "" if abs(est_rate - est.fps) <= 0.05 * est.fps else (
+            f"the estimator was trained at {est.fps:g} Hz but receives {est_rate:g} Hz "
+            f"(stream {hello.rate:g} Hz, stride {s.stride}); its output may be degraded")
+        await ws.send(json.dumps({"type": "ready", "subject": hello.subject, "estimator": est.name,
+                                  "sensors": list(est.sensor_names), "estimator_fps": est.fps, "stride": s.stride,
+                                  "reorder_window": s.reorder.window, "note": note}))
+        for sub in list(self.subscribers):
+            await self._safe_send(sub, self._subject_message(hello.subject, s))
+
+    def _make_estimator(self, hello: Hello) -> Estimator:
+        est = self.factory()
+        missing = [n for n in est.sensor_names if n not in hello.sensors]
+        if missing:
+            raise PacketError(f"hello.sensors lacks {missing} needed by estimator {est.name!r} "
+                              f"(it needs {list(est.sensor_names)})")
+        offsets = hello.subject_info.get("offsets")
+        if offsets and hasattr(est, "set_offsets") and hasattr(est, "_offsets_from"):
+            # Subject calibration (EM-POSE sensor offsets), read exactly as from a Recording.
+            est.set_offsets(*est._offsets_from(_SubjectOnly(hello.subject_info)))
+        est.reset()
+        return est
+
+    @staticmethod
+    def _subject_message(k: int, s: _Subject) -> str:
+        est = s.estimator
+        return json.dumps({"type": "subject", "subject": k, "sensors": list(s.hello.sensors), "rate": s.hello.rate,
+                           "estimator": getattr(est, "name", None),
+                           "estimator_sensors": list(getattr(est, "sensor_names", ())),
+                           "kit": getattr(est, "kit_name", None)})
+
+    def _on_frame(self, s: _Subject, pkt: FramePacket, t_arr: float) -> None:
+        s.counts["received"] += 1
+        for item in s.reorder.push(pkt.seq, (pkt, t_arr)):
+            self._enqueue(s, item)
+
+    def _enqueue(self, s: _Subject, item: tuple[FramePacket, float]) -> None:
+        if item[0].seq % s.stride:
+            s.counts["decimated"] += 1
+            return
+        s.queue.put_nowait(item)
+        s.counts["queue_max"] = max(s.counts["queue_max"], s.queue.qsize())
+
+    async def _end_subject(self, k: int) -> dict[str, Any]:
+        s = self.subjects.get(k)
+        if s is None:
+            return {}
+        for item in s.reorder.flush():
+            self._enqueue(s, item)
+        if s.worker is not None and not s.worker.done():
+            s.queue.put_nowait(_END)
+            await s.worker
+        self.subjects.pop(k, None)
+        self.finished[str(k)] = s.stats()
+        return self.finished[str(k)]
+
+    async def _work(self, k: int, s: _Subject) -> None:
+        loop = asyncio.get_running_loop()
+        est = s.estimator
+        hello = s.hello
+        while True:
+            item = await s.queue.get()
+            if item is _END:
+                return
+            pkt, t_arr = item
+            frame = SensorFrame(pkt.timestamp, hello.sensors, pkt.valid, frame_channels(pkt.data, pkt.valid, hello.channels))
+            s.counts["masked_sensor_samples"] += int((~pkt.valid).sum())
+            try:
+                pose, compute = await loop.run_in_executor(self.pool, _timed_step, est, frame)
+            except Exception as exc:  # noqa: BLE001 - one bad frame must not end the stream
+                s.counts["estimator_errors"] += 1
+                log.warning("subject %d seq %d: estimator error skipped: %s", k, pkt.seq, exc)
+                continue
+            s.counts["estimated"] += 1
+            idx = [hello.sensors.index(n) for n in est.sensor_names]
+            extras = {key: v for key, v in pose.extras.items() if isinstance(v, (str, int, float, bool, list))}
+            extras["sensor_valid"] = [bool(v) for v in pkt.valid[idx]]
+            out = PosePacket(k, pkt.seq, pkt.timestamp, bool(pose.valid), pose.local_rot.numpy(), pose.betas.numpy(),
+                             None if pose.trans is None else pose.trans.numpy(),
+                             None if pose.uncertainty is None else pose.uncertainty.numpy(), compute * 1e3, 0.0, extras)
+            await self._publish(s, out, t_arr)
+
+    async def _publish(self, s: _Subject, pose: PosePacket, t_arr: float) -> None:
+        cache: dict[str, str | bytes] = {}
+
+        def msg(fmt: str) -> str | bytes:
+            if fmt not in cache:
+                cache[fmt] = encode_pose_binary(pose) if fmt == "binary" else encode_pose_json(pose)
+            return cache[fmt]
+
+        pose.server_ms = (time.perf_counter() - t_arr) * 1e3  # measured just before the first send
+        sent = await self._safe_send(s.owner, msg(s.hello.format))
+        for ws, (fmt, subs) in list(self.subscribers.items()):
+            if subs is None or pose.subject in subs:
+                await self._safe_send(ws, msg(fmt))
+        s.server_ms.append(pose.server_ms)
+        s.compute_ms.append(pose.compute_ms)
+        s.counts["published"] += int(sent)
+
+    @staticmethod
+    async def _safe_send(ws: Any, msg: str | bytes) -> bool:
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            await ws.send(msg)
+            return True
+        except ConnectionClosed:
+            return False
+
+
+@dataclass
+class _SubjectOnly:
+    """The part of a Recording an estimator reads subject calibration from."""
+
+    subject: dict[str, Any]
+
+
+def _timed_step(est: Estimator, frame: SensorFrame) -> tuple[Any, float]:
+    t0 = time.perf_counter()
+    pose = est.step(frame)
+    return pose, time.perf_counter() - t0
+
+
+def estimator_factory(model: str, method: str | None = None, threads: int | None = None) -> Callable[[], Estimator]:
+    """``() -> Estimator`` for shipped weights (``wearpose.weights`` name, e.g. ``empose12_cpu``)
+    or a checkpoint file; ``method`` overrides the registry name read from the card/checkpoint."""
+    from pathlib import Path
+
+    from wearpose.errors import ConfigError
+    from wearpose.estimators.checkpoint import load_checkpoint
+    from wearpose.estimators.registry import get_estimator
+    from wearpose.weights import card, list_weights, weight_path
+
+    if model in list_weights():
+        path, name = weight_path(model), method or card(model)["method"]
+    elif Path(model).is_file():
+        path, name = Path(model), method or load_checkpoint(model).method
+    else:
+        raise ConfigError(f"--model {model!r}: neither shipped weights ({', '.join(list_weights()) or 'none'}) "
+                          f"nor a checkpoint file")
+    cls = get_estimator(name)
+    if threads is not None:
+        import torch
+
+        torch.set_num_threads(threads)
+
+    def make() -> Estimator:
+        return cls.load(path)
+
+    return make
+
+
+def run_server(estimator_factory: Callable[[], Estimator], host: str = "127.0.0.1", port: int = 8765,
+               on_start: Callable[[StreamServer], None] | None = None, **kwargs: Any) -> dict[str, Any]:
+    """Serve until SIGINT/SIGTERM, then shut down cleanly; returns the final stats."""
+    async def main() -> dict[str, Any]:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        server = await StreamServer(estimator_factory, host, port, **kwargs).start()
+        if on_start is not None:
+            on_start(server)
+        await stop.wait()
+        await server.stop()
+        return server.stats()
+
+    return asyncio.run(main())

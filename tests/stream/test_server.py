@@ -1,0 +1,135 @@
+"""The server on loopback: two subjects with faults, late frames, refusals, stats, shutdown."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import urllib.request
+
+import numpy as np
+import pytest
+
+from tests.stream.conftest import EchoEstimator, tiny_recording
+from wearpose.stream import FramePacket, Faults, Hello, StreamClient, StreamError, StreamServer, replay, stack_recording
+
+
+def _run(coro):  # noqa: ANN001, ANN202
+    return asyncio.run(asyncio.wait_for(coro, 60))
+
+
+class _Factory:
+    def __init__(self, delay_s: float = 0.0) -> None:
+        self.made: list[EchoEstimator] = []
+        self.delay_s = delay_s
+
+    def __call__(self) -> EchoEstimator:
+        self.made.append(EchoEstimator(self.delay_s))
+        return self.made[-1]
+
+
+def test_two_subjects_with_faults_lose_nothing_and_mask_dropouts() -> None:
+    fac = _Factory()
+    rec0, rec1 = tiny_recording(150, seed=0), tiny_recording(150, seed=1)
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(fac, port=0, reorder_window=4) as srv:
+            faults = Faults(malformed=0.05, dropout=0.02, reorder=0.05, seed=3)
+            watcher = StreamClient(srv.url)
+            await watcher.connect()
+            await watcher.subscribe([1])
+            r = await asyncio.gather(
+                replay(rec0, srv.url, subject=0, fmt="binary", realtime=True, speed=8.0, faults=faults),
+                replay(rec1, srv.url, subject=1, fmt="json", realtime=True, speed=8.0,
+                       faults=Faults(malformed=0.05, dropout=0.02, reorder=0.05, seed=4)))
+            stats = srv.stats()
+            await asyncio.sleep(0.05)
+            await watcher.close()
+            return r, stats, watcher
+
+    (r0, r1), stats, watcher = _run(main())
+    for r, rec in ((r0, rec0), (r1, rec1)):
+        assert r["frames_sent"] == 150 and r["frames_lost"] == 0 and r["poses_received"] == 150
+        s = r["server_stats"]
+        assert s["estimated"] == 150 and s["lost"] == 0 and s["late"] == 0
+        assert r["injected"]["reordered"] > 0 and r["injected"]["malformed"] > 0
+        # every masked sample reached the estimator as masked: injected plus the recording's own
+        assert s["masked_sensor_samples"] == r["injected"]["dropped_sensor_samples"] + int((~rec.on_common_grid().valid).sum())
+    # malformed messages counted (each is skipped; the streams kept running)
+    assert stats["malformed_total"] == r0["injected"]["malformed"] + r1["injected"]["malformed"]
+    # one estimator per subject, each saw its frames in order, with the masks as sent
+    assert len(fac.made) == 2
+    for est in fac.made:
+        ts = [t for t, _, _ in est.seen]
+        assert ts == sorted(ts) and len(ts) == 150
+        assert any(not ok for _, _, ok in est.seen)
+    # the subscriber got subject 1's poses only
+    got = []
+    while not watcher.poses.empty():
+        got.append(watcher.poses.get_nowait()[1])
+    assert {p.subject for p in got} == {1} and len(got) == 150
+    assert got[0].extras["interference"] == [0.0, 0.5, 1.0] and len(got[0].extras["sensor_valid"]) == 3
+
+
+def test_pose_content_follows_the_input() -> None:
+    rec = tiny_recording(30)
+    st = stack_recording(rec)
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(_Factory(), port=0) as srv, StreamClient(srv.url) as c:
+            await c.hello(Hello(5, st.names, st.channels, st.rate, "binary"))
+            for k in range(30):
+                await c.send_frame(FramePacket(5, k, float(st.timestamps[k]), st.valid[k], st.data[k]))
+            await c.bye(5)
+            return [c.poses.get_nowait()[1] for _ in range(c.poses.qsize())]
+
+    poses = _run(main())
+    assert [p.seq for p in poses] == list(range(30))
+    for p in poses:
+        k = p.seq
+        np.testing.assert_allclose(p.local_rot[0], st.data[k, 0, 3:].reshape(3, 3), atol=1e-6)
+        np.testing.assert_allclose(p.trans, st.data[k, :3, :3].mean(0), atol=1e-5)
+
+
+def test_late_frames_are_dropped_not_invented() -> None:
+    rec = tiny_recording(20)
+    st = stack_recording(rec)
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(_Factory(), port=0, reorder_window=3) as srv, StreamClient(srv.url) as c:
+            await c.hello(Hello(0, st.names, st.channels, st.rate, "json"))
+            order = [0, 1, 2, 4, 5, 6, 3, 7, 9, 8] + list(range(10, 20)) + [15]  # 3 is too late, 9/8 swap, 15 twice
+            for k in order:
+                await c.send_frame(FramePacket(0, k, float(st.timestamps[k]), st.valid[k], st.data[k]))
+            final = await c.bye(0)
+            return final, sorted(c.poses.get_nowait()[1].seq for _ in range(c.poses.qsize()))
+
+    final, seqs = _run(main())
+    assert seqs == [k for k in range(20) if k != 3]
+    assert (final["lost"], final["late"], final["estimated"], final["received"]) == (1, 2, 19, 21)
+
+
+def test_refusal_stats_endpoint_and_clean_shutdown() -> None:
+    rec = tiny_recording(40)
+    st = stack_recording(rec)
+    fac = _Factory(delay_s=0.01)
+
+    async def main():  # noqa: ANN202
+        srv = await StreamServer(fac, port=0).start()
+        c = await StreamClient(srv.url).connect()
+        with pytest.raises(StreamError, match="lacks"):
+            await c.hello(Hello(1, ("a", "b"), st.channels, st.rate))  # the estimator needs a, b, c
+        await c.hello(Hello(0, st.names, st.channels, st.rate, "binary"))
+        for k in range(40):
+            await c.send_frame(FramePacket(0, k, float(st.timestamps[k]), st.valid[k], st.data[k]))
+        await c.send_raw(b"\x00garbage")
+        stats = await c.stats()
+        http_stats = await asyncio.to_thread(
+            lambda: json.loads(urllib.request.urlopen(f"http://127.0.0.1:{srv.port}/stats", timeout=5).read()))
+        await srv.stop()  # with frames still queued (10 ms each): they are estimated, then connections close
+        await asyncio.wait_for(c._reader, 5)
+        return stats, http_stats, c.poses.qsize(), srv.stats()
+
+    stats, http_stats, n_poses, final = _run(main())
+    assert stats["type"] == "stats" and "0" in stats["subjects"]
+    assert http_stats["malformed_total"] == 1
+    assert n_poses == 40 and final["finished"]["0"]["estimated"] == 40
