@@ -1,0 +1,16 @@
+"""Physics of PIP (Sec. 3.2): an articulated character from the body asset, dynamics via
+Pinocchio, the dual PD controller and the contact QP solved with proxsuite.
+
+Public entry: :class:`PhysicsCharacter`, :class:`PhysicsConfig`, :class:`PhysicsOptimizer`,
+:class:`PhysicsState`. See ``docs/physics.md``.
+"""
+
+from wearpose.physics.optimizer import PhysicsConfig, PhysicsOptimizer, PhysicsState
+from wearpose.physics.character import (
+    BODY_DENSITY, DEFAULT_MASS_KG, SEGMENT_MASS_FRACTION, PhysicsCharacter, mesh_volume,
+)
+
+__all__ = [
+    "PhysicsConfig", "PhysicsOptimizer", "PhysicsState",
+    "PhysicsCharacter", "BODY_DENSITY", "DEFAULT_MASS_KG", "SEGMENT_MASS_FRACTION", "mesh_volume",
+]

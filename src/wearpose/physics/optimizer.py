@@ -1,0 +1,486 @@
+"""PIP's physics-aware motion optimizer (Sec. 3.2.2-3.2.4): dual PD controller + contact QP.
+
+Per frame (:meth:`PhysicsOptimizer.step`):
+
+1. Dynamics at the current state ``(q, v)`` from Pinocchio: mass matrix ``M`` (CRBA), non-linear
+   effects ``h`` (RNEA with zero acceleration), joint Jacobians ``J`` and their time variation
+   ``dJ`` (``computeJointJacobiansTimeVariation``), in the ``LOCAL_WORLD_ALIGNED`` frame.
+2. Dual PD controller. Rotation controller (Eq. 3) on every rotational DoF (root orientation and
+   the 23 joints): ``qdd_rot_des = kp_theta * log(R^T R_ref) - kd_theta * v_rot`` (the Lie-group
+   difference stands in for the paper's Euler-angle difference ``E(phi) - theta``).
+   Position controller (Eqs. 4-6) on the world positions of the joints in
+   ``PhysicsConfig.position_joints``: ``r_ref = r + v_ref dt``,
+   ``rdd_des = kp_r (r_ref - r) - kd_r J v``. With ``dual_pd=False`` (the paper's single-PD
+   ablation, "a single PD controller that only watches q") only the root joint's position is
+   controlled, i.e. a PD on the translation part of ``q`` with reference ``trans + v_root dt``.
+3. QP (Eq. 7-12) solved by proxsuite (dense):
+   ``min k_theta |qdd_rot - qdd_rot_des|^2 + k_r |J qdd + dJ v - rdd_des|^2
+   + k_lambda sum_c d_c |lambda_c|^2 + k_res |tau_root|^2 + k_tau |tau_joints|^2``
+   s.t. ``M qdd + h = tau + J_c^T lambda`` (equation of motion), ``lambda_c`` in the 4-sided
+   friction pyramid (``mu``), and for every contact joint
+   ``J_j (v + qdd dt)`` in ``{y >= 0, |x| <= sigma, |z| <= sigma}`` (no sliding, Eq. 11-12).
+   By default the torques are eliminated through the equation of motion
+   (``tau = M qdd + h - J_c^T lambda``), which gives the same minimiser with half the
+   variables and no equality constraints; ``eliminate_torques=False`` solves the paper's
+   three-block form (tests check both agree).
+4. State update (Eq. 13), semi-implicit Euler: ``v += qdd dt``, ``q = q (+) v dt`` (Pinocchio's
+   ``integrate`` on the Lie group). The original PIP implementation updates in this order too.
+
+Contacts (Sec. 3.2.3): a foot joint (``foot_joints``, SMPL ``left_foot``/``right_foot``) is in
+contact if its height above the ground is below ``contact_height`` (0.5 cm), or below
+``foot_contact_height`` (3 cm) with contact probability above 0.5; any other joint of
+``contact_candidates`` only below 0.5 cm. Each contact joint contributes the 4 corners of an
+``L x L`` horizontal, world-aligned square (L = 20 cm) at its height as contact points, centred
+on the joint, except that a foot's square is moved half-way towards its ankle
+(``foot_square_shift``, why: see :class:`PhysicsConfig`).
+
+Ground: the plane ``y = ground_y``. ``PhysicsConfig.ground_y=None`` places it at the lowest
+joint of ``contact_candidates`` at :meth:`PhysicsOptimizer.reset` (the subject starts on the
+ground, as PIP assumes); the motion corpus floor is at the height of the lowest *foot joint*,
+which is 0-4 cm above ``y = 0`` depending on the source.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+import proxsuite
+import torch
+
+from wearpose.body import JOINT_INDEX, NUM_JOINTS, PARENTS
+from wearpose.errors import ConfigError, ShapeError
+from wearpose.physics._blas import limit_blas_threads
+from wearpose.physics.character import PhysicsCharacter
+
+_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_NO_CONTACT = ("left_ankle", "right_ankle", "neck", "left_wrist", "right_wrist", "left_collar", "right_collar", "pelvis")
+
+
+@dataclass
+class PhysicsConfig:
+    """Gains and weights of the physics module; defaults are PIP's (Sec. 3.2, appendix A).
+
+    Attributes:
+        fps: frame rate (Hz); ``dt = 1 / fps`` is the simulation step (PIP: 60).
+        dual_pd: dual PD controller (rotation + joint position); False = single PD ablation.
+        kp_theta, kd_theta: rotation controller gains (PIP: 2400, 60; appendix A derives 3600
+            and lowers kp for smoother angular accelerations).
+        kp_r, kd_r: joint position controller gains (PIP: 3600, 60 = 1/dt^2, 1/dt for 60 fps).
+        k_theta, k_r: weights of the two PD energies (PIP: 1, 1).
+        k_lambda, k_res, k_tau: regulariser weights (PIP: 10, 0.1, 0.01).
+        mu: friction coefficient of the linearised (4-sided pyramid) cone (PIP: 0.6).
+        sigma: allowed horizontal speed of a contact joint, m/s (PIP: 0.01).
+        square_size: side L of the contact square per contact joint, m (PIP: 0.2).
+        contact_height: any candidate joint closer than this to the ground is in contact, m
+            (PIP: 0.5 cm).
+        foot_contact_height: a foot joint closer than this with contact probability above
+            ``contact_prob_threshold`` is in contact, m (PIP: 3 cm, 0.5).
+        min_contact_weight: floor on the point height ``d_c`` in the Signorini term, m: with
+            ``d_c = 0`` a point at (or below) the ground would have no force regulariser at
+            all. 1 mm: the original PIP code uses 5 mm, which on our character moves ~3 % of
+            a standing body weight from the feet to the residual root force (measured: 96.8 %
+            of m g on the feet at 5 mm, 99.8 % at 1 mm).
+        penetration_recovery: if a contact joint is below the ground, its lower bound on the
+            vertical velocity becomes ``depth / dt`` instead of 0 (pushes it back out in one
+            step). PIP's Eq. 11 only forbids moving further down; its original code has the same
+            correction. Set False for the paper's literal constraint.
+        foot_square_shift: the square of a foot joint is centred this fraction of the way from
+            the foot joint to its ankle (horizontally). PIP centres every square on its joint
+            (0.0); SMPL's foot joint is the ball of the foot, so a square centred there covers
+            toes to mid-foot, leaves the heel out, and the standing centre of mass of our
+            character (5.6 cm in front of the pelvis, 11 cm behind the foot joints) falls
+            outside the support polygon: standing then needs a large residual root force and
+            the body tips backwards. 0.5 centres the square on the sole (heel to toe tips
+            span -3..23 cm in Z on the embedded asset, the ankle-foot midpoint is at 10 cm).
+        ground_y: ground height in world Y, m; None = lowest contact candidate at reset.
+        foot_joints: SMPL joints whose contact uses ``contact_prob`` (left, right).
+        contact_candidates: SMPL joints tested for ground contact.
+        position_joints: joints under the position controller (default: all 24).
+        eliminate_torques: solve for (qdd, lambda) with tau eliminated through the equation of
+            motion (same minimiser, smaller QP); False = (qdd, lambda, tau) with equalities.
+        weights_in_norm: how the weights enter the energy. PIP's Eq. 8-9 write ``k * |r|^2``;
+            PIP's released implementation multiplies each residual by its weight inside the norm,
+            ``|k r|^2`` (so ``k_res = 0.1`` acts as 0.01, ``k_tau = 0.01`` as 1e-4 and the
+            Signorini term as ``(k_lambda d_c)^2 |lambda_c|^2``). True (default) follows the
+            implementation: with the literal reading on our character the torque and force
+            regularisers outweigh the PD terms, so a standing T-pose carries only ~93 % of its
+            weight on the feet (the rest on the residual root force) and slides ~16 cm in 2 s
+            (measured); the implementation's reading holds it (tests).
+        eps_abs: proxsuite absolute accuracy.
+        blas_threads: threads of numpy's OpenBLAS, set process-wide when the optimizer is built
+            (1: the step's matrices are small and multi-threaded BLAS costs 10-50 ms per step on
+            a loaded 2-core machine); None leaves BLAS alone.
+    """
+
+    fps: float = 60.0
+    dual_pd: bool = True
+    kp_theta: float = 2400.0
+    kd_theta: float = 60.0
+    kp_r: float = 3600.0
+    kd_r: float = 60.0
+    k_theta: float = 1.0
+    k_r: float = 1.0
+    k_lambda: float = 10.0
+    k_res: float = 0.1
+    k_tau: float = 0.01
+    mu: float = 0.6
+    sigma: float = 0.01
+    square_size: float = 0.2
+    contact_height: float = 0.005
+    foot_contact_height: float = 0.03
+    contact_prob_threshold: float = 0.5
+    min_contact_weight: float = 0.001
+    penetration_recovery: bool = True
+    foot_square_shift: float = 0.5
+    ground_y: float | None = None
+    foot_joints: tuple[int, int] = (JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"])
+    contact_candidates: tuple[int, ...] = tuple(
+        j for j in range(NUM_JOINTS) if j not in {JOINT_INDEX[n] for n in _NO_CONTACT})
+    position_joints: tuple[int, ...] = tuple(range(NUM_JOINTS))
+    eliminate_torques: bool = True
+    eps_abs: float = 1e-6
+    weights_in_norm: bool = True
+    blas_threads: int | None = 1
+
+    def __post_init__(self) -> None:
+        if not self.fps > 0:
+            raise ConfigError(f"PhysicsConfig.fps: expected a positive frame rate in Hz, got {self.fps}")
+        for name in ("kp_theta", "kd_theta", "kp_r", "kd_r", "k_theta", "k_r", "k_lambda", "k_res", "k_tau", "mu",
+                     "sigma", "square_size"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"PhysicsConfig.{name}: expected >= 0, got {getattr(self, name)}")
+        for name in ("foot_joints", "contact_candidates", "position_joints"):
+            bad = [j for j in getattr(self, name) if not 0 <= j < NUM_JOINTS]
+            if bad:
+                raise ConfigError(f"PhysicsConfig.{name}: joint indices {bad} outside 0..23")
+        missing = [j for j in self.foot_joints if j not in self.contact_candidates]
+        if missing:
+            raise ConfigError(f"PhysicsConfig.contact_candidates: must include the foot joints {missing}")
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.fps
+
+
+@dataclass
+class PhysicsState:
+    """Output of one :meth:`PhysicsOptimizer.step` (the state after the update, frame t+1).
+
+    Attributes:
+        pose_local: ``(24, 3, 3)`` float32 local joint rotations.
+        trans: ``(3,)`` float32 root translation, m (SMPL ``trans``).
+        joints: ``(24, 3)`` float32 world joint positions after the update, m.
+        torques: ``(24, 3)`` float32 joint torques, N*m, each in its joint's own frame (row j:
+            torque of the parent on body j about joint j); row 0 = the root's residual
+            (virtual) torque in the root frame.
+        residual: ``(6,)`` float32 residual root wrench (force N, torque N*m) in the root frame.
+        grf: ``(2, 3)`` float32 ground reaction force on the left / right foot, N, world frame
+            (sum over that foot joint's 4 contact points).
+        grf_joints: ``(24, 3)`` float32 ground reaction force per contact joint, N, world.
+        contacts: ``(2,)`` bool, left / right foot used as contact in this step's QP.
+        contact_joints: ``(24,)`` bool, every joint used as contact.
+        zmp: ``(2,)`` float32 centre of pressure of the GRF on the ground, world (x, z), m;
+            NaN when nothing touches the ground.
+        penetration_m: largest depth of a contact-candidate joint below the ground after the
+            update, m (0 when none is below).
+        qp_ms: proxsuite solve time, ms (building the QP excluded).
+        step_ms: wall time of the whole step, ms.
+        qp_status: proxsuite status string.
+    """
+
+    pose_local: torch.Tensor
+    trans: torch.Tensor
+    joints: torch.Tensor
+    torques: torch.Tensor
+    residual: torch.Tensor
+    grf: torch.Tensor
+    grf_joints: torch.Tensor
+    contacts: torch.Tensor
+    contact_joints: torch.Tensor
+    zmp: torch.Tensor
+    penetration_m: float
+    qp_ms: float
+    step_ms: float
+    qp_status: str = ""
+
+
+@dataclass
+class _Dyn:
+    """Dynamics quantities at the current state (float64 numpy)."""
+
+    M: np.ndarray  # (nv, nv)
+    h: np.ndarray  # (nv,)
+    pos: np.ndarray  # (24, 3) joint positions, world
+    J: np.ndarray  # (24, 6, nv) LWA joint Jacobians (linear rows 0:3, angular 3:6)
+    dJv: np.ndarray  # (24, 3) classical linear acceleration bias dJ v of each joint origin
+    extra: dict = field(default_factory=dict)
+
+
+def _skew(o: np.ndarray) -> np.ndarray:
+    """``(..., 3) -> (..., 3, 3)`` cross-product matrices."""
+    z = np.zeros(o.shape[:-1])
+    x, y, w = o[..., 0], o[..., 1], o[..., 2]
+    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+
+
+class PhysicsOptimizer:
+    """Online physics optimizer of PIP for one character.
+
+    Example:
+        >>> char = PhysicsCharacter.from_body(BodyModel(), torch.zeros(10))
+        >>> opt = PhysicsOptimizer(char, PhysicsConfig())
+        >>> opt.reset(torch.eye(3).expand(24, 3, 3), torch.zeros(3))
+        >>> st = opt.step(torch.eye(3).expand(24, 3, 3), torch.zeros(24, 3), torch.ones(2))
+    """
+
+    def __init__(self, character: PhysicsCharacter, config: PhysicsConfig | None = None) -> None:
+        self.char = character
+        self.config = config or PhysicsConfig()
+        if self.config.blas_threads is not None:
+            limit_blas_threads(self.config.blas_threads)
+        self.model = character.model
+        self.data = self.model.createData()
+        self.nv = self.model.nv
+        h = self.config.square_size / 2
+        self._square = np.array([[-h, 0, -h], [h, 0, -h], [-h, 0, h], [h, 0, h]])  # world offsets of the 4 points
+        mu = self.config.mu
+        # Friction pyramid rows F lambda <= 0 per point (Eq. 10): |x| <= mu y, |z| <= mu y.
+        self._fric = np.array([[1.0, -mu, 0.0], [-1.0, -mu, 0.0], [0.0, -mu, 1.0], [0.0, -mu, -1.0]])
+        c = self.config
+        w = np.full(self.nv, c.k_tau)
+        w[:6] = c.k_res
+        self._w_tau = w ** 2 if c.weights_in_norm else w
+        rot = np.zeros((self.nv - 3, self.nv))
+        rot[:, 3:] = np.eye(self.nv - 3)
+        self._S_rot = rot
+        self.q: np.ndarray | None = None
+        self.v = np.zeros(self.nv)
+        self.ground_y = 0.0
+
+    # ------------------------------------------------------------------ state
+    def reset(self, pose_local: torch.Tensor, trans: torch.Tensor, velocity: np.ndarray | None = None,
+              ground_y: float | None = None) -> None:
+        """Start at pose ``(24, 3, 3)`` local rotations and ``trans`` ``(3,)`` m, at rest.
+
+        Args:
+            velocity: optional initial generalised velocity ``(75,)`` (Pinocchio layout).
+            ground_y: ground height (m); default ``config.ground_y``, and if that is None the
+                lowest contact-candidate joint of this pose.
+        """
+        self.q = self.char.q_from_pose(pose_local, trans)
+        self.v = np.zeros(self.nv) if velocity is None else np.asarray(velocity, dtype=np.float64).copy()
+        if ground_y is None:
+            ground_y = self.config.ground_y
+        if ground_y is None:
+            pin.forwardKinematics(self.model, self.data, self.q)
+            ys = [self.data.oMi[j + 1].translation[1] for j in self.config.contact_candidates]
+            ground_y = float(min(ys))
+        self.ground_y = float(ground_y)
+
+    def joint_positions(self, q: np.ndarray | None = None) -> np.ndarray:
+        """World joint positions ``(24, 3)`` m at ``q`` (default: the current state)."""
+        pin.forwardKinematics(self.model, self.data, self.q if q is None else q)
+        return np.array([self.data.oMi[k].translation for k in range(1, NUM_JOINTS + 1)])
+
+    def _dynamics(self) -> _Dyn:
+        m, d, q, v = self.model, self.data, self.q, self.v
+        pin.computeJointJacobiansTimeVariation(m, d, q, v)  # also runs forward kinematics (pos, vel)
+        pin.crba(m, d, q)
+        M = np.triu(d.M) + np.triu(d.M, 1).T  # crba fills the upper triangle
+        h = pin.nonLinearEffects(m, d, q, v).copy()
+        pos = np.empty((NUM_JOINTS, 3))
+        J = np.empty((NUM_JOINTS, 6, self.nv))
+        dJ = np.empty((NUM_JOINTS, 6, self.nv))
+        for k in range(NUM_JOINTS):
+            pos[k] = d.oMi[k + 1].translation
+            J[k] = pin.getJointJacobian(m, d, k + 1, _LWA)
+            dJ[k] = pin.getJointJacobianTimeVariation(m, d, k + 1, _LWA)
+        return _Dyn(M=M, h=h, pos=pos, J=J, dJv=(dJ[:, :3] @ v))
+
+    # ------------------------------------------------------------------ contacts
+    def contact_mask(self, heights: np.ndarray, contact_prob: np.ndarray) -> np.ndarray:
+        """Joints in contact ``(24,)`` bool from joint heights above the ground ``(24,)`` m and
+        the feet's contact probabilities ``(2,)`` (Sec. 3.2.3)."""
+        c = self.config
+        mask = np.zeros(NUM_JOINTS, dtype=bool)
+        cand = np.array(c.contact_candidates)
+        mask[cand] = heights[cand] < c.contact_height
+        for f, p in zip(c.foot_joints, contact_prob):
+            if heights[f] < c.foot_contact_height and p > c.contact_prob_threshold:
+                mask[f] = True
+        return mask
+
+    def _contact_offsets(self, pos: np.ndarray, cj: np.ndarray) -> np.ndarray:
+        """World offsets ``(nj, 4, 3)`` of the 4 contact points of each contact joint from the joint."""
+        offs = np.repeat(self._square[None], len(cj), axis=0)
+        shift = self.config.foot_square_shift
+        if shift:
+            for i, j in enumerate(cj):
+                if j in self.config.foot_joints:
+                    d = pos[PARENTS[j]] - pos[j]
+                    offs[i, :, [0, 2]] += shift * d[[0, 2]][:, None]
+        return offs
+
+    # ------------------------------------------------------------------ step
+    def step(self, pose_target: torch.Tensor, joint_vel: torch.Tensor, contact_prob: torch.Tensor) -> PhysicsState:
+        """One frame: reference pose ``(24, 3, 3)`` (local rotations), reference joint velocities
+        ``(24, 3)`` m/s in the world frame (root = row 0), foot contact probabilities ``(2,)``
+        (left, right) in [0, 1]. Returns the state after the update (see :class:`PhysicsState`)."""
+        t_start = time.perf_counter()
+        if self.q is None:
+            raise ConfigError("PhysicsOptimizer.step: call reset(pose, trans) first")
+        c, dt, nv = self.config, self.config.dt, self.nv
+        v_ref = np.asarray(torch.as_tensor(joint_vel, dtype=torch.float64))
+        probs = np.asarray(torch.as_tensor(contact_prob, dtype=torch.float64)).reshape(-1)
+        if v_ref.shape != (NUM_JOINTS, 3):
+            raise ShapeError(f"joint_vel: expected (24, 3) world joint velocities in m/s, got {v_ref.shape}")
+        if probs.shape != (2,):
+            raise ShapeError(f"contact_prob: expected (2,) left/right foot probabilities, got {probs.shape}")
+        q_ref = self.char.q_from_pose(pose_target, self.q[:3])
+        dyn = self._dynamics()
+        v = self.v
+
+        # --- dual PD controller (Eq. 3-6)
+        rot_err = pin.difference(self.model, self.q, q_ref)[3:]  # log(R^T R_ref) per rotational DoF
+        qdd_rot_des = c.kp_theta * rot_err - c.kd_theta * v[3:]
+        pj = np.array(c.position_joints if c.dual_pd else (0,))
+        Jp = dyn.J[pj, :3].reshape(-1, nv)  # (3P, nv)
+        r_dot = Jp @ v
+        rdd_des = c.kp_r * (v_ref[pj].reshape(-1) * dt) - c.kd_r * r_dot  # r_ref - r = v_ref dt (Eq. 4)
+        b_r = rdd_des - dyn.dJv[pj].reshape(-1)
+
+        # --- contacts (Sec. 3.2.3)
+        heights = dyn.pos[:, 1] - self.ground_y
+        cmask = self.contact_mask(heights, probs)
+        cj = np.flatnonzero(cmask)
+        nj, npts = len(cj), 4 * len(cj)
+        if nj:
+            Jl, Ja = dyn.J[cj, :3], dyn.J[cj, 3:]  # (nj, 3, nv)
+            offs = self._contact_offsets(dyn.pos, cj)  # (nj, 4, 3)
+            # Point p = joint + o (o a world offset fixed to the joint's body): J_p = J_lin - [o]x J_ang.
+            Jc = (Jl[:, None] - _skew(offs) @ Ja[:, None]).reshape(3 * npts, nv)
+            d_c = np.maximum(np.repeat(heights[cj], 4), c.min_contact_weight)
+        else:
+            Jc = np.zeros((0, nv))
+            d_c = np.zeros(0)
+
+        # --- QP (Eq. 7-12); energy sum_k w_k |A_k x - b_k|^2 -> H = sum A^T W A, g = -sum A^T W b
+        k_th, k_r = (c.k_theta ** 2, c.k_r ** 2) if c.weights_in_norm else (c.k_theta, c.k_r)
+        H_qq = k_th * np.diag(np.r_[np.zeros(3), np.ones(nv - 3)]) + k_r * (Jp.T @ Jp)
+        g_q = -k_th * np.r_[np.zeros(3), qdd_rot_des] - k_r * (Jp.T @ b_r)
+        lam_w = np.repeat(c.k_lambda * d_c, 3)
+        if c.weights_in_norm:
+            lam_w = lam_w ** 2
+        # No sliding / no penetration per contact joint (Eq. 11-12): J_j (v + qdd dt) in C_j.
+        Jj = dyn.J[cj, :3].reshape(-1, nv)
+        vj = (Jj @ v).reshape(nj, 3)
+        lo = np.empty((nj, 3))
+        hi = np.empty((nj, 3))
+        lo[:, [0, 2]], hi[:, [0, 2]] = -c.sigma, c.sigma
+        lo[:, 1] = np.maximum(-heights[cj], 0.0) / dt if c.penetration_recovery else 0.0
+        hi[:, 1] = np.inf
+        lo_s, hi_s = (lo - vj).reshape(-1), (hi - vj).reshape(-1)
+        n_l = 3 * npts
+        t_qp = time.perf_counter()
+        if c.eliminate_torques:
+            # tau = M qdd + h - Jc^T lambda: A_tau = [M, -Jc^T], b_tau = -h.
+            A_t = np.hstack([dyn.M, -Jc.T])
+            n = nv + n_l
+            H = A_t.T @ (self._w_tau[:, None] * A_t)
+            H[:nv, :nv] += H_qq
+            H[nv:, nv:] += np.diag(lam_w)
+            g = A_t.T @ (self._w_tau * dyn.h)
+            g[:nv] += g_q
+            C = np.zeros((4 * npts + 3 * nj, n))
+            C[:4 * npts, nv:] = np.kron(np.eye(npts), self._fric)
+            C[4 * npts:, :nv] = dt * Jj
+            l = np.r_[np.full(4 * npts, -np.inf), lo_s]
+            u = np.r_[np.zeros(4 * npts), hi_s]
+            t_qp = time.perf_counter()
+            res = proxsuite.proxqp.dense.solve(H, g, None, None, C, l, u, eps_abs=c.eps_abs, eps_rel=0.0)
+            x = res.x
+            qdd, lam = x[:nv], x[nv:]
+            tau = dyn.M @ qdd + dyn.h - Jc.T @ lam
+        else:
+            n = 2 * nv + n_l
+            H = np.zeros((n, n))
+            g = np.zeros(n)
+            H[:nv, :nv] = H_qq
+            g[:nv] = g_q
+            H[nv:nv + n_l, nv:nv + n_l] = np.diag(lam_w)
+            H[nv + n_l:, nv + n_l:] = np.diag(self._w_tau)
+            A = np.hstack([dyn.M, -Jc.T, -np.eye(nv)])  # M qdd - Jc^T lambda - tau = -h
+            b = -dyn.h
+            C = np.zeros((4 * npts + 3 * nj, n))
+            C[:4 * npts, nv:nv + n_l] = np.kron(np.eye(npts), self._fric)
+            C[4 * npts:, :nv] = dt * Jj
+            l = np.r_[np.full(4 * npts, -np.inf), lo_s]
+            u = np.r_[np.zeros(4 * npts), hi_s]
+            t_qp = time.perf_counter()
+            res = proxsuite.proxqp.dense.solve(H, g, A, b, C, l, u, eps_abs=c.eps_abs, eps_rel=0.0)
+            x = res.x
+            qdd, lam, tau = x[:nv], x[nv:nv + n_l], x[nv + n_l:]
+        qp_ms = (time.perf_counter() - t_qp) * 1000.0
+
+        # --- state update (Eq. 13, semi-implicit)
+        self.v = v + qdd * dt
+        self.q = pin.integrate(self.model, self.q, self.v * dt)
+        pos_new = self.joint_positions()
+        cand = np.array(c.contact_candidates)
+        depth = float(np.max(np.maximum(self.ground_y - pos_new[cand, 1], 0.0)))
+
+        grf_j = np.zeros((NUM_JOINTS, 3))
+        zmp = np.full(2, np.nan)
+        if nj:
+            lam_pts = lam.reshape(nj, 4, 3)
+            grf_j[cj] = lam_pts.sum(1)
+            fy = lam_pts[..., 1].reshape(-1)
+            if fy.sum() > 1e-6:
+                pts = (dyn.pos[cj][:, None] + offs).reshape(-1, 3)
+                zmp = (fy[:, None] * pts[:, [0, 2]]).sum(0) / fy.sum()
+        torques = np.zeros((NUM_JOINTS, 3))
+        torques[0] = tau[3:6]
+        torques[1:] = tau[6:].reshape(NUM_JOINTS - 1, 3)
+        pose, trans = self.char.pose_from_q(self.q)
+        f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
+        return PhysicsState(
+            pose_local=pose, trans=trans, joints=f32(pos_new), torques=f32(torques), residual=f32(tau[:6]),
+            grf=f32(grf_j[list(c.foot_joints)]), grf_joints=f32(grf_j),
+            contacts=torch.from_numpy(cmask[list(c.foot_joints)].copy()), contact_joints=torch.from_numpy(cmask),
+            zmp=f32(zmp), penetration_m=depth, qp_ms=qp_ms, step_ms=(time.perf_counter() - t_start) * 1000.0,
+            qp_status=str(res.info.status).rsplit(".", 1)[-1],
+        )
+
+    # ------------------------------------------------------------------ offline
+    def run(self, poses: torch.Tensor, joint_vel: torch.Tensor, contact: torch.Tensor,
+            trans0: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Offline convenience: reset at ``poses[0]``/``trans0`` and step through every frame.
+
+        Args:
+            poses: ``(T, 24, 3, 3)`` reference local rotations.
+            joint_vel: ``(T, 24, 3)`` reference world joint velocities, m/s.
+            contact: ``(T, 2)`` foot contact probabilities.
+            trans0: ``(3,)`` initial translation, m.
+
+        Returns:
+            dict of stacked tensors: ``pose_local (T, 24, 3, 3)``, ``trans (T, 3)``,
+            ``joints (T, 24, 3)``, ``torques (T, 24, 3)``, ``residual (T, 6)``, ``grf (T, 2, 3)``,
+            ``grf_joints (T, 24, 3)``, ``contacts (T, 2)``, ``zmp (T, 2)``, ``penetration_m (T,)``,
+            ``qp_ms (T,)``, ``step_ms (T,)``; plus ``ground_y`` (scalar tensor).
+        """
+        T = poses.shape[0]
+        if joint_vel.shape[0] != T or contact.shape[0] != T:
+            raise ShapeError(f"run: poses, joint_vel and contact need the same T, got {T}, "
+                             f"{joint_vel.shape[0]}, {contact.shape[0]}")
+        self.reset(poses[0], trans0)
+        states = [self.step(poses[t], joint_vel[t], contact[t]) for t in range(T)]
+        out: dict[str, torch.Tensor] = {}
+        for k in ("pose_local", "trans", "joints", "torques", "residual", "grf", "grf_joints", "contacts", "zmp"):
+            out[k] = torch.stack([getattr(s, k) for s in states])
+        for k in ("penetration_m", "qp_ms", "step_ms"):
+            out[k] = torch.tensor([getattr(s, k) for s in states], dtype=torch.float32)
+        out["ground_y"] = torch.tensor(self.ground_y)
+        return out
