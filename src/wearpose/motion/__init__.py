@@ -1,10 +1,11 @@
-"""Motion data: ``MotionSequence``, BVH and AMASS readers, retargeting to SMPL-24, resampling,
+"""Motion data: ``MotionSequence``, BVH, ASF/AMC and AMASS readers, retargeting to SMPL-24, resampling,
 and the prepared corpus store.
 
 World frame everywhere: Y up, metres, at zero pose the body faces +Z with its left at +X.
 """
 
 from wearpose.motion.amass import read_amass, save_amass
+from wearpose.motion.asf import AsfSkeleton, find_asf_for, parse_amc_text, parse_asf_text, read_asf, read_asf_amc
 from wearpose.motion.bvh import (
     BvhMotion, BvhSkeleton, bvh_forward_kinematics, end_site_positions, parse_bvh_text, read_bvh,
 )
@@ -25,7 +26,8 @@ __all__ = [
     "read_bvh", "parse_bvh_text", "BvhMotion", "BvhSkeleton", "bvh_forward_kinematics", "end_site_positions",
     "retarget_bvh", "Retargeted", "SkeletonMap", "TPose", "solve_tpose", "detect_skeleton_map", "estimate_hinge_axes",
     "bone_direction_errors", "lowest_foot_height", "RetargetError", "CMU_DAZ", "BANDAI", "BUILTIN_MAPS",
-    "read_amass", "save_amass", "read_smpl_bvh", "is_smpl_bvh",
+    "read_amass", "save_amass", "read_asf", "read_asf_amc", "parse_asf_text", "parse_amc_text", "find_asf_for",
+    "AsfSkeleton", "read_smpl_bvh", "is_smpl_bvh",
     "prepare_corpus", "CorpusStore", "data_dir", "cache_dir",
     "default_rest_joints", "template_rest_joints",
 ]

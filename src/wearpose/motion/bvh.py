@@ -86,6 +86,9 @@ class BvhMotion:
     rotations: torch.Tensor
     translations: torch.Tensor
     path: Path | None = None
+    #: Facts from the reader beyond BVH itself (ASF/AMC: ``format``, declared ``units_to_m``,
+    #: ``angle``, ``fps_assumed``); empty for BVH files.
+    meta: dict = field(default_factory=dict)
 
     @property
     def num_frames(self) -> int:
@@ -101,16 +104,17 @@ class BvhMotion:
 
 
 # ---------------------------------------------------------------------------- reading text
-def _read_text(path: Path) -> str:
+def read_text_file(path: Path, what: str = "a BVH file (.bvh or .bvh.gz)") -> str:
+    """Text of a plain or gzipped (``.gz``) file; :class:`InputFileError` naming ``what`` was expected."""
     if not path.is_file():
-        raise InputFileError(path, "file not found", "a BVH file (.bvh or .bvh.gz)")
+        raise InputFileError(path, "file not found", what)
     try:
         if path.suffix == ".gz":
             with gzip.open(path, "rt", encoding="utf-8", errors="replace") as f:
                 return f.read()
         return path.read_text(encoding="utf-8", errors="replace")
     except (OSError, EOFError, gzip.BadGzipFile) as exc:
-        raise InputFileError(path, f"cannot read the file ({exc})", "a BVH text file, optionally gzip-compressed") from exc
+        raise InputFileError(path, f"cannot read the file ({exc})", f"{what}, optionally gzip-compressed") from exc
 
 
 class _Tokens:
@@ -332,7 +336,7 @@ def read_bvh(path: str | Path) -> BvhMotion:
             wrong value count on a motion line, non-numeric value, truncated motion.
     """
     path = Path(path)
-    return parse_bvh_text(_read_text(path), path)
+    return parse_bvh_text(read_text_file(path), path)
 
 
 def bvh_forward_kinematics(motion: BvhMotion) -> tuple[torch.Tensor, torch.Tensor]:
