@@ -1,0 +1,128 @@
+"""``PipConfig``: PIP kinematics-module hyper-parameters (PIP Sec. 3.1, appendix) and data settings.
+
+Presets (:meth:`PipConfig.preset`):
+
+- ``paper``: the appendix exactly: five RNNs (P_L, P_A, R_A, V_A, C_F), each a linear+ReLU input
+  layer, two LSTM layers of width 256 and a linear output, 40 % dropout; initialisation FCNs
+  I_PL / I_VA with FC widths 256-512-1024 (1024 = hidden + cell state of the two LSTM layers);
+  60 fps input, training windows of 200 frames, batch 256, Adam. The paper trains each RNN
+  separately (and fine-tunes on DIP-IMU, which we do not have); we train the chain jointly
+  (each stage fed the previous stage's prediction), see ``docs/pip.md``.
+- ``cpu``: the same chain sized to train in about an hour on one CPU thread: LSTM width 128
+  (FCN widths 128-256-512 so the last layer is again 2 layers x (h, c) x width; 7 MB of
+  weights instead of 22), batch 16 of the paper's 200-frame windows (half-overlapping), lr 1e-3
+  with a cosine decay, 12 epochs.
+- ``tiny``: a few-second smoke-test model (tests).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any
+
+from wearpose.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class PipConfig:
+    """PIP kinematics settings.
+
+    Model: ``hidden`` LSTM width (``rnn_layers`` layers) of every RNN, ``dropout`` on each RNN's
+    input, ``init_widths`` the two hidden FC widths of I_PL / I_VA (their output is
+    ``2 * rnn_layers * hidden``), ``learned_init`` (False = zero initial LSTM states: the
+    "w/o learned init" ablation of Table 2).
+    Scales (TransPose/PIP code): accelerations divided by ``acc_scale`` (m/s^2), joint
+    velocities by ``vel_scale`` (m/s) before entering / leaving the network.
+    Losses: ``w_leaf``, ``w_joints``, ``w_rot`` (L2), ``w_vel`` (cumulative velocity loss over
+    windows ``vel_windows`` frames, TransPose Eq. 5), ``w_contact`` (binary cross-entropy).
+    Contact labels (TransPose): a foot (SMPL joints 10/11) is in contact when it moves less than
+    ``contact_speed`` m/s; additionally it must be within ``contact_height`` m of the clip's
+    lowest foot height (rules out the slow apex of a jump).
+    Data: ``rate`` Hz, ``seq_len`` frames per window, ``window_stride``, ``train_noise`` IMU
+    error model (``default`` / ``none``), ``max_train_clips`` (0 = whole train split),
+    ``val_clips`` (validation clips per epoch, 0 = all), ``seed``.
+    Optimisation: ``lr``, ``lr_schedule``, ``lr_min_factor``, ``batch_size``, ``epochs``,
+    ``grad_clip``.
+    """
+
+    hidden: int = 256
+    rnn_layers: int = 2
+    dropout: float = 0.4
+    init_widths: tuple[int, int] = (256, 512)
+    learned_init: bool = True
+    acc_scale: float = 30.0
+    vel_scale: float = 3.0
+    w_leaf: float = 1.0
+    w_joints: float = 1.0
+    w_rot: float = 1.0
+    w_vel: float = 1.0
+    w_contact: float = 1.0
+    vel_windows: tuple[int, ...] = (1, 3, 9, 27)
+    contact_speed: float = 0.48
+    contact_height: float = 0.10
+    rate: float = 60.0
+    seq_len: int = 200
+    window_stride: int = 200
+    train_noise: str = "default"
+    max_train_clips: int = 0
+    val_clips: int = 0
+    seed: int = 0
+    lr: float = 1e-3
+    lr_schedule: str = "constant"
+    lr_min_factor: float = 0.1
+    batch_size: int = 256
+    epochs: int = 100
+    grad_clip: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.hidden < 1 or self.rnn_layers < 1:
+            raise ConfigError("PipConfig: hidden >= 1 and rnn_layers >= 1 required")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ConfigError(f"PipConfig.dropout: expected 0 <= p < 1, got {self.dropout!r}")
+        if self.lr_schedule not in ("constant", "cosine"):
+            raise ConfigError(f"PipConfig.lr_schedule: expected 'constant' or 'cosine', got {self.lr_schedule!r}")
+        if self.train_noise not in ("default", "none"):
+            raise ConfigError(f"PipConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
+        if self.seq_len < 2 or self.window_stride < 1:
+            raise ConfigError("PipConfig: seq_len >= 2 and window_stride >= 1 required")
+        if len(self.init_widths) != 2:
+            raise ConfigError(f"PipConfig.init_widths: expected two widths, got {self.init_widths!r}")
+
+    @property
+    def kit(self) -> str:
+        return "imu6"
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["init_widths"] = list(self.init_widths)
+        d["vel_windows"] = list(self.vel_windows)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PipConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"PipConfig: unknown fields {unknown}; known: {sorted(known)}")
+        d = dict(d)
+        for k in ("init_widths", "vel_windows"):
+            if k in d:
+                d[k] = tuple(int(v) for v in d[k])
+        return cls(**d)
+
+    def override(self, **kw: Any) -> PipConfig:
+        """A copy with the non-None keyword values replaced."""
+        return replace(self, **{k: v for k, v in kw.items() if v is not None})
+
+    @classmethod
+    def preset(cls, name: str) -> PipConfig:
+        """``paper``, ``cpu`` or ``tiny`` (module doc)."""
+        if name == "paper":
+            return cls()
+        if name == "cpu":
+            return cls(hidden=128, init_widths=(128, 256), batch_size=16, seq_len=200, window_stride=100, lr=1e-3,
+                       lr_schedule="cosine", epochs=12, val_clips=40)
+        if name == "tiny":
+            return cls(hidden=16, init_widths=(16, 32), dropout=0.0, batch_size=4, seq_len=12, window_stride=6, lr=3e-3,
+                       epochs=2, val_clips=2, vel_windows=(1, 3))
+        raise ConfigError(f"unknown PIP config preset {name!r}; expected paper, cpu or tiny")

@@ -1,0 +1,245 @@
+"""Training data for PIP: six virtual IMUs simulated from corpus clips, with the kinematics
+module's targets, cached on disk.
+
+Per clip (sorted clip ids of one split of :class:`~wearpose.motion.CorpusStore`):
+
+1. resample to ``cfg.rate`` (60 Hz, PIP's rate);
+2. simulate kit ``imu6`` with :func:`wearpose.sensors.simulate`: orientation = the global
+   rotation of the bone the sensor is strapped to (``imu_orientation="segment"``, what
+   TransPose/PIP synthesise and what a T-pose calibration produces on real IMUs,
+   :func:`wearpose.calibration.apply_calibration`), free acceleration of the skin site by
+   TransPose's smoothed second differences, IMU error model ``cfg.train_noise``; seeds derive
+   from the clip id;
+3. normalise (TransPose/PIP, :func:`imu_features`): accelerations relative to the pelvis
+   sensor's and rotated into its frame, orientations of the 5 other sensors relative to the
+   pelvis orientation, plus the pelvis orientation itself: ``x`` ``(T, 72)``;
+4. targets in the root (pelvis joint) frame: leaf joint positions (wrists, ankles, head),
+   all non-root joint positions, root-relative global joint rotations (6D), joint
+   velocities by PIP Eq. 14 ``v(t) = R_root(t)^T (r(t) - r(t-1)) / dt``, and foot contact
+   labels (module :class:`~wearpose.estimators.pip.config.PipConfig` doc).
+
+Everything is stored frame-concatenated in one tensor file under
+``<cache>/estimators/pip/<split>-<fingerprint[:16]>.pt`` keyed by the fingerprint of the clip
+ids and all simulation settings, so epochs never re-simulate.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+import torch
+
+from wearpose.body.skeleton import JOINT_INDEX
+from wearpose.estimators.checkpoint import fingerprint
+from wearpose.estimators.empose.data import clip_seed, num_batches
+from wearpose.estimators.pip.config import PipConfig
+from wearpose.geometry import matrix_to_rot6d
+
+DATA_VERSION = 2
+#: Leaf joints of P_L (PIP Sec. 3.1: wrists, ankles and head), SMPL indices.
+LEAF_JOINTS: tuple[int, ...] = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"], JOINT_INDEX["left_ankle"],
+                                JOINT_INDEX["right_ankle"], JOINT_INDEX["head"])
+#: Foot joints whose contact C_F predicts (left, right), SMPL indices (TransPose labels joints 10/11).
+FOOT_JOINTS: tuple[int, int] = (JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"])
+NUM_SENSORS = 6
+#: Frames cut from each end of a simulated clip (:func:`simulate_clip`): TransPose's
+#: acceleration stencil half-width at 60 Hz.
+EDGE_FRAMES = 4
+INPUT_DIM = NUM_SENSORS * 12
+
+
+def imu_features(acc: torch.Tensor, ori: torch.Tensor, acc_scale: float) -> torch.Tensor:
+    """TransPose/PIP input normalisation.
+
+    Args:
+        acc: ``(..., 6, 3)`` free accelerations, world frame, m/s^2, kit ``imu6`` order (pelvis last).
+        ori: ``(..., 6, 3, 3)`` bone orientations ``R_WB`` (after T-pose calibration).
+        acc_scale: accelerations are divided by it (m/s^2).
+
+    Returns:
+        ``(..., 72)``: 18 accelerations ``R_root^T [a_i - a_root ..., a_root] / acc_scale`` then 54
+        rotation-matrix entries ``[R_root^T R_i ..., R_root]`` (row-major).
+    """
+    Rr = ori[..., 5:, :, :]
+    a = torch.cat([acc[..., :5, :] - acc[..., 5:, :], acc[..., 5:, :]], dim=-2)
+    a = (Rr.transpose(-1, -2) @ a.unsqueeze(-1)).squeeze(-1) / acc_scale
+    R = torch.cat([Rr.transpose(-1, -2) @ ori[..., :5, :, :], Rr], dim=-3)
+    return torch.cat([a.flatten(-2), R.flatten(-3)], dim=-1)
+
+
+def root_frame_targets(pose: torch.Tensor, joints: torch.Tensor, fps: float, cfg: PipConfig
+                       ) -> dict[str, torch.Tensor]:
+    """Kinematics targets of one sequence (module doc, step 4).
+
+    Args:
+        pose: ``(T, 24, 3, 3)`` local rotations (root = world orientation); joints ``(T, 24, 3)``
+            world positions, m; fps: Hz.
+
+    Returns:
+        ``leaf`` ``(T, 15)`` m, ``joints`` ``(T, 69)`` m (joints 1..23, root frame), ``rot6``
+        ``(T, 138)`` (root-relative global rotations of joints 1..23, 6D), ``vel`` ``(T, 72)``
+        (Eq. 14, m/s divided by ``vel_scale``; frame 0 copies frame 1), ``contact`` ``(T, 2)``
+        in {0, 1}.
+    """
+    from wearpose.evaluate.metrics import root_relative_global_rotations
+
+    T = pose.shape[0]
+    RrT = pose[:, 0].transpose(-1, -2)
+    rel = (RrT[:, None] @ (joints - joints[:, :1]).unsqueeze(-1)).squeeze(-1)
+    glob = root_relative_global_rotations(pose)
+    d = torch.zeros_like(joints)
+    if T > 1:
+        d[1:] = joints[1:] - joints[:-1]
+        d[0] = d[1]
+    vel = (RrT[:, None] @ d.unsqueeze(-1)).squeeze(-1) * fps / cfg.vel_scale
+    feet = joints[:, list(FOOT_JOINTS)]
+    speed = d[:, list(FOOT_JOINTS)].norm(dim=-1) * fps
+    height = feet[..., 1] - feet[..., 1].min()
+    contact = ((speed < cfg.contact_speed) & (height < cfg.contact_height)).float()
+    return {"leaf": rel[:, list(LEAF_JOINTS)].flatten(1), "joints": rel[:, 1:].flatten(1),
+            "rot6": matrix_to_rot6d(glob[:, 1:]).flatten(1), "vel": vel.flatten(1), "contact": contact}
+
+
+def simulate_clip(motion: Any, cfg: PipConfig, body: Any, seed: int, noise: str | None = None,
+                  trim: int = EDGE_FRAMES) -> dict[str, Any]:
+    """Simulate one clip for PIP (module doc, steps 1-4).
+
+    ``trim`` frames are cut from both ends after simulating: the smoothed acceleration stencil
+    is one-sided there, and many clips begin or end with a jump into or out of a rest pose
+    (accelerations of hundreds of m/s^2 in the first frames of some CMU clips). ``motion`` in the
+    result is trimmed too; ``sim`` is not.
+
+    Returns:
+        dict: ``x`` ``(T, 72)``, the targets of :func:`root_frame_targets`, ``acc`` ``(T, 6, 3)``,
+        ``ori`` ``(T, 6, 3, 3)`` (raw simulated, kit order), ``pose`` ``(T, 24, 3, 3)``, ``trans``
+        ``(T, 3)``, ``betas`` ``(10,)``, ``world_joints`` ``(T, 24, 3)``, ``motion`` (resampled),
+        ``sim`` the :class:`~wearpose.sensors.SimulationResult`.
+    """
+    from wearpose.motion import resample
+    from wearpose.sensors import simulate
+
+    m = motion if abs(motion.fps - cfg.rate) < 1e-9 else resample(motion, cfg.rate)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the kit's documented site substitutions warn per call
+        sim = simulate(m, cfg.kit, body, seed=seed, noise=noise or cfg.train_noise, rate=cfg.rate,
+                       imu_orientation="segment")
+    names = list(sim.kit.sensor_names)
+    acc = torch.stack([sim[n].acceleration for n in names], 1).float()
+    ori = torch.stack([sim[n].orientation for n in names], 1).float()
+    pose, betas, trans = m.pose.float(), m.betas.float(), m.trans.float()
+    with torch.no_grad():
+        joints = body(pose, betas, trans, return_vertices=False).joints.float()
+    T = pose.shape[0]
+    if trim > 0 and T > 2 * trim + 2:
+        cut = slice(trim, T - trim)
+        acc, ori, pose, trans, joints = acc[cut], ori[cut], pose[cut], trans[cut], joints[cut]
+        m = m.slice(trim, T - trim)
+    tg = root_frame_targets(pose, joints, cfg.rate, cfg)
+    return {"x": imu_features(acc, ori, cfg.acc_scale), **tg, "acc": acc, "ori": ori, "pose": pose, "trans": trans,
+            "betas": betas, "world_joints": joints, "motion": m, "sim": sim}
+
+
+TENSORS = ("x", "leaf", "joints", "rot6", "vel", "contact")
+
+
+@dataclass
+class PipData:
+    """One split, simulated and frame-concatenated: ``x`` ``(F, 72)`` and the targets of
+    :func:`root_frame_targets` (``leaf``, ``joints``, ``rot6``, ``vel``, ``contact``), ``starts``
+    / ``lengths`` ``(C,)`` per clip, ``clip_ids``, ``fingerprint``, ``settings``."""
+
+    x: torch.Tensor
+    leaf: torch.Tensor
+    joints: torch.Tensor
+    rot6: torch.Tensor
+    vel: torch.Tensor
+    contact: torch.Tensor
+    starts: torch.Tensor
+    lengths: torch.Tensor
+    clip_ids: list[str]
+    fingerprint: str
+    settings: dict[str, Any]
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.x.shape[0])
+
+    def windows(self, seq_len: int, stride: int) -> torch.Tensor:
+        """``(W,)`` first frame of every window of ``seq_len`` frames inside one clip."""
+        out = [torch.arange(int(s), int(s) + int(L) - seq_len + 1, max(1, stride))
+               for s, L in zip(self.starts, self.lengths) if int(L) >= seq_len]
+        return torch.cat(out) if out else torch.zeros(0, dtype=torch.long)
+
+    def batch(self, first: torch.Tensor, seq_len: int) -> dict[str, torch.Tensor]:
+        """Windows starting at ``first`` ``(B,)`` -> tensors ``(B, seq_len, ...)``."""
+        idx = first[:, None] + torch.arange(seq_len)
+        return {k: getattr(self, k)[idx] for k in TENSORS}
+
+    def iter_batches(self, seq_len: int, stride: int, batch_size: int, generator: torch.Generator | None = None,
+                     shuffle: bool = True, skip: int = 0) -> Iterator[dict[str, torch.Tensor]]:
+        """Batches of windows (shuffled by ``generator``), skipping the first ``skip`` batches."""
+        w = self.windows(seq_len, stride)
+        order = torch.randperm(len(w), generator=generator) if shuffle else torch.arange(len(w))
+        for i in range(skip, num_batches(len(w), batch_size)):
+            yield self.batch(w[order[i * batch_size:(i + 1) * batch_size]], seq_len)
+
+
+def data_settings(cfg: PipConfig, body: Any) -> dict[str, Any]:
+    """Everything that changes the simulated data (part of the fingerprint)."""
+    from wearpose.estimators.empose.data import kit_sites
+
+    return {"version": DATA_VERSION, "kit": cfg.kit, "rate": cfg.rate, "noise": cfg.train_noise, "seed": cfg.seed,
+            "acc_scale": cfg.acc_scale, "vel_scale": cfg.vel_scale, "contact_speed": cfg.contact_speed,
+            "contact_height": cfg.contact_height, "body_asset": body.asset_id, "orientation": "segment",
+            "sites": kit_sites(cfg.kit, body)}
+
+
+def build_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, limit: int | None = None,
+                cache_root: str | Path | None = None, progress: Any = None) -> PipData:
+    """Simulate (or load from the cache) one corpus split.
+
+    Args:
+        split: ``train`` / ``val`` / ``test``.
+        cfg: data settings; body: the body model the sensors are simulated on.
+        store: a :class:`~wearpose.motion.CorpusStore` (default: the prepared cache).
+        limit: ``limit`` clips only, evenly spread over the sorted ids (the sorted order groups
+            clips by source and motion type, so a prefix would be one kind of motion).
+        cache_root: directory of the tensor cache (default ``<corpus cache>/estimators/pip``).
+        progress: optional callable ``progress(done, total)``.
+    """
+    from wearpose.motion import CorpusStore
+
+    store = store or CorpusStore()
+    ids = store.clips(split=split)
+    if limit and limit < len(ids):
+        ids = [ids[int(i * len(ids) / limit)] for i in range(limit)]
+    settings = data_settings(cfg, body)
+    fp = fingerprint(ids, {**settings, "split": split})
+    root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "pip"
+    path = root / f"{split}-{fp[:16]}.pt"
+    if path.is_file():
+        d = torch.load(path, weights_only=True)
+        return PipData(**{k: d[k] for k in (*TENSORS, "starts", "lengths")}, clip_ids=list(d["clip_ids"]),
+                       fingerprint=fp, settings=settings)
+    cols: dict[str, list[torch.Tensor]] = {k: [] for k in TENSORS}
+    starts, lengths, total = [], [], 0
+    for c, cid in enumerate(ids):
+        r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed, "pip"))
+        for k in TENSORS:
+            cols[k].append(r[k])
+        T = int(r["x"].shape[0])
+        starts.append(total)
+        lengths.append(T)
+        total += T
+        if progress is not None:
+            progress(c + 1, len(ids))
+    d = {k: torch.cat(v) for k, v in cols.items()}
+    d.update(starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save({**d, "clip_ids": ids, "fingerprint": fp}, tmp)
+    tmp.replace(path)
+    return PipData(**d, clip_ids=ids, fingerprint=fp, settings=settings)

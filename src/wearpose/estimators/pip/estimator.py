@@ -1,0 +1,362 @@
+"""``PipEstimator``: PIP (kinematics RNN chain + optional physics optimizer) behind the
+:class:`~wearpose.estimators.Estimator` protocol.
+
+Input: kit ``imu6`` (left/right forearm, left/right lower leg, head, pelvis) at 60 Hz, in
+canonical form (orientation ``R_WS``, free acceleration in the world frame). The network needs
+*bone* orientations in wearpose's world (the subject faced +Z at calibration):
+
+- a recording with ``meta["orientation_frame"] == "segment"`` is used as is (simulated with
+  ``imu_orientation="segment"``, or already passed through
+  :func:`wearpose.calibration.apply_calibration`);
+- a recording carrying a ``tpose``/``ipose`` calibration in ``meta["calibration"]`` is
+  calibrated here (:func:`~wearpose.calibration.apply_calibration`);
+- otherwise the estimator runs PIP's T-pose calibration itself on the first
+  ``calibration_window`` seconds (the wearer must stand in a T-pose then; PIP Sec. 3.1), or,
+  with ``calibration_window=None``, uses the orientations as bone orientations with a warning.
+
+Masked input: a dropped sample is held at the sensor's last valid value; frames with any
+dropped sensor are ``valid = False``.
+
+Initial state (Sec. 3.1.2, "we assume the initial pose of the subject is known, which can be
+obtained from the calibration step"): :meth:`set_initial_state` (pose, velocities,
+translation); default a T-pose at rest at the origin. ``learned_init`` off (or a model trained
+without I_PL / I_VA) starts every LSTM from zeros.
+
+Options (the ablations of Table 2): ``physics`` (False: translation by integrating the
+estimated root velocity, no torques/forces), ``dual_pd`` (False: single PD controller).
+
+Output: ``extras["frame"] = "world"``; root orientation = the pelvis IMU's; ``trans`` the
+root translation; ``extras``: ``contacts`` ``(T, 2)`` probabilities, ``joint_vel`` ``(T, 24, 3)``
+world m/s, and with physics ``torques`` ``(T, 24, 3)`` N m, ``grf`` ``(T, 2, 3)`` N,
+``contact_flags``, ``qp_ms``, ``penetration_m``, ``kin_ms``.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from wearpose.errors import ShapeError
+from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
+from wearpose.estimators.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from wearpose.estimators.empose.data import hold_invalid
+from wearpose.estimators.pip.config import PipConfig
+from wearpose.estimators.pip.data import LEAF_JOINTS, imu_features
+from wearpose.estimators.pip.model import PipNet
+from wearpose.estimators.registry import register_estimator
+from wearpose.geometry import rot6d_to_matrix
+
+
+def physics_available() -> bool:
+    """True when :mod:`wearpose.physics` provides the optimizer PIP drives."""
+    try:
+        import wearpose.physics as ph
+    except ImportError:
+        return False
+    return all(hasattr(ph, n) for n in ("PhysicsCharacter", "PhysicsConfig", "PhysicsOptimizer"))
+
+
+@register_estimator("pip")
+class PipEstimator(Estimator):
+    """PIP (see module doc).
+
+    Args:
+        config: :class:`PipConfig` (default: the ``cpu`` preset).
+        body: :class:`~wearpose.body.BodyModel` (default: the embedded asset).
+        physics: run the physics optimizer (needs :mod:`wearpose.physics`).
+        dual_pd: dual PD controller (False: single PD, Table 2 ablation).
+        learned_init: use I_PL / I_VA at the start (only if the model has them).
+        betas: ``(10,)`` subject shape (default zeros; the recording's ``subject["betas"]`` wins).
+        calibration_window: ``(start_s, stop_s)`` of a T-pose for the built-in calibration of
+            uncalibrated recordings, or None.
+    """
+
+    name = "pip"
+    causal = True
+    lookahead = 0
+
+    def __init__(self, config: PipConfig | None = None, body: Any = None, *, physics: bool = True, dual_pd: bool = True,
+                 learned_init: bool = True, betas: Any = None, calibration_window: tuple[float, float] | None = (0.0, 1.0),
+                 device: str | torch.device = "cpu") -> None:
+        from wearpose.body import BodyModel
+        from wearpose.sensors import get_kit
+
+        self.config = config or PipConfig.preset("cpu")
+        self.device = torch.device(device)
+        self.body = (body or BodyModel()).to(self.device)
+        self.kit_name = self.config.kit
+        self.sensor_names = get_kit(self.kit_name).sensor_names
+        self.body_asset_id = self.body.asset_id
+        self.fps = float(self.config.rate)
+        self.model = PipNet(self.config).to(self.device)
+        self.physics = bool(physics)
+        self.dual_pd = bool(dual_pd)
+        self.learned_init = bool(learned_init)
+        self.calibration_window = calibration_window
+        self.betas = torch.zeros(10) if betas is None else torch.as_tensor(betas, dtype=torch.float32).reshape(10)
+        self.data_fingerprint = ""
+        self.train_command = ""
+        self.meta: dict[str, Any] = {}
+        self._init: dict[str, torch.Tensor] | None = None
+        self._optimizer: Any = None
+        self._opt_key: Any = None
+        self.reset()
+
+    def to(self, device: str | torch.device) -> PipEstimator:
+        self.device = torch.device(device)
+        self.model.to(self.device)
+        self.body.to(self.device)
+        return self
+
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
+        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name,
+                          sensors=list(self.sensor_names), body_asset=self.body_asset_id,
+                          weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
+                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
+                          meta={**self.meta, **(meta or {})}, train_state=train_state)
+
+    def save(self, path: str | Path) -> Path:
+        return save_checkpoint(self.checkpoint(), path)
+
+    @classmethod
+    def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
+             map_location: str | torch.device = "cpu", **options: Any) -> PipEstimator:
+        """Read a checkpoint; ``options`` are the constructor's (``physics``, ``dual_pd``,
+        ``learned_init``, ``betas``, ``calibration_window``)."""
+        ck = load_checkpoint(path, map_location)
+        ck.check(method=cls.name, kit=kit, body_asset=getattr(body, "asset_id", None), path=path)
+        if body is None:
+            from wearpose.body import BodyModel
+
+            body = BodyModel()
+            ck.check(body_asset=body.asset_id, path=path)
+        est = cls(PipConfig.from_dict(ck.config), body=body, device=map_location, **options)
+        est.model.load_state_dict(ck.weights)
+        est.data_fingerprint, est.train_command, est.meta = ck.data_fingerprint, ck.train_command, dict(ck.meta)
+        return est
+
+    def fit(self, *args: Any, **kwargs: Any) -> Any:
+        """Train (see :func:`wearpose.estimators.pip.train.train_pip`)."""
+        from wearpose.estimators.pip.train import train_pip
+
+        return train_pip(self, *args, **kwargs)
+
+    # ------------------------------------------------------------------ initial state
+    @torch.no_grad()
+    def set_initial_state(self, pose: torch.Tensor | None = None, joint_vel: torch.Tensor | None = None,
+                          trans: torch.Tensor | None = None, betas: torch.Tensor | None = None) -> None:
+        """The subject's known state at the first frame (Sec. 3.1.2).
+
+        Args:
+            pose: ``(24, 3, 3)`` local rotations (default: T-pose facing +Z).
+            joint_vel: ``(24, 3)`` joint velocities, root frame, m/s (PIP Eq. 14; default 0).
+            trans: ``(3,)`` root translation, m (default 0).
+            betas: ``(10,)`` shape (default: the estimator's).
+        """
+        if betas is not None:
+            self.betas = torch.as_tensor(betas, dtype=torch.float32).reshape(10)
+        pose = torch.eye(3).repeat(24, 1, 1) if pose is None else torch.as_tensor(pose, dtype=torch.float32)
+        if pose.shape != (24, 3, 3):
+            raise ShapeError(f"set_initial_state: pose must be (24, 3, 3), got {tuple(pose.shape)}")
+        trans = torch.zeros(3) if trans is None else torch.as_tensor(trans, dtype=torch.float32).reshape(3)
+        j = self.body(pose[None].to(self.device), self.betas[None].to(self.device), trans[None].to(self.device),
+                      return_vertices=False).joints[0].cpu()
+        rel = pose[0].T @ (j - j[:1]).T
+        leaf = rel.T[list(LEAF_JOINTS)].reshape(15)
+        vel = torch.zeros(72) if joint_vel is None else torch.as_tensor(joint_vel, dtype=torch.float32).reshape(72)
+        self._init = {"pose": pose, "trans": trans, "leaf": leaf, "vel": vel / self.config.vel_scale}
+        self.reset()
+
+    def _initial(self) -> dict[str, torch.Tensor]:
+        if self._init is None:
+            self.set_initial_state()
+        assert self._init is not None
+        return self._init
+
+    # ------------------------------------------------------------------ inputs
+    def _bone_recording(self, recording: Any) -> Any:
+        missing = [n for n in self.sensor_names if n not in recording.names]
+        if missing:
+            raise ShapeError(f"recording lacks sensors {missing} of kit {self.kit_name!r} (has {list(recording.names)})")
+        rec = recording.to_canonical()
+        for n in self.sensor_names:
+            s = rec.sensor(n)
+            if s.kind not in ("imu", "mimu") or s.orientation is None or s.acceleration is None:
+                raise ShapeError(f"sensor {n!r}: PIP needs an IMU with orientation and acceleration, got kind {s.kind!r}")
+            if abs(float(s.info.rate) - self.fps) > 1e-3 * self.fps:
+                raise ShapeError(f"sensor {n!r} runs at {s.info.rate} Hz; PIP was trained at {self.fps:g} Hz (resample first)")
+        meta = rec.meta or {}
+        if meta.get("orientation_frame") == "segment":
+            return rec
+        from wearpose.calibration import CalibrationResult, apply_calibration, calibrate
+
+        cal = meta.get("calibration")
+        if isinstance(cal, dict) and cal.get("method") in ("tpose", "ipose"):
+            return apply_calibration(rec, CalibrationResult.from_dict(cal))
+        if self.calibration_window is not None:
+            res = calibrate(rec.select(self.sensor_names), "tpose", body=None, window=self.calibration_window)
+            return apply_calibration(rec, res)
+        warnings.warn("PIP: recording is neither calibrated nor marked orientation_frame='segment'; using the IMU "
+                      "orientations as bone orientations", stacklevel=3)
+        return rec
+
+    def _inputs(self, recording: Any) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        rec = self._bone_recording(recording)
+        grid = rec.on_common_grid(self.sensor_names)
+        valid = torch.as_tensor(grid.valid)
+        acc = torch.as_tensor(np.nan_to_num(grid.channels["acceleration"]), dtype=torch.float32)
+        ori = torch.as_tensor(grid.channels["orientation"], dtype=torch.float32)
+        acc, ori = hold_invalid(acc, ori, valid)
+        subj = recording.subject or {}
+        if subj.get("betas") is not None:
+            self.betas = torch.as_tensor(np.asarray(subj["betas"], dtype=np.float32)).reshape(10)
+        return acc, ori, valid
+
+    # ------------------------------------------------------------------ outputs
+    def _decode(self, out: dict[str, torch.Tensor], root: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Network output ``(T, ...)`` + pelvis orientation ``(T, 3, 3)`` -> local pose
+        ``(T, 24, 3, 3)``, world joint velocities ``(T, 24, 3)`` m/s, contact probabilities ``(T, 2)``."""
+        from wearpose.body.kinematics import global_to_local
+
+        T = root.shape[0]
+        glob = torch.cat([torch.eye(3).expand(T, 1, 3, 3), rot6d_to_matrix(out["rot6"].reshape(T, 23, 6))], 1)
+        glob = root[:, None] @ glob
+        vel = (root[:, None] @ out["vel"].reshape(T, 24, 3, 1)).squeeze(-1) * self.config.vel_scale
+        return {"pose": global_to_local(glob), "vel": vel, "contact": torch.sigmoid(out["contact_logit"])}
+
+    def _physics_optimizer(self) -> Any:
+        key = (self.dual_pd, tuple(self.betas.tolist()))
+        if self._optimizer is None or self._opt_key != key:
+            from wearpose.physics import PhysicsCharacter, PhysicsConfig, PhysicsOptimizer
+
+            char = PhysicsCharacter.from_body(self.body, self.betas)
+            self._optimizer = PhysicsOptimizer(char, PhysicsConfig(fps=self.fps, dual_pd=self.dual_pd))
+            self._opt_key = key
+        return self._optimizer
+
+    def _use_physics(self) -> bool:
+        if self.physics and not physics_available():
+            warnings.warn("PIP: wearpose.physics is not available; running without physics", stacklevel=3)
+            self.physics = False
+        return self.physics
+
+    # ------------------------------------------------------------------ offline
+    @torch.no_grad()
+    def estimate(self, recording: Any) -> PoseTrack:
+        """Offline estimate: the causal chain over the whole sequence (identical to stepping
+        :meth:`step` frame by frame), then physics frame by frame or root-velocity integration."""
+        acc, ori, valid = self._inputs(recording)
+        return self.estimate_tensors(acc, ori, valid)
+
+    @torch.no_grad()
+    def estimate_tensors(self, acc: torch.Tensor, ori: torch.Tensor, valid: torch.Tensor | None = None) -> PoseTrack:
+        """:meth:`estimate` on raw tensors: ``acc`` ``(T, 6, 3)`` free acceleration (world,
+        m/s^2), ``ori`` ``(T, 6, 3, 3)`` bone orientations, kit order; ``valid`` ``(T, 6)``."""
+        T = acc.shape[0]
+        valid = torch.ones(T, 6, dtype=torch.bool) if valid is None else valid
+        init = self._initial()
+        self.model.eval()
+        x = imu_features(acc, ori, self.config.acc_scale).to(self.device)
+        t0 = time.perf_counter()
+        states = self._start_states()
+        out, _ = self.model(x[None], states)
+        kin_ms = (time.perf_counter() - t0) * 1000 / max(T, 1)
+        out = {k: v[0].cpu() for k, v in out.items()}
+        dec = self._decode(out, ori[:, 5])
+        extras: dict[str, Any] = {"frame": "world", "method": self.name, "contacts": dec["contact"],
+                                  "joint_vel": dec["vel"], "kin_ms_per_frame": kin_ms, "physics": False}
+        if self._use_physics():
+            opt = self._physics_optimizer()
+            opt.reset(init["pose"], init["trans"])
+            poses, trans, tau, grf, flags, qp, pen = [], [], [], [], [], [], []
+            for t in range(T):
+                st = opt.step(dec["pose"][t], dec["vel"][t], dec["contact"][t])
+                poses.append(torch.as_tensor(st.pose_local, dtype=torch.float32))
+                trans.append(torch.as_tensor(st.trans, dtype=torch.float32))
+                tau.append(torch.as_tensor(st.torques, dtype=torch.float32))
+                grf.append(torch.as_tensor(st.grf, dtype=torch.float32))
+                flags.append(torch.as_tensor(np.asarray(st.contacts, dtype=bool)))
+                qp.append(float(st.qp_ms))
+                pen.append(float(st.penetration_m))
+            pose, tr = torch.stack(poses), torch.stack(trans)
+            extras.update(physics=True, dual_pd=self.dual_pd, torques=torch.stack(tau), grf=torch.stack(grf),
+                          contact_flags=torch.stack(flags), qp_ms=torch.tensor(qp), penetration_m=torch.tensor(pen),
+                          kinematic_pose=dec["pose"])
+        else:
+            pose = dec["pose"]
+            step = dec["vel"][:, 0] / self.fps
+            tr = init["trans"] + torch.cumsum(torch.cat([torch.zeros(1, 3), step[1:]]), 0)
+        return PoseTrack(pose, self.betas.clone(), tr, valid.all(1), self.fps, extras=extras)
+
+    def _start_states(self) -> list[Any]:
+        init = self._initial()
+        if not (self.learned_init and self.config.learned_init):
+            return [None] * 5
+        return self.model.initial_states(init["leaf"][None].to(self.device), init["vel"][None].to(self.device))
+
+    # ------------------------------------------------------------------ online
+    def reset(self) -> None:
+        self._states: list[Any] | None = None
+        self._last: tuple[torch.Tensor, torch.Tensor] | None = None
+        self._trans: torch.Tensor | None = None
+        self._started_physics = False
+        self._integrating = False
+
+    @torch.no_grad()
+    def step(self, frame: SensorFrame) -> PoseFrame:
+        """One 60 fps frame of bone orientations and free accelerations (calibrated: see
+        :meth:`set_initial_state` and the module doc); the LSTM states carry over."""
+        names = list(frame.names)
+        try:
+            idx = [names.index(n) for n in self.sensor_names]
+        except ValueError:
+            raise ShapeError(f"frame has sensors {names}; PIP needs {list(self.sensor_names)}") from None
+        v = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
+        a = torch.as_tensor(np.nan_to_num(np.asarray(frame.channels["acceleration"])[idx]), dtype=torch.float32)
+        R = torch.as_tensor(np.asarray(frame.channels["orientation"])[idx], dtype=torch.float32)
+        hold_a, hold_R = self._last if self._last is not None else (torch.zeros_like(a), torch.eye(3).expand_as(R))
+        a, R = torch.where(v[:, None], a, hold_a), torch.where(v[:, None, None], R, hold_R)
+        self._last = (a, R)
+        return self.step_tensors(a, R, bool(v.all()), frame.timestamp)
+
+    @torch.no_grad()
+    def step_tensors(self, acc: torch.Tensor, ori: torch.Tensor, valid: bool = True, timestamp: float = 0.0) -> PoseFrame:
+        """:meth:`step` on tensors ``acc`` ``(6, 3)``, ``ori`` ``(6, 3, 3)`` (kit order, bone orientations)."""
+        init = self._initial()
+        if self._states is None:
+            self.model.eval()
+            self._states = self._start_states()
+            self._trans = init["trans"].clone()
+        t0 = time.perf_counter()
+        x = imu_features(acc, ori, self.config.acc_scale).to(self.device)
+        out, self._states = self.model(x[None, None], self._states)
+        dec = self._decode({k: v[0].cpu() for k, v in out.items()}, ori[5:6])
+        kin_ms = (time.perf_counter() - t0) * 1000
+        extras: dict[str, Any] = {"frame": "world", "contacts": dec["contact"][0], "joint_vel": dec["vel"][0],
+                                  "kin_ms": kin_ms}
+        if self._use_physics():
+            opt = self._physics_optimizer()
+            if not self._started_physics:
+                opt.reset(init["pose"], init["trans"])
+                self._started_physics = True
+            st = opt.step(dec["pose"][0], dec["vel"][0], dec["contact"][0])
+            pose = torch.as_tensor(st.pose_local, dtype=torch.float32)
+            trans = torch.as_tensor(st.trans, dtype=torch.float32)
+            extras.update(torques=torch.as_tensor(st.torques), grf=torch.as_tensor(st.grf), contact_flags=st.contacts,
+                          qp_ms=float(st.qp_ms), penetration_m=float(st.penetration_m))
+        else:
+            pose = dec["pose"][0]
+            assert self._trans is not None
+            # Frame 0 sits at the known initial translation; integration starts at frame 1
+            # (as in the offline path).
+            if self._integrating:
+                self._trans = self._trans + dec["vel"][0, 0] / self.fps
+            self._integrating = True
+            trans = self._trans.clone()
+        return PoseFrame(pose, self.betas.clone(), trans, valid, timestamp, extras=extras)

@@ -1,0 +1,159 @@
+"""PIP kinematics networks (PIP Sec. 3.1, appendix Fig. 7).
+
+Five RNNs of one structure (:class:`StageRNN`: dropout -> linear -> ReLU -> 2 LSTM layers ->
+linear), chained causally:
+
+- ``P_L``: ``x`` (72) -> leaf joint positions (15), root frame;
+- ``P_A``: ``[p_leaf, x]`` (87) -> all non-root joint positions (69), root frame;
+- ``R_A``: ``[p, x]`` (141) -> root-relative global rotations of joints 1..23 (138, 6D);
+- ``V_A``: ``[p, x]`` (141) -> joint velocities (72, Eq. 14, root frame, / ``vel_scale``);
+- ``C_F``: ``[p, x]`` (141) -> foot contact logits (2; sigmoid = probability).
+
+``P_L`` and ``V_A`` carry learned initialisation networks ``I_PL`` / ``I_VA`` (FC-ReLU-FC-ReLU-FC)
+mapping the first frame's leaf positions / joint velocities to the hidden and cell states of
+both LSTM layers (Sec. 3.1.2). With ``learned_init=False`` every LSTM starts from zeros.
+
+Training (:func:`pip_loss`): each stage is fed the previous stage's *detached* prediction, so
+each RNN is trained by its own loss only -- the paper trains the RNNs separately; feeding the
+predictions (instead of ground truth with noise, TransPose) trains them on the inputs they see
+at run time.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from wearpose.estimators.pip.config import PipConfig
+from wearpose.estimators.pip.data import INPUT_DIM, LEAF_JOINTS
+
+LEAF_DIM = 3 * len(LEAF_JOINTS)
+JOINTS_DIM = 3 * 23
+ROT_DIM = 6 * 23
+VEL_DIM = 3 * 24
+STAGES = ("pl", "pa", "ra", "va", "cf")
+
+State = tuple[torch.Tensor, torch.Tensor]
+
+
+class StageRNN(nn.Module):
+    """One PIP RNN: ``dropout -> Linear(in, H) -> ReLU -> LSTM(H, H, layers) -> Linear(H, out)``;
+    with ``init_dim`` also an initialisation FCN ``init_dim -> w1 -> w2 -> 2 * layers * H``."""
+
+    def __init__(self, in_dim: int, out_dim: int, cfg: PipConfig, init_dim: int | None = None) -> None:
+        super().__init__()
+        H, L = cfg.hidden, cfg.rnn_layers
+        self.hidden, self.layers = H, L
+        self.dropout = nn.Dropout(cfg.dropout)
+        self.linear1 = nn.Linear(in_dim, H)
+        self.rnn = nn.LSTM(H, H, L, batch_first=True)
+        self.linear2 = nn.Linear(H, out_dim)
+        self.init_net = None
+        if init_dim is not None:
+            w1, w2 = cfg.init_widths
+            self.init_net = nn.Sequential(nn.Linear(init_dim, w1), nn.ReLU(), nn.Linear(w1, w2), nn.ReLU(),
+                                          nn.Linear(w2, 2 * L * H))
+
+    def init_state(self, v: torch.Tensor) -> State:
+        """``v`` ``(B, init_dim)`` -> ``(h, c)`` each ``(layers, B, H)``."""
+        assert self.init_net is not None
+        s = self.init_net(v).view(v.shape[0], 2, self.layers, self.hidden).permute(1, 2, 0, 3)
+        return s[0].contiguous(), s[1].contiguous()
+
+    def forward(self, x: torch.Tensor, state: State | None = None) -> tuple[torch.Tensor, State]:
+        """``x`` ``(B, T, in)`` -> ``(B, T, out)`` and the final LSTM state."""
+        y, state = self.rnn(F.relu(self.linear1(self.dropout(x))), state)
+        return self.linear2(y), state
+
+
+class PipNet(nn.Module):
+    """The five-RNN kinematics chain (module doc)."""
+
+    def __init__(self, cfg: PipConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        init = cfg.learned_init
+        self.pl = StageRNN(INPUT_DIM, LEAF_DIM, cfg, LEAF_DIM if init else None)
+        self.pa = StageRNN(INPUT_DIM + LEAF_DIM, JOINTS_DIM, cfg)
+        self.ra = StageRNN(INPUT_DIM + JOINTS_DIM, ROT_DIM, cfg)
+        self.va = StageRNN(INPUT_DIM + JOINTS_DIM, VEL_DIM, cfg, VEL_DIM if init else None)
+        self.cf = StageRNN(INPUT_DIM + JOINTS_DIM, 2, cfg)
+
+    def initial_states(self, init_leaf: torch.Tensor | None, init_vel: torch.Tensor | None) -> list[State | None]:
+        """States before the first frame: learned from ``init_leaf`` ``(B, 15)`` / ``init_vel``
+        ``(B, 72)`` (scaled like the targets) when the model has init nets, else zeros (None)."""
+        states: list[State | None] = [None] * len(STAGES)
+        if self.cfg.learned_init:
+            if init_leaf is not None:
+                states[0] = self.pl.init_state(init_leaf)
+            if init_vel is not None:
+                states[3] = self.va.init_state(init_vel)
+        return states
+
+    def forward(self, x: torch.Tensor, states: list[State | None] | None = None, detach_stages: bool = False
+                ) -> tuple[dict[str, torch.Tensor], list[State | None]]:
+        """Run the chain on ``x`` ``(B, T, 72)`` from ``states`` (:meth:`initial_states`, or the
+        states a previous call returned, for online use).
+
+        Returns:
+            ``{"leaf" (B, T, 15), "joints" (B, T, 69), "rot6" (B, T, 138), "vel" (B, T, 72),
+            "contact_logit" (B, T, 2)}`` and the five final states.
+        """
+        states = list(states) if states is not None else [None] * len(STAGES)
+        leaf, states[0] = self.pl(x, states[0])
+        leaf_in = leaf.detach() if detach_stages else leaf
+        joints, states[1] = self.pa(torch.cat([leaf_in, x], -1), states[1])
+        h = torch.cat([joints.detach() if detach_stages else joints, x], -1)
+        rot6, states[2] = self.ra(h, states[2])
+        vel, states[3] = self.va(h, states[3])
+        cl, states[4] = self.cf(h, states[4])
+        return {"leaf": leaf, "joints": joints, "rot6": rot6, "vel": vel, "contact_logit": cl}, states
+
+
+def cumulative_velocity_loss(pred: torch.Tensor, gt: torch.Tensor, windows: tuple[int, ...]) -> torch.Tensor:
+    """TransPose's cumulative velocity loss: for each window length ``n``, the squared norm of
+    the error *summed* over consecutive non-overlapping ``n``-frame windows (a position drift
+    over n frames, in units of ``vel_scale / fps`` m), divided by ``n``, averaged over windows and
+    joints, summed over ``windows``.
+
+    Args:
+        pred, gt: ``(B, T, 3J)`` velocities.
+    """
+    B, T = pred.shape[:2]
+    e = (pred - gt).view(B, T, -1, 3)
+    total = pred.new_zeros(())
+    for n in windows:
+        k = T // n
+        if k == 0:
+            continue
+        s = e[:, :k * n].reshape(B, k, n, -1, 3).sum(2)
+        total = total + (s ** 2).sum(-1).mean() / n
+    return total
+
+
+def pip_loss(out: dict[str, torch.Tensor], b: dict[str, torch.Tensor], cfg: PipConfig
+             ) -> tuple[torch.Tensor, dict[str, float]]:
+    """Weighted sum of the five losses (L2 for P_L, P_A, R_A as mean squared error per
+    coordinate in cm / 6D units, cumulative for V_A, BCE for C_F); returns ``(loss, parts)``."""
+    def l2(p: torch.Tensor, g: torch.Tensor, k: float = 1.0) -> torch.Tensor:
+        return ((p - g) * k).pow(2).mean()
+
+    # Positions in decimetres so the L2 terms have similar magnitudes (each RNN has its own
+    # parameters, so the weights only matter for reporting and the shared optimiser's steps).
+    parts = {"leaf": l2(out["leaf"], b["leaf"], 10.0), "joints": l2(out["joints"], b["joints"], 10.0),
+             "rot": l2(out["rot6"], b["rot6"]),
+             "vel": cumulative_velocity_loss(out["vel"], b["vel"], cfg.vel_windows),
+             "contact": F.binary_cross_entropy_with_logits(out["contact_logit"], b["contact"])}
+    w = {"leaf": cfg.w_leaf, "joints": cfg.w_joints, "rot": cfg.w_rot, "vel": cfg.w_vel, "contact": cfg.w_contact}
+    loss = sum(w[k] * v for k, v in parts.items())
+    return loss, {f"loss_{k}": float(v.detach()) for k, v in parts.items()}
+
+
+def run_windows(net: PipNet, b: dict[str, Any], detach_stages: bool = True
+                ) -> tuple[dict[str, torch.Tensor], list[State | None]]:
+    """Forward a batch of training windows from learned initial states (first frame's targets)."""
+    states = net.initial_states(b["leaf"][:, 0], b["vel"][:, 0])
+    return net(b["x"], states, detach_stages=detach_stages)

@@ -1,0 +1,223 @@
+"""PIP kinematics module: input normalisation, targets (Eq. 14, contact labels), the RNN chain
+(shapes, causality, learned initialisation), the cumulative velocity loss, training, and the
+estimator protocol without physics. Synthetic motion, tiny preset, one thread."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+import torch
+
+from tests.sensors.sensor_testutils import smooth_motion
+from wearpose.errors import ConfigError, ShapeError
+from wearpose.estimators import PoseTrack, SensorFrame, get_estimator
+from wearpose.estimators.pip import PipConfig, PipEstimator, PipNet, cumulative_velocity_loss, imu_features, pip_loss
+from wearpose.estimators.pip.data import (
+    FOOT_JOINTS, LEAF_JOINTS, build_split, root_frame_targets, simulate_clip,
+)
+from wearpose.estimators.pip.model import run_windows
+from wearpose.estimators.pip.train import train_pip
+from wearpose.geometry import axis_angle_to_matrix, geodesic_angle, rotation_y
+from wearpose.motion import MotionSequence
+
+
+def tiny(**kw) -> PipConfig:
+    return PipConfig.preset("tiny").override(**kw)
+
+
+def motion(seed: int = 0, T: int = 60) -> MotionSequence:
+    return smooth_motion(T=T, fps=60.0, seed=seed, amp=0.3).to(torch.float32)
+
+
+class FakeStore:
+    """Duck-typed CorpusStore over synthetic clips."""
+
+    def __init__(self, root: Path, n: dict[str, int]) -> None:
+        self.root = root
+        self._ids = {s: [f"synthetic/{s}_{i:02d}" for i in range(k)] for s, k in n.items()}
+
+    def clips(self, split: str | None = None) -> list[str]:
+        return list(self._ids.get(split, []))
+
+    def load(self, clip_id: str) -> MotionSequence:
+        return motion(sum(map(ord, clip_id)) % 1000, T=50 + len(clip_id) % 5)
+
+
+def test_presets_and_config_errors() -> None:
+    p = PipConfig.preset("paper")
+    assert (p.hidden, p.rnn_layers, p.dropout, p.seq_len, p.batch_size) == (256, 2, 0.4, 200, 256)
+    assert 2 * p.rnn_layers * p.hidden == 1024  # I_PL / I_VA output: hidden + cell of 2 LSTM layers
+    assert PipConfig.from_dict(PipConfig.preset("cpu").to_dict()) == PipConfig.preset("cpu")
+    with pytest.raises(ConfigError):
+        PipConfig.preset("huge")
+    with pytest.raises(ConfigError):
+        PipConfig(dropout=1.0)
+    with pytest.raises(ConfigError):
+        PipConfig.from_dict({"hidden": 8, "nope": 1})
+
+
+def test_imu_features_are_root_relative() -> None:
+    g = torch.Generator().manual_seed(0)
+    acc = torch.randn(5, 6, 3, generator=g)
+    ori = axis_angle_to_matrix(torch.randn(5, 6, 3, generator=g))
+    x = imu_features(acc, ori, 30.0)
+    assert x.shape == (5, 72)
+    # A yaw of the whole world (heading) changes only the root orientation entries.
+    Ry = rotation_y(torch.tensor(0.7))
+    x2 = imu_features((Ry @ acc.unsqueeze(-1)).squeeze(-1), Ry @ ori, 30.0)
+    assert torch.allclose(x[:, :63], x2[:, :63], atol=1e-5)
+    assert not torch.allclose(x[:, 63:], x2[:, 63:], atol=1e-3)
+    # The leading entries are R_root^T (a_0 - a_root) / 30.
+    want = ori[:, 5].transpose(-1, -2) @ (acc[:, 0] - acc[:, 5]).unsqueeze(-1) / 30.0
+    assert torch.allclose(x[:, :3], want.squeeze(-1), atol=1e-6)
+
+
+def test_targets_eq14_and_contacts(body) -> None:
+    cfg = tiny()
+    T = 30
+    yaw = rotation_y(torch.tensor(0.5))
+    pose = torch.eye(3).repeat(T, 24, 1, 1)
+    pose[:, 0] = yaw
+    v = torch.tensor([0.3, 0.0, 0.0])  # m/s, world
+    trans = torch.arange(T, dtype=torch.float32)[:, None] / 60.0 * v
+    joints = body(pose, torch.zeros(10), trans, return_vertices=False).joints
+    tg = root_frame_targets(pose, joints, 60.0, cfg)
+    vel = tg["vel"].view(T, 24, 3) * cfg.vel_scale
+    assert torch.allclose(vel, (yaw.T @ v).expand(T, 24, 3), atol=1e-4)  # Eq. 14: root frame
+    assert tg["leaf"].shape == (T, 15) and tg["joints"].shape == (T, 69) and tg["rot6"].shape == (T, 138)
+    assert bool((tg["contact"] == 1).all())  # 0.3 m/s < 0.48 m/s, feet on the lowest level
+    fast = root_frame_targets(pose, body(pose, torch.zeros(10), trans * 3, return_vertices=False).joints, 60.0, cfg)
+    assert bool((fast["contact"] == 0).all())  # 0.9 m/s: sliding feet are not in contact
+    # One foot lifted 20 cm (static): that foot is out of contact, the other in.
+    j2 = joints.clone()
+    j2[:, FOOT_JOINTS[0], 1] += 0.2
+    j2[:, :, 0] = joints[:1, :, 0]
+    lifted = root_frame_targets(pose, j2, 60.0, cfg)["contact"]
+    assert bool((lifted[:, 0] == 0).all()) and bool((lifted[:, 1] == 1).all())
+    assert len(LEAF_JOINTS) == 5
+
+
+def test_simulate_clip_shapes_and_trim(body) -> None:
+    r = simulate_clip(motion(1, T=40), tiny(), body, seed=3)
+    assert r["x"].shape == (32, 72) and r["motion"].num_frames == 32  # 4 frames cut at each end
+    assert torch.isfinite(r["x"]).all()
+    # The bone orientation of the pelvis sensor is the root rotation (noise 0.5 deg).
+    ang = geodesic_angle(r["ori"][:, 5], r["pose"][:, 0])
+    assert float(ang.max()) < math.radians(3)
+
+
+def test_cumulative_velocity_loss() -> None:
+    gt = torch.zeros(2, 27, 72)
+    assert float(cumulative_velocity_loss(gt, gt, (1, 3, 9, 27))) == 0.0
+    bias = torch.zeros(2, 27, 72)
+    bias[..., 0::3] = 0.1  # a constant x error at every joint
+    # window n sums n errors: |n 0.1|^2 / n = 0.01 n, summed over n
+    got = float(cumulative_velocity_loss(bias, gt, (1, 3, 9, 27)))
+    assert got == pytest.approx(0.01 * (1 + 3 + 9 + 27), rel=1e-5)
+    # An alternating error cancels in longer windows: the loss penalises drift, not noise.
+    alt = torch.zeros(2, 27, 72)
+    alt[:, 0::2, 0::3] = 0.1
+    alt[:, 1::2, 0::3] = -0.1
+    assert float(cumulative_velocity_loss(alt, gt, (1, 3, 9, 27))) < got / 5
+
+
+def test_network_shapes_causality_and_init() -> None:
+    torch.manual_seed(0)
+    net = PipNet(tiny()).eval()
+    x = torch.randn(2, 10, 72)
+    leaf0, vel0 = torch.randn(2, 15), torch.randn(2, 72)
+    out, states = net(x, net.initial_states(leaf0, vel0))
+    assert out["leaf"].shape == (2, 10, 15) and out["joints"].shape == (2, 10, 69)
+    assert out["rot6"].shape == (2, 10, 138) and out["vel"].shape == (2, 10, 72) and out["contact_logit"].shape == (2, 10, 2)
+    # causal: changing frame 7 leaves frames 0..6 untouched
+    x2 = x.clone()
+    x2[:, 7] += 5.0
+    out2, _ = net(x2, net.initial_states(leaf0, vel0))
+    assert torch.allclose(out["rot6"][:, :7], out2["rot6"][:, :7]) and not torch.allclose(out["rot6"][:, 7], out2["rot6"][:, 7])
+    # frame-by-frame with carried state == whole sequence
+    st = net.initial_states(leaf0, vel0)
+    steps = []
+    for t in range(10):
+        o, st = net(x[:, t:t + 1], st)
+        steps.append(o["vel"])
+    assert torch.allclose(torch.cat(steps, 1), out["vel"], atol=1e-5)
+    # the learned initial state matters; without init nets the model has none
+    out3, _ = net(x, net.initial_states(leaf0 + 1.0, vel0))
+    assert not torch.allclose(out3["leaf"][:, 0], out["leaf"][:, 0])
+    plain = PipNet(tiny(learned_init=False))
+    assert plain.pl.init_net is None and plain.va.init_net is None
+    assert plain.initial_states(leaf0, vel0) == [None] * 5
+
+
+def test_training_reduces_loss_and_resumes(body, tmp_path: Path) -> None:
+    store = FakeStore(tmp_path / "store", {"train": 4, "val": 2})
+    cfg = tiny(lr=1e-2)
+    data = build_split("train", cfg, body, store=store, cache_root=tmp_path / "cache")
+    again = build_split("train", cfg, body, store=store, cache_root=tmp_path / "cache")  # cache hit
+    assert torch.equal(data.x, again.x) and data.fingerprint == again.fingerprint
+    torch.manual_seed(0)
+    net = PipNet(cfg)
+    b = data.batch(data.windows(cfg.seq_len, cfg.window_stride)[:4], cfg.seq_len)
+    opt = torch.optim.Adam(net.parameters(), lr=1e-2)
+    first = None
+    for _ in range(40):
+        loss, parts = pip_loss(run_windows(net, b)[0], b, cfg)
+        first = first if first is not None else float(loss.detach())
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    assert float(loss) < 0.5 * first, (first, float(loss))
+    est = PipEstimator(cfg, body=body, physics=False)
+    res = train_pip(est, tmp_path / "run", max_steps=3, quiet=True, store=store, cache_root=tmp_path / "cache")
+    assert res["steps"] == 3 and (tmp_path / "run" / "last.pt").is_file()
+    res2 = train_pip(PipEstimator(cfg, body=body, physics=False), tmp_path / "run", epochs=1, resume=True, quiet=True,
+                     store=store, cache_root=tmp_path / "cache")
+    assert res2["steps"] >= 3 and (tmp_path / "run" / "best.pt").is_file()
+
+
+def _recording(body, m: MotionSequence, cfg: PipConfig):
+    from wearpose.recording import Recording
+
+    r = simulate_clip(m, cfg, body, seed=0, noise="none", trim=0)
+    return r, Recording.from_simulation(r["sim"], r["motion"], meta={"orientation_frame": "segment"})
+
+
+def test_estimator_protocol_without_physics(body, tmp_path: Path) -> None:
+    cfg = tiny()
+    est = PipEstimator(cfg, body=body, physics=False)
+    assert get_estimator("pip") is PipEstimator and est.causal and est.sensor_names[-1] == "pelvis"
+    r, rec = _recording(body, motion(2, T=30), cfg)
+    est.set_initial_state(r["pose"][0], trans=r["trans"][0])
+    track = est.estimate(rec)
+    assert isinstance(track, PoseTrack) and track.local_rot.shape == (30, 24, 3, 3) and track.trans.shape == (30, 3)
+    assert track.extras["frame"] == "world" and track.extras["contacts"].shape == (30, 2)
+    assert torch.allclose(track.trans[0], r["trans"][0])
+    # root orientation is the pelvis IMU's
+    assert torch.allclose(track.local_rot[:, 0], r["ori"][:, 5], atol=1e-5)
+    # online == offline
+    est.reset()
+    from wearpose.estimators import iter_frames
+
+    frames = [est.step(f) for f in iter_frames(rec, est.sensor_names)]
+    assert torch.allclose(torch.stack([f.local_rot for f in frames]), track.local_rot, atol=1e-4)
+    assert torch.allclose(torch.stack([f.trans for f in frames]), track.trans, atol=1e-4)
+    # save / load round trip; options pass through load
+    p = est.save(tmp_path / "pip.pt")
+    est2 = PipEstimator.load(p, physics=False, learned_init=False)
+    assert not est2.learned_init
+    est2.set_initial_state(r["pose"][0], trans=r["trans"][0])
+    assert not torch.allclose(est2.estimate(rec).local_rot, track.local_rot)  # zero init differs
+    est3 = PipEstimator.load(p, physics=False)
+    est3.set_initial_state(r["pose"][0], trans=r["trans"][0])
+    assert torch.allclose(est3.estimate(rec).local_rot, track.local_rot, atol=1e-5)
+
+
+def test_estimator_input_errors(body) -> None:
+    est = PipEstimator(tiny(), body=body, physics=False)
+    with pytest.raises(ShapeError):
+        est.set_initial_state(torch.eye(3).repeat(23, 1, 1))
+    bad = SensorFrame(0.0, ("head",), torch.ones(1, dtype=torch.bool).numpy(), {})
+    with pytest.raises(ShapeError, match="pelvis"):
+        est.step(bad)
