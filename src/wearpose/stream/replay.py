@@ -191,7 +191,8 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         if held is not None:
             sent[held.seq] = time.perf_counter()
             await c.send_frame(held)
-        server_stats = await c.bye(subject)
+        # The estimator may be behind (frames queue, never dropped): give it time to finish.
+        server_stats = await c.bye(subject, timeout=max(600.0, 2.0 * N / st.rate))
     finally:
         c.on_pose = prev_on_pose
         if own:

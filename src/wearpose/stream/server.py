@@ -135,6 +135,7 @@ class _Subject:
     ready: asyncio.Event = field(default_factory=asyncio.Event)
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
         ("received", "estimated", "published", "malformed", "masked_sensor_samples", "decimated", "estimator_errors",
+         "abandoned_at_shutdown",
          "queue_max"), 0))
     compute_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_SAMPLES))
     server_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_SAMPLES))
@@ -201,7 +202,18 @@ class StreamServer:
             self._server.close(close_connections=False)
         ends = [self._end_subject(k) for k in list(self.subjects)]
         if ends:
-            await asyncio.wait_for(asyncio.gather(*ends, return_exceptions=True), drain_timeout)
+            try:
+                await asyncio.wait_for(asyncio.gather(*ends, return_exceptions=True), drain_timeout)
+            except asyncio.TimeoutError:
+                # The estimator is far behind: stop anyway, and say how many received frames it never estimated.
+                for k, s in list(self.subjects.items()):
+                    if s.worker is not None:
+                        s.worker.cancel()
+                    s.counts["abandoned_at_shutdown"] = max(0, s.queue.qsize() - 1)  # minus the end marker
+                    self.finished[str(k)] = s.stats()
+                    log.warning("subject %d: %d received frames not estimated (shutdown after %.0f s of draining)",
+                                k, s.counts["abandoned_at_shutdown"], drain_timeout)
+                self.subjects.clear()
         for ws in list(self.connections):
             await ws.close(1001, "server shutting down")
         if self._server is not None:

@@ -1,0 +1,186 @@
+"""Load and fault benchmark of the streaming server over loopback.
+
+Run: ``python benchmarks/stream.py [--duration 600] [--stride 1] [--malformed 0.01] ...``
+(the default 10 minutes per scenario; CI never runs it).
+
+Scenarios:
+
+- ``em12``: 12 EM sensors at 120 Hz (a held-out test clip simulated with default EM noise and a
+  synthetic subject's offsets, looped) -> ``wearpose serve --model empose12_cpu``.
+- ``imu6``: 6 IMUs at 60 Hz -> shipped weights whose card's kit is ``imu6``; reported as
+  pending when none is shipped.
+
+The server runs in its own process (``python -m wearpose.cli serve``, as a user starts it); the
+replay client (:func:`wearpose.stream.replay`) paces frames at real time, injects 1 % malformed
+messages (extra messages: no real frame is withheld), random sensor dropouts and a few swapped
+frames, and times every frame from send to its pose coming back. Latency is split into
+``compute_ms`` (the estimator's ``step``), ``queue_ms`` (waiting for the estimator, incl. the
+thread hand-off) and ``transport_ms`` (everything outside the server: encode, loopback, decode,
+the client's event loop). CPU use of both processes comes from psutil (100 % = one core).
+Writes ``benchmarks/results/stream.json`` and prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import platform
+import signal
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import psutil
+import torch
+from rich.console import Console
+from rich.table import Table
+
+from wearpose.stream import Faults, replay
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def kit_recording(clip: str, kit: str, rate: float, seed: int) -> Any:
+    """``clip`` as simulated ``kit`` sensors at ``rate`` Hz (default noise, random EM subject offsets)."""
+    from wearpose.body import BodyModel
+    from wearpose.motion import load_motion, resample
+    from wearpose.recording import Recording
+    from wearpose.sensors import simulate
+
+    body = BodyModel()
+    m = load_motion(clip, rest_joints=body.rest_joints())
+    m = resample(m, rate)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = simulate(m, kit, body, seed=seed, noise="default", offsets="random", rate=rate)
+    return Recording.from_simulation(sim, m)
+
+
+def imu_weights() -> str | None:
+    from wearpose.weights import card, list_weights
+
+    return next((w for w in list_weights() if card(w).get("kit") == "imu6"), None)
+
+
+def start_server(model: str, stride: str, workers: int, threads: int) -> tuple[subprocess.Popen, str]:
+    cmd = [sys.executable, "-m", "wearpose.cli", "serve", "--model", model, "--port", "0", "--stride", stride,
+           "--workers", str(workers), "--threads", str(threads), "--log-level", "ERROR"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    line = proc.stdout.readline()
+    if " on ws://" not in line:
+        proc.kill()
+        raise RuntimeError(f"server did not start: {line!r}")
+    return proc, line.strip().split(" on ")[-1]
+
+
+def run_scenario(name: str, rec: Any, model: str, args: argparse.Namespace) -> dict[str, Any]:
+    proc, url = start_server(model, args.stride, args.workers, args.threads)
+    sp, me = psutil.Process(proc.pid), psutil.Process()
+    c0s, c0c, t0 = sp.cpu_times(), me.cpu_times(), time.perf_counter()
+    faults = Faults(malformed=args.malformed, dropout=args.dropout, dropout_frames=(1, 30), reorder=args.reorder,
+                    seed=args.seed)
+    last = [time.perf_counter()]
+
+    def progress(k: int, n: int) -> None:
+        if time.perf_counter() - last[0] > 30:
+            last[0] = time.perf_counter()
+            print(f"  {name}: {k}/{n} frames", flush=True)
+
+    try:
+        res = asyncio.run(replay(rec, url, subject=0, fmt=args.format, realtime=True, duration=args.duration,
+                                 faults=faults, progress=progress))
+        wall = time.perf_counter() - t0
+        c1s, c1c = sp.cpu_times(), me.cpu_times()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    cpu = lambda a, b: round(100.0 * ((b.user - a.user) + (b.system - a.system)) / wall, 1)  # noqa: E731
+    res["cpu_percent_of_one_core"] = {"server": cpu(c0s, c1s), "client": cpu(c0c, c1c)}
+    res["wall_s"] = round(wall, 1)
+    res["model"] = model
+    res["server_exit_code"] = proc.returncode
+    est_hz = res["ready"]["estimator_fps"]
+    comp = res["compute_ms"]["median"]
+    period_ms = 1000.0 * res["ready"]["stride"] / res["rate_hz"]
+    res["estimator_keeps_up"] = bool(comp is not None and comp < period_ms)
+    res["notes"] = [
+        f"estimator step median {comp} ms vs frame period {period_ms:.2f} ms at {res['rate_hz']:.0f} Hz / stride "
+        f"{res['ready']['stride']}: " + ("keeps up" if res["estimator_keeps_up"] else
+                                          "SLOWER than the sensor rate: frames queue (none dropped), latency grows"),
+        f"the weights were trained at {est_hz:g} Hz; {res['ready']['note'] or 'rates match'}",
+    ]
+    return res
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--duration", type=float, default=600.0, help="seconds streamed per scenario")
+    ap.add_argument("--scenarios", default="em12,imu6")
+    ap.add_argument("--weights", default="empose12_cpu")
+    ap.add_argument("--clip", default="cmu_daz/05/05_01", help="a test-split clip (looped)")
+    ap.add_argument("--rate", type=float, default=120.0, help="EM sensor rate, Hz")
+    ap.add_argument("--stride", default="1", help="server --stride: 1 = estimate every frame")
+    ap.add_argument("--format", default="binary", choices=("binary", "json"))
+    ap.add_argument("--malformed", type=float, default=0.01)
+    ap.add_argument("--dropout", type=float, default=0.001, help="per sensor and frame: start of a 1-30 frame dropout")
+    ap.add_argument("--reorder", type=float, default=0.005)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "stream.json")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    out: dict[str, Any] = {
+        "command": "python benchmarks/stream.py " + " ".join(sys.argv[1:]),
+        "targets": {"frames_lost": 0, "latency_p99_ms": 10.0},
+        "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "load_average_1m_start": os.getloadavg()[0],
+                    "torch": torch.__version__},
+        "scenarios": {},
+    }
+    for name in args.scenarios.split(","):
+        if name == "em12":
+            rec = kit_recording(args.clip, "em12", args.rate, args.seed)
+            out["scenarios"][name] = run_scenario(name, rec, args.weights, args)
+        elif name == "imu6":
+            w = imu_weights()
+            if w is None:
+                out["scenarios"][name] = {"status": "pending: no shipped IMU (imu6) estimator weights in this build"}
+                continue
+            out["scenarios"][name] = run_scenario(name, kit_recording(args.clip, "imu6", 60.0, args.seed), w, args)
+        else:
+            raise SystemExit(f"unknown scenario {name!r}")
+    out["machine"]["load_average_1m_end"] = os.getloadavg()[0]
+    for r in out["scenarios"].values():
+        if "latency_ms" in r:
+            r["meets_targets"] = bool(r["frames_lost"] == 0 and r["latency_ms"]["p99"] is not None
+                                      and r["latency_ms"]["p99"] < 10.0)
+    tab = Table(title=f"stream benchmark, {args.duration:g} s per scenario, loopback, {args.format} packets")
+    for c in ("scenario", "sent", "poses", "lost", "e2e med/p99/max ms", "compute med/p99", "queue p99",
+              "transport p99", "cpu srv/cli %", "targets"):
+        tab.add_column(c)
+    for name, r in out["scenarios"].items():
+        if "latency_ms" not in r:
+            tab.add_row(name, *["-"] * 8, r["status"])
+            continue
+        L, C = r["latency_ms"], r["compute_ms"]
+        tab.add_row(name, str(r["frames_sent"]), str(r["poses_received"]), str(r["frames_lost"]),
+                    f"{L['median']}/{L['p99']}/{L['max']}", f"{C['median']}/{C['p99']}", str(r["queue_ms"]["p99"]),
+                    str(r["transport_ms"]["p99"]),
+                    f"{r['cpu_percent_of_one_core']['server']}/{r['cpu_percent_of_one_core']['client']}",
+                    "met" if r["meets_targets"] else "MISSED")
+    Console(width=180).print(tab)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(out, indent=2, default=str))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

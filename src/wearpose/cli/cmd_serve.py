@@ -1,0 +1,157 @@
+"""``wearpose serve`` (the streaming server), ``wearpose stream replay`` (stream a recording to
+it) and ``wearpose view-live`` / ``wearpose view-recording`` (the browser viewer).
+
+Thin: each command parses options and calls :mod:`wearpose.stream` or :mod:`wearpose.viewer`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from pathlib import Path
+from typing import Any, Optional
+
+import typer
+from rich.table import Table
+
+from wearpose.cli.app import _emit, app, console, err_console
+
+stream_app = typer.Typer(help="Clients of the streaming server (see wearpose serve).\n\n"
+                              "Example: wearpose stream replay out/rec.npz --url ws://127.0.0.1:8765",
+                         no_args_is_help=True)
+app.add_typer(stream_app, name="stream")
+
+
+def _stride(value: str) -> int | str:
+    if value == "auto":
+        return value
+    try:
+        n = int(value)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise typer.BadParameter(f"expected a positive integer or 'auto', got {value!r}", param_hint="--stride")
+    return n
+
+
+@app.command()
+def serve(
+    model: str = typer.Option("empose12_cpu", help="Shipped weights name (wearpose.weights) or a checkpoint file."),
+    method: Optional[str] = typer.Option(None, help="Estimator registry name (default: from the card/checkpoint)."),
+    host: str = typer.Option("127.0.0.1", help="Interface to listen on (0.0.0.0 for the network)."),
+    port: int = typer.Option(8765, help="TCP port (0: any free port, printed at start)."),
+    reorder_window: int = typer.Option(4, help="Lateness bound: a missing frame is given up once a frame this many "
+                                               "sequence numbers newer has arrived."),
+    stride: str = typer.Option("1", help="Estimate every N-th frame: 1 (every frame), N, or auto (stream rate / "
+                                         "the estimator's trained rate)."),
+    workers: int = typer.Option(2, help="Threads running estimator steps (subjects run in parallel up to this)."),
+    threads: int = typer.Option(1, help="torch CPU threads per step."),
+    log_level: str = typer.Option("INFO", help="Python logging level."),
+    as_json: bool = typer.Option(False, "--json", help="Print the final stats as JSON at shutdown."),
+) -> None:
+    """Run the streaming server: sensor frames in, poses out (WebSocket, JSON or binary packets).
+
+    Runs until Ctrl-C / SIGTERM, then finishes the frames it has received and closes cleanly.
+    Packet formats: docs/streaming.md. Stats: send {"type": "stats"} or GET http://HOST:PORT/stats.
+
+    Example: wearpose serve --model empose12_cpu --port 8765
+    """
+    from wearpose.stream import estimator_factory, run_server
+
+    logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    factory = estimator_factory(model, method, threads)
+
+    def started(server: Any) -> None:
+        # One line a script can wait for (benchmarks/stream.py does).
+        print(f"serving {model} on {server.url}", flush=True)
+
+    final = run_server(factory, host, port, on_start=started, reorder_window=reorder_window, stride=_stride(stride),
+                       workers=workers)
+    _emit(final, as_json, lambda r: console.print(f"stopped; subjects served: {len(r['finished'])}, "
+                                                  f"malformed messages: {r['malformed_total']}"))
+
+
+@stream_app.command("replay")
+def stream_replay(
+    recording: Path = typer.Argument(..., help="A wearpose recording file (.npz)."),
+    url: str = typer.Option("ws://127.0.0.1:8765", help="Server URL."),
+    subject: int = typer.Option(0, help="Subject id (0..65535)."),
+    fmt: str = typer.Option("binary", "--format", help="Packet format: binary or json."),
+    speed: float = typer.Option(1.0, help="Playback speed (1 = real time)."),
+    duration: Optional[float] = typer.Option(None, help="Seconds to stream, looping the recording (default: once)."),
+    malformed: float = typer.Option(0.0, help="Inject a malformed message after this fraction of frames."),
+    dropout: float = typer.Option(0.0, help="Per-sensor, per-frame probability of starting a 1-30 frame dropout."),
+    reorder: float = typer.Option(0.0, help="Fraction of frames sent after their successor."),
+    seed: int = typer.Option(0, help="Seed of the injected faults."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+) -> None:
+    """Stream a recording to a running server at real time and report latency and losses.
+
+    Example: wearpose stream replay out/demo/recording.npz --speed 1 --dropout 0.001 --malformed 0.01
+    """
+    from rich.progress import Progress
+
+    from wearpose.recording import load_recording
+    from wearpose.stream import Faults, replay
+
+    if fmt not in ("binary", "json"):
+        raise typer.BadParameter(f"expected binary or json, got {fmt!r}", param_hint="--format")
+    rec = load_recording(recording)
+    faults = Faults(malformed=malformed, dropout=dropout, reorder=reorder, seed=seed)
+    with Progress(console=err_console, disable=as_json) as prog:
+        task = prog.add_task("streaming", total=None)
+        res = asyncio.run(replay(rec, url, subject=subject, fmt=fmt, speed=speed, duration=duration, faults=faults,
+                                 progress=lambda k, n: prog.update(task, completed=k, total=n)))
+
+    def render(r: dict[str, Any]) -> None:
+        t = Table(title=f"{recording.name} -> {url} (subject {subject}, {r['rate_hz']:.0f} Hz, {r['format']})")
+        t.add_column("")
+        t.add_column("value")
+        for k in ("frames_sent", "frames_expected", "poses_received", "frames_lost", "invalid_pose_frames"):
+            t.add_row(k, str(r[k]))
+        for k in ("latency_ms", "transport_ms", "server_ms", "compute_ms"):
+            s = r[k]
+            t.add_row(f"{k} median / p99 / max", f"{s['median']} / {s['p99']} / {s['max']}")
+        t.add_row("injected", str(r["injected"]))
+        console.print(t)
+
+    _emit(res, as_json, render)
+
+
+@app.command("view-live")
+def view_live(
+    url: str = typer.Option("ws://127.0.0.1:8765", help="Streaming server to subscribe to."),
+    port: int = typer.Option(8080, help="HTTP port of the viewer page."),
+    host: str = typer.Option("127.0.0.1", help="Interface of the viewer page."),
+    subject: Optional[int] = typer.Option(None, help="Only this subject (default: every subject)."),
+    body: Optional[str] = typer.Option(None, help="Body asset: default, smpl or a file path."),
+) -> None:
+    """Browser viewer of a running server's pose stream (body mesh, skeleton, sensors).
+
+    Open http://HOST:PORT in a browser. Runs until Ctrl-C.
+
+    Example: wearpose serve & wearpose view-live --port 8080 & wearpose stream replay rec.npz
+    """
+    from wearpose.viewer.live import run_live_viewer
+
+    run_live_viewer(url, host=host, port=port, subjects=None if subject is None else [subject], body=body)
+
+
+@app.command("view-recording")
+def view_recording(
+    recording: Path = typer.Argument(..., help="A wearpose recording (.npz; ground truth shown when it has one)."),
+    model: Optional[str] = typer.Option(None, help="Estimate with these shipped weights / checkpoint and show the "
+                                                   "estimate beside the ground truth."),
+    port: int = typer.Option(8080, help="HTTP port of the viewer page."),
+    host: str = typer.Option("127.0.0.1", help="Interface of the viewer page."),
+    body: Optional[str] = typer.Option(None, help="Body asset: default, smpl or a file path."),
+) -> None:
+    """Browser viewer of a recording (ground truth and/or an estimate) with a timeline.
+
+    Open http://HOST:PORT in a browser. Runs until Ctrl-C.
+
+    Example: wearpose view-recording out/demo/recording.npz --model empose12_cpu
+    """
+    from wearpose.viewer.live import run_recording_viewer
+
+    run_recording_viewer(recording, model=model, host=host, port=port, body=body)
