@@ -5,6 +5,7 @@ Public entry: :class:`PhysicsCharacter`, :class:`PhysicsConfig`, :class:`Physics
 :class:`PhysicsState`. See ``docs/physics.md``.
 """
 
+from wearpose.physics.reference import FOOT_JOINTS, KinematicReference, kinematic_reference
 from wearpose.physics.optimizer import PhysicsConfig, PhysicsOptimizer, PhysicsState
 from wearpose.physics.character import (
     BODY_DENSITY, DEFAULT_MASS_KG, SEGMENT_MASS_FRACTION, PhysicsCharacter, mesh_volume,
@@ -12,5 +13,6 @@ from wearpose.physics.character import (
 
 __all__ = [
     "PhysicsConfig", "PhysicsOptimizer", "PhysicsState",
+    "KinematicReference", "kinematic_reference", "FOOT_JOINTS",
     "PhysicsCharacter", "BODY_DENSITY", "DEFAULT_MASS_KG", "SEGMENT_MASS_FRACTION", "mesh_volume",
 ]
