@@ -175,7 +175,7 @@ def test_cli_model_option(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> No
     runner = CliRunner()
     res = runner.invoke(app, ["train", "empose", "--model", "transformer", "--out", str(tmp_path / "r")])
     assert res.exit_code != 0 and "birnn" in res.output
-    res = runner.invoke(app, ["train", "--help"])
+    res = runner.invoke(app, ["train", "empose", "--help"])
     assert "--model" in res.output
     # A real (tiny) CLI run needs the prepared corpus: route it to the fake store instead.
     import wearpose.estimators.empose.train as tr

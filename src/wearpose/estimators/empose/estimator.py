@@ -27,7 +27,7 @@ from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFram
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, load_checkpoint, save_checkpoint
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.empose.data import frame_measurements, hold_invalid
-from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, decode_omega, sensor_features
+from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, sensor_features
 from wearpose.estimators.registry import register_estimator
 
 
@@ -241,21 +241,25 @@ class EmposeEstimator(Estimator):
         self._state = None
         self._last = None
 
-    @torch.no_grad()
+    @torch.no_grad()  # not inference_mode: the axis-angle (autograd) path needs grad mode inside refine
     def step(self, frame: SensorFrame) -> PoseFrame:
         """One frame: LSTM state carried over, N LGD updates on this frame (offsets from
-        :meth:`set_offsets`, identity with a warning if never set)."""
+        :meth:`set_offsets`, identity with a warning if never set). With the 6D pose the updates
+        use the closed-form gradient (:mod:`~wearpose.estimators.empose.fastgrad`)."""
         if self._offsets is None:
             self._offsets = self._offsets_from(None)
         p, R, v = frame_measurements(frame, self.sensor_names, self._last)
         self._last = (p, R)
-        self.model.eval()
+        if self.model.training:
+            self.model.eval()
         dev = self.device
-        x = sensor_features(p, R).to(dev)
+        if self._offsets[0].device != dev:
+            self._offsets = (self._offsets[0].to(dev), self._offsets[1].to(dev))
+        p, R = p.to(dev), R.to(dev)
+        x = sensor_features(p, R)
         omega0, self._state = self.model.initial(x[None, None], self._state)
         offR, offt = self._offsets
-        outs = self.model.refine(omega0[0], x[None], p[None].to(dev), R[None].to(dev), offR[None].to(dev),
-                                 offt[None].to(dev), self.sensors, train=False)
-        rot, b = decode_omega(outs[-1]["omega"].detach(), self.model.rep)
-        return PoseFrame(rot[0].cpu(), b[0].cpu(), None, bool(v.all()), frame.timestamp,
-                         extras={"frame": "em_source", "rec_loss": float(outs[-1]["rec"][0])})
+        outs = self.model.refine(omega0[0], x[None], p[None], R[None], offR[None], offt[None], self.sensors, train=False)
+        last = outs[-1]
+        return PoseFrame(last["local_rot"][0].detach().cpu(), last["betas"][0].detach().cpu(), None, bool(v.all()), frame.timestamp,
+                         extras={"frame": "em_source", "rec_loss": float(last["rec"][0])})

@@ -89,6 +89,17 @@ class VirtualSensors:
         self.unique = list(dict.fromkeys([*sites, source_site]))
         self.index = [self.unique.index(s) for s in sites]
         self.src = self.unique.index(source_site)
+        self._lean: dict[tuple[str, torch.dtype], Any] = {}
+
+    def lean(self) -> Any:
+        """The closed-form L_r / gradient kernel for these sites on the body's current device and
+        dtype (:class:`~wearpose.estimators.empose.fastgrad.LeanSensorGrad`, built once)."""
+        from wearpose.estimators.empose.fastgrad import LeanSensorGrad
+
+        key = (str(self.body.device), self.body.dtype)
+        if key not in self._lean:
+            self._lean[key] = LeanSensorGrad(self.body, self.unique, self.index, self.src)
+        return self._lean[key]
 
     def __call__(self, local_rot: torch.Tensor, betas: torch.Tensor, off_R: torch.Tensor, off_t: torch.Tensor
                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -145,6 +156,10 @@ class LGDRNN(nn.Module):
         self.cfg = cfg
         self.rep = cfg.rep
         self.num_sensors = num_sensors
+        #: Inference (``train=False``) with the 6D pose takes the closed-form gradient of
+        #: :mod:`~wearpose.estimators.empose.fastgrad` instead of autograd (same numbers, several
+        #: times faster); False forces the autograd path (tests compare the two).
+        self.lean_inference = True
         F = num_sensors * SENSOR_FEATURES
         D = omega_dim(cfg.rep)
         self.in_dim, self.omega_dim = F, D
@@ -178,6 +193,8 @@ class LGDRNN(nn.Module):
             N + 1 dicts (n = 0..N) with ``omega`` ``(N, D)``, ``local_rot``, ``betas``, ``joints``
             ``(N, 24, 3)`` and ``rec`` ``(N,)`` = L_r at that estimate.
         """
+        if not train and self.lean_inference and self.rep == "rot6d":
+            return self._refine_lean(omega0, x, meas_p, meas_R, off_R, off_t, sensors)
         out = []
         omega = omega0
         for n in range(self.cfg.iterations + 1):
@@ -195,6 +212,22 @@ class LGDRNN(nn.Module):
             omega = omega + self.cfg.alpha * step
             if not train:
                 omega = omega.detach()
+        return out
+
+    @torch.no_grad()
+    def _refine_lean(self, omega: torch.Tensor, x: torch.Tensor, meas_p: torch.Tensor, meas_R: torch.Tensor,
+                     off_R: torch.Tensor, off_t: torch.Tensor, sensors: VirtualSensors) -> list[dict[str, torch.Tensor]]:
+        """:meth:`refine` for inference with the closed-form dL_r/dOmega (no graph)."""
+        kernel = sensors.lean()
+        out = []
+        for n in range(self.cfg.iterations + 1):
+            ctx = kernel.forward(omega, meas_p, meas_R, off_R, off_t)
+            out.append({"omega": omega, "local_rot": ctx["local_rot"], "betas": ctx["betas"], "joints": ctx["joints"],
+                        "rec": ctx["rec"]})
+            if n == self.cfg.iterations:
+                break
+            grad = kernel.backward(ctx)
+            omega = omega + self.cfg.alpha * self.update(torch.cat([grad, omega, x], dim=-1))
         return out
 
     def forward(self, x: torch.Tensor, meas_p: torch.Tensor, meas_R: torch.Tensor, off_R: torch.Tensor,

@@ -1,0 +1,99 @@
+"""The closed-form L_r gradient of the LGD-RNN inference path against autograd."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from wearpose.body import BodyModel
+from wearpose.body.asset import load_default_asset
+from wearpose.estimators import iter_frames
+from wearpose.estimators.empose import EmposeEstimator, VirtualSensors
+from wearpose.estimators.empose.data import recording_from_clip, simulate_clip
+from wearpose.estimators.empose.estimator import _sites
+from wearpose.estimators.empose.fastgrad import LeanSensorGrad
+from wearpose.estimators.empose.model import decode_omega, reconstruction_loss
+from wearpose.geometry import axis_angle_to_matrix
+from wearpose.weights import weight_path
+
+from test_empose import synthetic_motion  # tests/estimators is on sys.path (pytest rootdir mode)
+
+
+def _problem(dtype: torch.dtype, N: int = 4, S: int = 12, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    r = lambda *s, k=1.0: k * torch.randn(*s, generator=g, dtype=dtype)  # noqa: E731
+    omega = torch.cat([r(N, 120), r(N, 10, k=0.5)], 1)
+    return (omega, r(N, S, 3, k=0.3), axis_angle_to_matrix(r(N, S, 3)), axis_angle_to_matrix(r(N, S, 3, k=0.2)),
+            r(N, S, 3, k=0.02))
+
+
+def _autograd(vs: VirtualSensors, omega, mp, mR, oR, ot):
+    om = omega.clone().requires_grad_(True)
+    R, b = decode_omega(om, "rot6d")
+    p_hat, R_hat, J = vs(R, b, oR, ot)
+    rec = reconstruction_loss(p_hat, R_hat, mp, mR)
+    grad, = torch.autograd.grad(rec.sum(), om)
+    return rec.detach(), grad, J.detach(), R.detach()
+
+
+@pytest.mark.parametrize("posedirs", [False, True])
+def test_closed_form_gradient_matches_autograd_float64(posedirs: bool) -> None:
+    """L_r, joints, pose and dL_r/dOmega equal autograd through BodyModel.sites to 1e-6 (float64),
+    with and without pose blend shapes (the embedded asset has none; SMPL files do)."""
+    asset = load_default_asset()
+    if posedirs:
+        rng = np.random.default_rng(0)
+        asset = dataclasses.replace(asset, posedirs=1e-2 * rng.standard_normal((207, asset.v_template.size)))
+    body = BodyModel(asset, dtype=torch.float64)
+    sites, src = _sites("em12", body)
+    vs = VirtualSensors(body, sites, src)
+    kernel = vs.lean()
+    args = _problem(torch.float64)
+    rec, grad, J, R = _autograd(vs, *args)
+    ctx = kernel.forward(*args)
+    g = kernel.backward(ctx)
+    assert torch.allclose(ctx["rec"], rec, atol=1e-9, rtol=0)
+    assert torch.allclose(ctx["joints"], J, atol=1e-12, rtol=0)
+    assert torch.allclose(ctx["local_rot"], R, atol=1e-12, rtol=0)
+    assert float((g - grad).abs().max()) < 1e-6 * max(1.0, float(grad.abs().max()))
+    assert float(grad.abs().max()) > 1e-2  # a non-trivial gradient was compared
+    # Shared offsets (S, 3, 3) broadcast like per-frame ones (the online path passes them so).
+    ctx2 = kernel.forward(args[0], args[1], args[2], args[3][0], args[4][0])
+    rec2, _, _, _ = _autograd(vs, args[0], args[1], args[2], args[3][:1].expand_as(args[3]), args[4][:1].expand_as(args[4]))
+    assert torch.allclose(ctx2["rec"], rec2, atol=1e-9, rtol=0)
+
+
+def test_kernel_is_cached_per_device_and_dtype(body: BodyModel) -> None:
+    sites, src = _sites("em6", body)
+    vs = VirtualSensors(body, sites, src)
+    assert vs.lean() is vs.lean()
+    assert isinstance(vs.lean(), LeanSensorGrad)
+
+
+def test_shipped_checkpoint_lean_path_equals_autograd_path() -> None:
+    """Online step and offline estimate of the shipped 12-sensor model: the closed-form path gives
+    the same pose and shape as the autograd path (float32, ~1e-5)."""
+    paths = {}
+    for lean in (True, False):
+        est = EmposeEstimator.load(weight_path("empose12_cpu"))
+        est.model.lean_inference = lean
+        paths[lean] = est
+    r = simulate_clip(synthetic_motion(5, T=24), paths[True].config, paths[True].body, seed=1, noise="default")
+    rec = recording_from_clip(r, paths[True].config)
+    tracks = {k: e.estimate(rec) for k, e in paths.items()}
+    assert float((tracks[True].local_rot - tracks[False].local_rot).abs().max()) < 1e-5
+    assert float((tracks[True].betas - tracks[False].betas).abs().max()) < 1e-5
+    assert torch.allclose(tracks[True].extras["rec_loss"], tracks[False].extras["rec_loss"], atol=1e-5, rtol=1e-4)
+    for e in paths.values():
+        e.set_offsets(torch.as_tensor(r["off_R"]), torch.as_tensor(r["off_t"]))
+        e.reset()
+    for k, frame in enumerate(iter_frames(rec, paths[True].sensor_names)):
+        if k >= 6:
+            break
+        a, b = paths[True].step(frame), paths[False].step(frame)
+        assert float((a.local_rot - b.local_rot).abs().max()) < 1e-5
+        assert float((a.betas - b.betas).abs().max()) < 1e-5
+        assert not a.local_rot.requires_grad and not b.local_rot.requires_grad
