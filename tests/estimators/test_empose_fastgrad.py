@@ -97,3 +97,22 @@ def test_shipped_checkpoint_lean_path_equals_autograd_path() -> None:
         assert float((a.local_rot - b.local_rot).abs().max()) < 1e-5
         assert float((a.betas - b.betas).abs().max()) < 1e-5
         assert not a.local_rot.requires_grad and not b.local_rot.requires_grad
+
+
+def test_update_net_inference_folds_batch_norm_exactly() -> None:
+    """Eval + no-grad UpdateNet (batch norm folded into the dense layers) equals the module
+    stack, and follows later changes of the weights / running statistics."""
+    from wearpose.estimators.empose.model import UpdateNet
+
+    torch.manual_seed(0)
+    net = UpdateNet(20, 16, 3, 5, 0.2)
+    for _ in range(3):
+        net(torch.randn(8, 20))  # training mode: moves the running statistics off their init
+    net.eval()
+    x = torch.randn(4, 20)
+    with torch.no_grad():
+        assert torch.allclose(net(x), net.net(x), atol=1e-6)
+        net.net[1].running_mean += 0.5
+        net.net[0].weight.mul_(1.1)
+        assert torch.allclose(net(x), net.net(x), atol=1e-6)
+    assert net(x).requires_grad  # with grad enabled the module stack runs (training through it)

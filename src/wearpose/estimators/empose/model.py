@@ -139,8 +139,39 @@ class UpdateNet(nn.Module):
                      nn.Linear(width, width if i < layers - 1 else out_dim)]
         self.net = nn.Sequential(*mods)
 
+        self._fused: tuple[tuple[int, ...], list[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]]] | None = None
+
+    def _fused_layers(self) -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]]:
+        """Eval-mode layers with each batch norm folded into the dense layer before it:
+        ``[(W, b, prelu_weight or None), ...]``; rebuilt whenever a parameter or running
+        statistic changed (tensor version counters)."""
+        key = tuple(t._version for t in (*self.parameters(), *self.buffers()))
+        if self._fused is None or self._fused[0] != key:
+            mods = list(self.net)
+            layers, i = [], 0
+            while i < len(mods):
+                lin = mods[i]
+                W, b = lin.weight.detach(), lin.bias.detach()
+                act = None
+                if i + 1 < len(mods):
+                    bn, pr = mods[i + 1], mods[i + 2]
+                    scale = bn.weight.detach() / torch.sqrt(bn.running_var + bn.eps)
+                    W = W * scale[:, None]
+                    b = (b - bn.running_mean) * scale + bn.bias.detach()
+                    act = pr.weight.detach()
+                layers.append((W, b, act))
+                i += 4
+            self._fused = (key, layers)
+        return self._fused[1]
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x)
+        if self.training or torch.is_grad_enabled():
+            return self.net(x)
+        for W, b, act in self._fused_layers():  # inference: 2 ops per layer, no module calls
+            x = torch.nn.functional.linear(x, W, b)
+            if act is not None:
+                x = torch.nn.functional.prelu(x, act)
+        return x
 
 
 class LGDRNN(nn.Module):
