@@ -1,0 +1,146 @@
+"""``BiraeConfig``: BiRAE (Butt et al., IEEE Access 2021) hyper-parameters and data settings.
+
+Presets (:meth:`BiraeConfig.preset`):
+
+- ``paper``: Sec. IV-A / IV-E exactly: input FC 512 + ReLU + dropout 0.2, two stacked Bi-LSTM
+  layers of 512, linear mean / log-variance heads; 300-frame subsequences (truncated BPTT),
+  batch 16, Adam lr 1e-3 decayed x0.9 every 5000 steps (``lr_schedule="exp"``), gradient-norm
+  clipping 1, best-validation checkpoint (early stopping), max 2000 epochs split between the
+  clean phase and the augmented fine-tuning phase, 60 Hz.
+- ``cpu``: the same network at CPU scale for a ~45-60 min single-thread run per model on a
+  heavily shared 2-core machine: width and hidden 128 (256 measured ~3x slower per step, too
+  slow at the ~10 % of a core each run got), 240-frame subsequences, batch 16, lr 1e-3 with a
+  cosine decay per phase, 3 clean + 2 augmented epochs over all training clips, 60 validation
+  clips, 10 MC-dropout samples. Everything else as ``paper``.
+- ``tiny``: a seconds-long smoke-test model (tests).
+
+Input representations (``rep``; :mod:`.representations`): ``"6param"`` (Appendix A),
+``"3param"`` (its yaw-free subset r31, r32, r33), ``"3param_rate"`` (3-param plus the
+root-relative angular rate, with an auxiliary reconstruction loss on the rate, Sec. IV-D) and
+``"zhou6d"`` (Zhou et al.'s first two columns, Table 1's comparison row; we keep the
+exponential-map output for it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any
+
+from wearpose.errors import ConfigError
+
+REPS: tuple[str, ...] = ("6param", "3param", "3param_rate", "zhou6d")
+
+
+@dataclass(frozen=True)
+class BiraeConfig:
+    """Network, data and optimisation settings (see the module doc for the presets).
+
+    Network: ``rep`` input representation; ``width`` input FC size; ``hidden`` Bi-LSTM size per
+    direction; ``layers`` stacked Bi-LSTM layers; ``dropout`` after the input FC (also the
+    MC-dropout rate at inference); ``logvar_min`` / ``logvar_max`` clamp of the predicted
+    log-variance (rad^2, numerical safety only); ``aux_weight`` weight of the angular-rate
+    reconstruction loss (``3param_rate`` only); ``rate_scale`` factor applied to angular rates
+    (rad/s) before they enter the network (keeps them in the range of the orientation
+    parameters).
+    Data: ``rate`` Hz of the training data; ``seq_len`` subsequence length (truncated BPTT);
+    ``min_len`` shortest clip kept (frames); ``aug_*`` augmentation of the second phase (white
+    orientation noise std, impulse probability per frame and std, yaw-rate bias std in deg/s);
+    ``seed``; ``train_clips`` / ``val_clips`` first N clips of the split (0 = all).
+    Optimisation: ``lr``, ``lr_schedule`` (``exp`` = x``lr_decay`` every ``lr_decay_steps``;
+    ``cosine``; ``constant``), ``batch_size``, ``epochs_clean`` then ``epochs_aug``,
+    ``grad_clip``.
+    Inference: ``mc_samples`` M of Eq. 7-8; ``window`` (past, future) frames of the online mode
+    at ``rate`` (Sec. V-D: [130, 30] at 60 Hz).
+    """
+
+    rep: str = "6param"
+    width: int = 512
+    hidden: int = 512
+    layers: int = 2
+    dropout: float = 0.2
+    logvar_min: float = -14.0
+    logvar_max: float = 4.0
+    aux_weight: float = 1.0
+    rate_scale: float = 0.1
+    rate: float = 60.0
+    seq_len: int = 300
+    min_len: int = 200
+    aug_white_deg: float = 1.0
+    aug_impulse_prob: float = 0.002
+    aug_impulse_deg: float = 5.0
+    aug_yaw_bias_dps: float = 0.5
+    seed: int = 0
+    train_clips: int = 0
+    val_clips: int = 0
+    lr: float = 1e-3
+    lr_schedule: str = "exp"
+    lr_decay: float = 0.9
+    lr_decay_steps: int = 5000
+    lr_min_factor: float = 0.1
+    batch_size: int = 16
+    epochs_clean: int = 1000
+    epochs_aug: int = 1000
+    grad_clip: float = 1.0
+    mc_samples: int = 20
+    window: tuple[int, int] = (130, 30)
+
+    def __post_init__(self) -> None:
+        if self.rep not in REPS:
+            raise ConfigError(f"BiraeConfig.rep: expected one of {REPS}, got {self.rep!r}")
+        if self.lr_schedule not in ("exp", "cosine", "constant"):
+            raise ConfigError(f"BiraeConfig.lr_schedule: expected exp, cosine or constant, got {self.lr_schedule!r}")
+        if min(self.width, self.hidden, self.layers, self.seq_len, self.batch_size, self.mc_samples) < 1:
+            raise ConfigError("BiraeConfig: width, hidden, layers, seq_len, batch_size and mc_samples must be >= 1")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ConfigError(f"BiraeConfig.dropout: expected a probability in [0, 1), got {self.dropout!r}")
+        w = tuple(self.window)
+        if len(w) != 2 or min(w) < 0:
+            raise ConfigError(f"BiraeConfig.window: expected (past, future) frames >= 0, got {self.window!r}")
+        object.__setattr__(self, "window", (int(w[0]), int(w[1])))
+        if not (self.rate > 0 and math.isfinite(self.rate)):
+            raise ConfigError(f"BiraeConfig.rate: expected a positive rate in Hz, got {self.rate!r}")
+
+    @property
+    def kit(self) -> str:
+        return "mimu6"
+
+    @property
+    def uses_rate(self) -> bool:
+        """True when the input carries the root-relative angular rate (``3param_rate``)."""
+        return self.rep == "3param_rate"
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["window"] = list(self.window)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> BiraeConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"BiraeConfig: unknown fields {unknown}; known: {sorted(known)}")
+        d = dict(d)
+        if "window" in d:
+            d["window"] = tuple(d["window"])
+        return cls(**d)
+
+    def override(self, **kw: Any) -> BiraeConfig:
+        """A copy with the non-None keyword values replaced."""
+        return replace(self, **{k: v for k, v in kw.items() if v is not None})
+
+    @classmethod
+    def preset(cls, name: str, rep: str = "6param") -> BiraeConfig:
+        """``paper``, ``cpu`` or ``tiny`` for input representation ``rep``."""
+        paper = cls(rep=rep)
+        if name == "paper":
+            return paper
+        if name == "cpu":
+            return replace(paper, width=128, hidden=128, seq_len=240, min_len=60, lr_schedule="cosine",
+                           epochs_clean=3, epochs_aug=2, val_clips=60, mc_samples=10)
+        if name == "tiny":
+            return replace(paper, width=16, hidden=16, seq_len=32, min_len=8, batch_size=4, lr=3e-3,
+                           lr_schedule="constant", epochs_clean=1, epochs_aug=1, train_clips=4, val_clips=2,
+                           mc_samples=3)
+        raise ConfigError(f"unknown BiRAE config preset {name!r}; expected paper, cpu or tiny")

@@ -1,0 +1,326 @@
+"""``BiraeEstimator``: BiRAE behind the :class:`~wearpose.estimators.Estimator` protocol.
+
+Input: kit ``mimu6`` (left/right wrist, left/right lower leg, head, root = lower spine), each
+sensor's world orientation ``R_WS`` (DESIGN inertial canonical form; calibrated to its segment,
+BiRAE Eq. 2). Only orientations are used (no accelerations, Sec. III-C). Dropped samples are
+held at the sensor's last valid orientation; output frames resting on a dropped sample are
+``valid = False``.
+
+Output (:class:`~wearpose.estimators.PoseTrack`): local rotations of the 15 major joints from
+the predicted exponential maps, every other joint (root included) the identity:
+``extras["frame"] = "root"`` (BiRAE predicts the pose "less rotation and translation of root";
+:meth:`with_root` puts the root sensor's orientation back). Uncertainty: per joint, the RMS over
+the three exp-map components of the combined sigma (Eq. 7-8, MC-dropout with ``mc_samples``
+passes), times the post-hoc calibration factor (:mod:`.uncertainty`), radians, in
+``PoseTrack.uncertainty`` ``(T, 24)`` (0 for joints not predicted); the per-component sigmas
+are in ``extras["sigma"]`` ``(T, 15, 3)`` (combined, calibrated), ``extras["sigma_aleatoric"]``
+and ``extras["sigma_epistemic"]``, and ``extras["expmap"]`` ``(T, 15, 3)`` is the mean.
+
+Modes:
+
+- offline (:meth:`estimate`): the whole sequence through the Bi-LSTM end to end (Fig. 3a);
+- online (:meth:`step`): a sliding window of ``past`` + 1 + ``future`` frames (Fig. 3b); the
+  output for input frame ``t`` is the pose of frame ``t - future`` (``PoseFrame.timestamp`` is
+  that frame's time), so latency = ``future / fps`` + compute (:attr:`latency_s`). The first
+  ``future`` steps return ``valid=False`` placeholders. :meth:`estimate_windowed` runs the
+  same windows over a recording in batches (for evaluation).
+
+Frame rate (Sec. V-E): the recurrent model accepts any input rate; :meth:`estimate` runs at the
+recording's rate without resampling (the angular-rate input of ``3param_rate`` is in rad/s, so it
+stays consistent); the online window is given in frames at the trained rate and scaled to the
+input rate.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from wearpose.errors import ShapeError
+from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
+from wearpose.estimators.birae.config import BiraeConfig
+from wearpose.estimators.birae.model import BiRAE
+from wearpose.estimators.birae.representations import (
+    SENSORS, angular_rate, features, relative_orientations, target_to_pose,
+)
+from wearpose.estimators.birae.uncertainty import combine, mc_predict
+from wearpose.estimators.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from wearpose.estimators.registry import register_estimator
+from wearpose.body.skeleton import MAJOR_JOINTS, NUM_JOINTS
+
+
+def hold_last_valid(R: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """Replace dropped orientations ``(T, S, 3, 3)`` (``valid`` ``(T, S)``) by the last valid one
+    (the first valid one before any; identity for a sensor never valid)."""
+    T, S = valid.shape
+    if bool(valid.all()):
+        return R.clone()
+    idx = torch.arange(T).unsqueeze(1).expand(T, S)
+    last = torch.where(valid, idx, torch.full_like(idx, -1)).cummax(0).values
+    first = torch.where(valid.any(0), valid.float().argmax(0), torch.zeros(S, dtype=torch.long))
+    src = torch.where(last >= 0, last, first.unsqueeze(0).expand(T, S))
+    out = R[src, torch.arange(S).unsqueeze(0).expand(T, S)].clone()
+    never = ~valid.any(0)
+    if bool(never.any()):
+        out[:, never] = torch.eye(3, dtype=R.dtype)
+    return out
+
+
+@register_estimator("birae")
+class BiraeEstimator(Estimator):
+    """BiRAE estimator (see module doc).
+
+    Args:
+        config: :class:`BiraeConfig` (default: ``cpu`` preset, 6-param input).
+        device: torch device.
+        window: online (past, future) frames at the trained rate (default ``config.window``).
+    """
+
+    name = "birae"
+    causal = False
+    lookahead = 30  # default future window at 60 Hz; the instance attribute follows the config
+
+    def __init__(self, config: BiraeConfig | None = None, device: str | torch.device = "cpu",
+                 window: tuple[int, int] | None = None) -> None:
+        self.config = config or BiraeConfig.preset("cpu")
+        self.device = torch.device(device)
+        self.kit_name = self.config.kit
+        self.sensor_names = SENSORS
+        self.body_asset_id = "none"  # joint rotations only: no body asset in the model or its data
+        self.fps = float(self.config.rate)
+        self.model = BiRAE(self.config).to(self.device)
+        self.sigma_scale = 1.0
+        self.calibration: dict[str, Any] = {}
+        self.data_fingerprint = ""
+        self.train_command = ""
+        self.meta: dict[str, Any] = {}
+        self.mc_samples = self.config.mc_samples
+        self.seed = 0
+        self.set_window(*(window or self.config.window))
+        self.reset()
+
+    # ------------------------------------------------------------------ settings
+    def set_window(self, past: int, future: int) -> None:
+        """Online window in frames at the trained rate; ``lookahead`` = ``future``."""
+        if past < 0 or future < 0:
+            raise ShapeError(f"BiRAE window: expected (past, future) >= 0 frames, got ({past}, {future})")
+        self.window = (int(past), int(future))
+        self.lookahead = int(future)
+
+    @property
+    def latency_s(self) -> float:
+        """Algorithmic latency of :meth:`step` (the future window), seconds, excluding compute."""
+        return self.window[1] / self.fps
+
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
+        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name,
+                          sensors=list(self.sensor_names), body_asset=self.body_asset_id,
+                          weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
+                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
+                          meta={**self.meta, "sigma_scale": self.sigma_scale, "calibration": self.calibration,
+                                **(meta or {})}, train_state=train_state)
+
+    def save(self, path: str | Path) -> Path:
+        return save_checkpoint(self.checkpoint(), path)
+
+    @classmethod
+    def from_checkpoint(cls, ckpt: Checkpoint, *, kit: str | None = None, device: str | torch.device = "cpu",
+                        path: str | Path = "<checkpoint>") -> BiraeEstimator:
+        ckpt.check(method=cls.name, kit=kit, path=path)
+        est = cls(BiraeConfig.from_dict(ckpt.config), device=device)
+        ckpt.check(sensors=list(est.sensor_names), path=path)
+        est.model.load_state_dict(ckpt.weights)
+        est.data_fingerprint, est.train_command, est.meta = ckpt.data_fingerprint, ckpt.train_command, dict(ckpt.meta)
+        est.body_asset_id = ckpt.body_asset
+        est.sigma_scale = float(ckpt.meta.get("sigma_scale", 1.0))
+        est.calibration = dict(ckpt.meta.get("calibration") or {})
+        return est
+
+    @classmethod
+    def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
+             map_location: str | torch.device = "cpu") -> BiraeEstimator:
+        """Read a checkpoint (``body`` is accepted for the protocol; BiRAE's output does not
+        depend on a body asset: it predicts joint rotations only)."""
+        return cls.from_checkpoint(load_checkpoint(path, map_location), kit=kit, device=map_location, path=path)
+
+    def fit(self, *args: Any, **kwargs: Any) -> Any:
+        """Train (see :func:`wearpose.estimators.birae.train.train_birae`)."""
+        from wearpose.estimators.birae.train import train_birae
+
+        return train_birae(self, *args, **kwargs)
+
+    def finetune(self, motions: Any, out_dir: str | Path, **kwargs: Any) -> Any:
+        """Fine-tune on target-domain motions (see :func:`wearpose.estimators.birae.train.finetune`)."""
+        from wearpose.estimators.birae.train import finetune
+
+        return finetune(self, motions, out_dir, **kwargs)
+
+    # ------------------------------------------------------------------ inputs
+    def _inputs(self, recording: Any) -> tuple[torch.Tensor, torch.Tensor, float, np.ndarray]:
+        missing = [n for n in self.sensor_names if n not in recording.names]
+        if missing:
+            raise ShapeError(f"recording lacks sensors {missing} of kit {self.kit_name!r} (has {list(recording.names)})")
+        for n in self.sensor_names:
+            info = recording.sensor(n).info
+            if info.kind not in ("mimu", "imu"):
+                raise ShapeError(f"sensor {n!r}: BiRAE needs MIMU (or IMU) orientations, got kind {info.kind!r}")
+            if recording.sensor(n).orientation is None:
+                raise ShapeError(f"sensor {n!r}: no 'orientation' channel; BiRAE needs R_WS per frame")
+        grid = recording.on_common_grid(self.sensor_names)
+        valid = torch.as_tensor(grid.valid)
+        R = torch.as_tensor(np.nan_to_num(grid.channels["orientation"]), dtype=torch.float32)
+        ts = grid.timestamps
+        fps = float(recording.sensor(self.sensor_names[0]).info.rate)
+        return hold_last_valid(R, valid), valid.all(1), fps, ts
+
+    def _features(self, R_world: torch.Tensor, fps: float) -> torch.Tensor:
+        Rr = relative_orientations(R_world)
+        rate = angular_rate(Rr, fps) if self.config.uses_rate else None
+        return features(Rr, self.config.rep, rate, self.config.rate_scale)
+
+    def _track(self, pred: dict[str, torch.Tensor], valid: torch.Tensor, fps: float, mode: str) -> PoseTrack:
+        mu = pred["mu"].reshape(-1, 15, 3)
+        sig = pred["sigma"].reshape(-1, 15, 3) * self.sigma_scale
+        T = mu.shape[0]
+        unc = torch.zeros(T, NUM_JOINTS)
+        unc[:, list(MAJOR_JOINTS)] = sig.pow(2).mean(-1).sqrt()
+        return PoseTrack(target_to_pose(mu), torch.zeros(10), None, valid, fps, uncertainty=unc,
+                         extras={"frame": "root", "method": self.name, "mode": mode, "uncertainty_unit": "rad",
+                                 "uncertainty_joints": list(MAJOR_JOINTS), "expmap": mu, "sigma": sig,
+                                 "sigma_aleatoric": pred["sigma_a"].reshape(-1, 15, 3) * self.sigma_scale,
+                                 "sigma_epistemic": pred["sigma_e"].reshape(-1, 15, 3) * self.sigma_scale,
+                                 "sigma_scale": self.sigma_scale, "mc_samples": self.mc_samples,
+                                 "rep": self.config.rep})
+
+    # ------------------------------------------------------------------ offline
+    @torch.no_grad()
+    def predict(self, x: torch.Tensor, mc_samples: int | None = None) -> dict[str, torch.Tensor]:
+        """Raw prediction for features ``(B, T, D)``: ``mu``, ``sigma`` (Eq. 8), ``sigma_a``, ``sigma_e`` ``(B, T, 45)``
+        (uncalibrated). ``mc_samples`` 0 = deterministic pass, aleatoric only."""
+        M = self.mc_samples if mc_samples is None else mc_samples
+        self.model.eval()
+        if M <= 0:
+            out = self.model(x.to(self.device))
+            sa = torch.exp(0.5 * out["logvar"]).cpu()
+            return {"mu": out["mu"].cpu(), "sigma": sa, "sigma_a": sa, "sigma_e": torch.zeros_like(sa)}
+        g = torch.Generator(device=self.device).manual_seed(self.seed)
+        mus, lvs = mc_predict(self.model, x.to(self.device), M, generator=g)
+        return {k: v.cpu() for k, v in combine(mus, lvs).items()}
+
+    @torch.no_grad()
+    def estimate(self, recording: Any, mc_samples: int | None = None) -> PoseTrack:
+        """Offline, end-to-end bidirectional estimate of a whole recording (module doc)."""
+        R, ok, fps, _ = self._inputs(recording)
+        x = self._features(R, fps)[None]
+        return self._track({k: v[0] for k, v in self.predict(x, mc_samples).items()}, ok, fps, "offline")
+
+    @torch.no_grad()
+    def estimate_windowed(self, recording: Any, window: tuple[int, int] | None = None, mc_samples: int | None = None,
+                          frames: Any = None, batch: int = 64) -> PoseTrack:
+        """What :meth:`step` would output, computed in batches: for every frame ``t`` the
+        window ``[t - past, t + future]`` (clipped to the sequence) is run and its frame ``t``
+        kept. ``frames``: optional subset of frame indices (others are marked invalid and hold
+        the identity pose / zero sigma)."""
+        R, ok, fps, _ = self._inputs(recording)
+        past, fut = self._scaled_window(window or self.window, fps)
+        x = self._features(R, fps)
+        T = x.shape[0]
+        idx = torch.arange(T) if frames is None else torch.as_tensor(frames, dtype=torch.long)
+        mu = torch.zeros(T, 45)
+        sg, sa, se = torch.zeros(T, 45), torch.zeros(T, 45), torch.zeros(T, 45)
+        for a in range(0, len(idx), batch):
+            ts = idx[a:a + batch]
+            lo = (ts - past).clamp_min(0)
+            hi = (ts + fut).clamp_max(T - 1)
+            L = int((hi - lo).max()) + 1
+            gather = (lo[:, None] + torch.arange(L)).clamp_max(T - 1)
+            lengths = hi - lo + 1
+            xb = x[gather]
+            # Only the window is seen: frames beyond its end are excluded by packing.
+            self.model.eval()
+            M = self.mc_samples if mc_samples is None else mc_samples
+            pred = self._predict_packed(xb, lengths, M)
+            pos = ts - lo
+            rows = torch.arange(len(ts))
+            mu[ts] = pred["mu"][rows, pos]
+            sg[ts], sa[ts], se[ts] = pred["sigma"][rows, pos], pred["sigma_a"][rows, pos], pred["sigma_e"][rows, pos]
+        valid = ok.clone()
+        if frames is not None:
+            keep = torch.zeros(T, dtype=torch.bool)
+            keep[idx] = True
+            valid &= keep
+        return self._track({"mu": mu, "sigma": sg, "sigma_a": sa, "sigma_e": se}, valid, fps, f"window{past},{fut}")
+
+    def _predict_packed(self, xb: torch.Tensor, lengths: torch.Tensor, M: int) -> dict[str, torch.Tensor]:
+        if M <= 0:
+            out = self.model(xb.to(self.device), lengths)
+            s = torch.exp(0.5 * out["logvar"]).cpu()
+            return {"mu": out["mu"].cpu(), "sigma": s, "sigma_a": s, "sigma_e": torch.zeros_like(s)}
+        g = torch.Generator(device=self.device).manual_seed(self.seed)
+        mus, lvs = mc_predict(self.model, xb.to(self.device), M, lengths=lengths, generator=g)
+        return {k: v.cpu() for k, v in combine(mus, lvs).items()}
+
+    def _scaled_window(self, window: tuple[int, int], fps: float) -> tuple[int, int]:
+        k = fps / self.fps
+        return int(round(window[0] * k)), int(round(window[1] * k))
+
+    def with_root(self, track: PoseTrack, recording: Any) -> PoseTrack:
+        """The track with the root sensor's world orientation as root (sensor = pelvis segment)."""
+        R, _, _, _ = self._inputs(recording)
+        rot = track.local_rot.clone()
+        rot[:, 0] = R[:, list(self.sensor_names).index("root")]
+        return PoseTrack(rot, track.betas.clone(), track.trans, track.valid.clone(), track.fps, track.uncertainty,
+                         {**track.extras, "frame": "world"})
+
+    # ------------------------------------------------------------------ online
+    def reset(self) -> None:
+        self._buf: deque[tuple[float, torch.Tensor, bool]] = deque()
+        self._last_R: torch.Tensor | None = None
+        self._prev_rel: torch.Tensor | None = None
+
+    @torch.no_grad()
+    def step(self, frame: SensorFrame, fps: float | None = None) -> PoseFrame:
+        """Feed one input frame; returns the pose of the frame ``future`` steps back (module doc).
+
+        Args:
+            frame: the newest :class:`SensorFrame` (``orientation`` channel, kit sensors).
+            fps: input rate (default: the trained rate); scales the window and the angular rate.
+        """
+        fps = float(fps or self.fps)
+        names = list(frame.names)
+        try:
+            idx = [names.index(n) for n in self.sensor_names]
+        except ValueError:
+            raise ShapeError(f"frame has sensors {names}; BiRAE needs {list(self.sensor_names)}") from None
+        v = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
+        R = torch.as_tensor(np.nan_to_num(np.asarray(frame.channels["orientation"])[idx]), dtype=torch.float32)
+        hold = self._last_R if self._last_R is not None else torch.eye(3).expand_as(R)
+        R = torch.where(v[:, None, None], R, hold)
+        self._last_R = R
+        Rr = relative_orientations(R)
+        rate = None
+        if self.config.uses_rate:
+            rate = angular_rate(torch.stack([self._prev_rel if self._prev_rel is not None else Rr, Rr]), fps)[1]
+        self._prev_rel = Rr
+        past, fut = self._scaled_window(self.window, fps)
+        self._buf.append((frame.timestamp, features(Rr, self.config.rep, rate, self.config.rate_scale), bool(v.all())))
+        while len(self._buf) > past + fut + 1:
+            self._buf.popleft()
+        n = len(self._buf)
+        k = n - 1 - fut  # position of the output frame in the buffer
+        if k < 0:
+            return PoseFrame(torch.eye(3).expand(NUM_JOINTS, 3, 3).clone(), torch.zeros(10), None, False,
+                             frame.timestamp - fut / fps, extras={"frame": "root", "warming_up": True})
+        x = torch.stack([b[1] for b in self._buf])[None]
+        pred = self.predict(x)
+        mu = pred["mu"][0, k].reshape(15, 3)
+        sig = pred["sigma"][0, k].reshape(15, 3) * self.sigma_scale
+        unc = torch.zeros(NUM_JOINTS)
+        unc[list(MAJOR_JOINTS)] = sig.pow(2).mean(-1).sqrt()
+        return PoseFrame(target_to_pose(mu), torch.zeros(10), None, self._buf[k][2], self._buf[k][0], unc,
+                         extras={"frame": "root", "expmap": mu, "sigma": sig, "latency_frames": fut})

@@ -1,0 +1,285 @@
+"""BiRAE: representations, network, loss, uncertainty, data synthesis, training, fine-tuning and
+the estimator protocol (offline, online sliding window, frame rate). Synthetic motion, ``tiny``
+preset, one torch thread."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import pytest
+import torch
+
+from tests.estimators.test_empose import FakeStore, synthetic_motion
+from wearpose.errors import ConfigError, ShapeError
+from wearpose.estimators import CheckpointMismatchError, PoseTrack, get_estimator, iter_frames
+from wearpose.estimators.birae import BiraeConfig, BiraeEstimator, BiRAE, nll_loss
+from wearpose.estimators.birae.data import (
+    SCENARIOS, augmentation_noise, build_split, make_recording, sensor_orientations, synthesize,
+)
+from wearpose.estimators.birae.estimator import hold_last_valid
+from wearpose.estimators.birae.representations import (
+    angular_rate, features, input_dim, pose_to_target, relative_orientations, target_to_pose,
+)
+from wearpose.estimators.birae.uncertainty import (
+    GAUSS_1SIGMA, calibration_report, combine, coverage, fit_sigma_scale, pearson, reliability_curve,
+)
+from wearpose.geometry import axis_angle_to_matrix, rotation_x, rotation_y
+
+
+def rand_R(n: int, seed: int) -> torch.Tensor:
+    g = torch.Generator().manual_seed(seed)
+    return axis_angle_to_matrix(torch.randn(n, 3, generator=g))
+
+
+def tiny(rep: str = "6param", **kw) -> BiraeConfig:
+    return BiraeConfig.preset("tiny", rep).override(**kw)
+
+
+# --------------------------------------------------------------------------- representations
+def test_3param_is_yaw_free_and_6param_is_not() -> None:
+    """A heading error on one sensor (root upright) leaves the 3-param input unchanged only."""
+    R = rand_R(6, 0).reshape(1, 6, 3, 3)
+    R[:, 5] = rotation_x(torch.tensor(0.0))  # upright root (identity)
+    Ry = rotation_y(torch.tensor(0.7))
+    R2 = R.clone()
+    R2[:, 1] = Ry @ R[:, 1]
+    a3, b3 = features(relative_orientations(R), "3param"), features(relative_orientations(R2), "3param")
+    a6, b6 = features(relative_orientations(R), "6param"), features(relative_orientations(R2), "6param")
+    assert a3.shape == (1, 15) and a6.shape == (1, 30)
+    assert torch.allclose(a3, b3, atol=1e-6)
+    assert (a6 - b6).abs().max() > 0.1
+
+
+def test_inputs_invariant_to_a_common_world_rotation() -> None:
+    """Eq. 1: turning the whole body (all sensors) changes no representation."""
+    R = rand_R(12, 1).reshape(2, 6, 3, 3)
+    G = rand_R(1, 2)[0]
+    for rep in ("6param", "3param", "zhou6d"):
+        assert torch.allclose(features(relative_orientations(R), rep), features(relative_orientations(G @ R), rep), atol=1e-5)
+        assert features(relative_orientations(R), rep).shape[-1] == input_dim(rep)
+
+
+def test_angular_rate_recovers_a_constant_rotation_rate() -> None:
+    fps, w = 60.0, torch.tensor([0.3, -1.2, 0.5])
+    t = torch.arange(10, dtype=torch.float32)[:, None] / fps
+    Rr = axis_angle_to_matrix(t * w).reshape(10, 1, 3, 3).expand(10, 5, 3, 3)
+    r = angular_rate(Rr, fps)
+    assert r.shape == (10, 5, 3) and torch.all(r[0] == 0)
+    assert torch.allclose(r[1:], w.expand(9, 5, 3), atol=1e-4)
+    with pytest.raises(ShapeError):
+        features(Rr, "3param_rate")
+
+
+def test_expmap_target_round_trip_and_identity_elsewhere() -> None:
+    pose = synthetic_motion(3, T=5).pose
+    y = pose_to_target(pose)
+    back = target_to_pose(y)
+    assert y.shape == (5, 15, 3)
+    from wearpose.body import MAJOR_JOINTS
+
+    assert torch.allclose(back[:, list(MAJOR_JOINTS)], pose[:, list(MAJOR_JOINTS)], atol=1e-5)
+    other = [j for j in range(24) if j not in MAJOR_JOINTS]
+    assert torch.allclose(back[:, other], torch.eye(3).expand(5, len(other), 3, 3))
+
+
+# --------------------------------------------------------------------------- network and loss
+def test_network_shapes_packing_and_mc_dropout() -> None:
+    cfg = tiny("3param_rate")
+    net = BiRAE(cfg).eval()
+    x = torch.randn(3, 12, input_dim(cfg.rep))
+    out = net(x)
+    assert out["mu"].shape == (3, 12, 45) and out["logvar"].shape == (3, 12, 45) and out["aux"].shape == (3, 12, 15)
+    # A padded row gives the same outputs on its real frames as the row alone (packing).
+    lengths = torch.tensor([12, 7, 12])
+    packed = net(x, lengths)["mu"]
+    alone = net(x[1:2, :7])["mu"]
+    assert torch.allclose(packed[1, :7], alone[0], atol=1e-5)
+    # MC-dropout: reproducible for a seeded generator, different between draws, off by default.
+    g1, g2 = torch.Generator().manual_seed(1), torch.Generator().manual_seed(1)
+    a, b = net(x, mc=True, generator=g1)["mu"], net(x, mc=True, generator=g2)["mu"]
+    assert torch.equal(a, b) and not torch.allclose(a, net(x, mc=True, generator=g1)["mu"])
+    assert torch.equal(net(x)["mu"], net(x)["mu"])
+
+
+def test_nll_is_minimised_at_the_true_error_scale() -> None:
+    y = torch.zeros(1, 1, 45)
+    mu = torch.full((1, 1, 45), 0.2)
+    lv = torch.linspace(-8, 2, 201)
+    vals = torch.stack([nll_loss(mu, torch.full_like(mu, float(v)), y) for v in lv])
+    assert abs(float(lv[vals.argmin()]) - math.log(0.04)) < 0.06
+    mask = torch.tensor([[True, False]])
+    two = torch.cat([mu, mu + 100], 1), torch.zeros(1, 2, 45), torch.zeros(1, 2, 45)
+    assert torch.isclose(nll_loss(*two, mask), nll_loss(mu, torch.zeros_like(mu), y))
+
+
+# --------------------------------------------------------------------------- uncertainty
+def test_combine_follows_eq7_eq8() -> None:
+    mus = torch.tensor([[1.0], [3.0]])
+    lvs = torch.log(torch.tensor([[1.0], [3.0]]))
+    c = combine(mus, lvs)
+    assert torch.allclose(c["mu"], torch.tensor([2.0]))
+    assert torch.allclose(c["sigma_e"] ** 2, torch.tensor([1.0]))
+    assert torch.allclose(c["sigma_a"] ** 2, torch.tensor([2.0]))
+    assert torch.allclose(c["sigma"] ** 2, torch.tensor([3.0]))
+
+
+def test_sigma_scaling_calibrates_an_overconfident_gaussian() -> None:
+    g = torch.Generator().manual_seed(0)
+    sigma = 0.05 + 0.1 * torch.rand(20000, 15, 3, generator=g)
+    res = 2.5 * sigma * torch.randn(20000, 15, 3, generator=g)
+    assert coverage(res, sigma) < 0.4
+    s = fit_sigma_scale(res, sigma, "nll")
+    assert abs(s - 2.5) < 0.05
+    assert abs(coverage(res, s * sigma) - GAUSS_1SIGMA) < 0.01
+    q = fit_sigma_scale(res, sigma, "quantile")
+    assert abs(coverage(res, q * sigma) - GAUSS_1SIGMA) < 0.001
+    rep = calibration_report(res, s * sigma)
+    assert set(rep["groups"]) == {"distal", "tracking", "other"} and rep["pearson_r_sigma_error"] > 0.1
+    rel = reliability_curve(res, s * sigma)
+    assert max(abs(a - b) for a, b in zip(rel["expected"], rel["observed"])) < 0.02
+    assert math.isnan(pearson(torch.ones(4), torch.arange(4.0)))
+    with pytest.raises(ValueError):
+        fit_sigma_scale(res, sigma, "bogus")
+
+
+# --------------------------------------------------------------------------- data
+def test_synthesis_matches_the_sensor_simulator(body) -> None:
+    """Ideal orientations by FK equal ``simulate(kit mimu6, imu_orientation='segment')``."""
+    from wearpose.sensors import simulate
+
+    m = synthetic_motion(5, T=20, fps=60.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = simulate(m, "mimu6", body, noise="none", imu_orientation="segment")
+    ref = torch.stack([sim[n].orientation for n in sim.kit.sensor_names], 1).float()
+    assert torch.allclose(sensor_orientations(m.pose), ref, atol=1e-5)
+
+
+def test_scenarios_disturb_heading_as_declared() -> None:
+    m = synthetic_motion(6, T=120, fps=60.0)
+    clean = synthesize(m, 60.0, None)
+    mag = synthesize(m, 60.0, SCENARIOS["magnetic"], seed=3)
+    again = synthesize(m, 60.0, SCENARIOS["magnetic"], seed=3)
+    assert torch.equal(mag["R_world"], again["R_world"])
+    assert float(clean["yaw_error"].abs().max()) == 0.0
+    assert float(mag["yaw_error"].abs().max()) > math.radians(1.0)
+    assert clean["R_rel"].shape == (clean["target"].shape[0], 5, 3, 3)
+    assert augmentation_noise(tiny()).mag_rate == 0.0  # training never sees magnetic disturbance
+
+
+def test_hold_last_valid() -> None:
+    R = rand_R(8, 4).reshape(4, 2, 3, 3)
+    v = torch.tensor([[False, True], [True, True], [False, True], [True, False]])
+    out = hold_last_valid(R, v)
+    assert torch.equal(out[0, 0], R[1, 0]) and torch.equal(out[2, 0], R[1, 0]) and torch.equal(out[3, 1], R[2, 1])
+
+
+# --------------------------------------------------------------------------- training and estimator
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory) -> tuple[BiraeEstimator, Path, FakeStore]:
+    tmp = tmp_path_factory.mktemp("birae")
+    store = FakeStore(tmp, {"train": 4, "val": 2, "test": 1})
+    est = BiraeEstimator(tiny())
+    res = est.fit(tmp / "run", store=store, cache_root=tmp / "cache", quiet=True, checkpoint_every=2, threads=1)
+    assert res["best_checkpoint"] and (tmp / "run" / "clean" / "best.pt").is_file() and (tmp / "run" / "aug" / "best.pt").is_file()
+    return est, tmp, store
+
+
+def test_loss_decreases_on_a_fixed_batch(tmp_path: Path) -> None:
+    torch.manual_seed(0)
+    cfg = tiny("3param_rate", lr=1e-2)
+    data = build_split("train", cfg, store=FakeStore(tmp_path, {"train": 3}), cache_root=tmp_path / "c")
+    b = next(data.iter_batches(cfg, augmented=True, shuffle=False))
+    est = BiraeEstimator(cfg)
+    from wearpose.estimators.birae.train import batch_loss
+
+    opt = torch.optim.Adam(est.model.parameters(), lr=cfg.lr)
+    first = None
+    for _ in range(40):
+        loss, parts, _ = batch_loss(est, b, torch.device("cpu"))
+        first = first if first is not None else float(loss.detach())
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    assert float(loss.detach()) < first - 0.2 and "aux_mse" in parts
+
+
+def test_train_resume_save_load_estimate(trained, tmp_path: Path) -> None:
+    est, tmp, store = trained
+    # resume of a finished run is a no-op that keeps the checkpoints
+    again = BiraeEstimator(tiny())
+    again.fit(tmp / "run", store=store, cache_root=tmp / "cache", quiet=True, resume=True, threads=1)
+    m = store.load("synthetic/test_00")
+    s = synthesize(m, 60.0, SCENARIOS["noise"], seed=1, channels=True)
+    rec = make_recording(s["R_world"], 60.0, s["sim"])
+    track = est.estimate(rec)
+    T = s["pose"].shape[0]
+    assert isinstance(track, PoseTrack) and track.local_rot.shape == (T, 24, 3, 3) and track.uncertainty.shape == (T, 24)
+    assert track.extras["sigma"].shape == (T, 15, 3) and bool((track.extras["sigma"] > 0).all())
+    assert track.extras["frame"] == "root" and track.uncertainty[:, 0].eq(0).all() and track.uncertainty[:, 1].gt(0).all()
+    p = est.save(tmp_path / "e.pt")
+    loaded = get_estimator("birae").load(p)
+    t2 = loaded.estimate(rec)
+    assert torch.allclose(t2.local_rot, track.local_rot, atol=1e-6)
+    assert torch.allclose(t2.extras["sigma"], track.extras["sigma"], atol=1e-6)  # seeded MC-dropout
+    with pytest.raises(CheckpointMismatchError):
+        BiraeEstimator.load(p, kit="imu6")
+    world = est.with_root(track, rec)
+    assert world.extras["frame"] == "world" and torch.allclose(world.local_rot[:, 0], s["R_world"][:, 5], atol=1e-6)
+
+
+def test_online_step_equals_windowed_and_declares_latency(trained) -> None:
+    est, _, store = trained
+    est.set_window(6, 3)
+    est.mc_samples = 0  # MC-dropout masks are drawn per call; the deterministic pass must agree exactly
+    assert est.lookahead == 3 and math.isclose(est.latency_s, 3 / 60)
+    s = synthesize(store.load("synthetic/test_00"), 60.0, None, channels=True)
+    rec = make_recording(s["R_world"], 60.0, s["sim"])
+    win = est.estimate_windowed(rec, frames=[0, 5, 10])
+    est.reset()
+    outs = [est.step(f) for f in iter_frames(rec, est.sensor_names)]
+    assert not outs[0].valid and outs[0].extras.get("warming_up")
+    for t in (0, 5, 10):
+        o = outs[t + 3]
+        assert math.isclose(o.timestamp, t / 60.0, abs_tol=1e-6) and o.valid
+        assert torch.allclose(o.local_rot, win.local_rot[t], atol=1e-5)
+        assert torch.allclose(o.extras["sigma"], win.extras["sigma"][t], atol=1e-5)
+    assert not bool(win.valid[1])  # frames not asked for are marked invalid
+    est.set_window(*est.config.window)
+    est.mc_samples = est.config.mc_samples
+
+
+def test_frame_rate_flexibility_and_input_errors(trained) -> None:
+    est, _, store = trained
+    m = store.load("synthetic/test_00")
+    s30 = synthesize(m, 30.0, None, channels=True)
+    rec = make_recording(s30["R_world"], 30.0, s30["sim"])
+    t30 = est.estimate(rec)
+    assert t30.fps == 30.0 and t30.local_rot.shape[0] == s30["pose"].shape[0]
+    with pytest.raises(ShapeError):
+        est.estimate(rec.select(["head", "root"]))
+    with pytest.raises(ShapeError):
+        est.set_window(-1, 3)
+    with pytest.raises(ConfigError):
+        BiraeConfig.preset("huge")
+    with pytest.raises(ConfigError):
+        BiraeConfig(rep="9param")
+
+
+def test_finetune_improves_the_fit_on_target_motions(trained, tmp_path: Path) -> None:
+    from wearpose.estimators.birae.evaluate import evaluate, scenario_recordings
+
+    est, tmp, store = trained
+    target = [synthetic_motion(40 + i, T=60) for i in range(2)]
+    recs = []
+    for i, m in enumerate(target):
+        s = synthesize(m, 60.0, None, channels=True)
+        recs.append((f"t{i}", make_recording(s["R_world"], 60.0, s["sim"]), s["pose"]))
+    before = evaluate(est, recs, mc_samples=0)["mpjae_all_deg"]
+    tuned = BiraeEstimator.load(tmp / "run" / "best.pt")
+    tuned.finetune(target, tmp_path / "ft", epochs=15, lr=1e-2, augmented=False)
+    after = evaluate(tuned, recs, mc_samples=0)["mpjae_all_deg"]
+    assert after < before and "finetuned_on" in tuned.meta
+    assert len(scenario_recordings("test", "clean", store=store)) == 1
