@@ -46,9 +46,10 @@ def apose_globals(rest: torch.Tensor, arm_down_deg: float = 45.0) -> tuple[torch
 
 
 def custom_skeleton_motion(local: torch.Tensor, pelvis: torch.Tensor, rest: torch.Tensor, scale: float = 1000.0,
-                           z_up: bool = True, arm_down_deg: float = 45.0) -> dict:
+                           z_up: bool = True, arm_down_deg: float = 45.0, world: torch.Tensor | None = None) -> dict:
     """The custom skeleton's joint tree and motion: SMPL minus the hands, zero pose = A-pose with
-    world-aligned joint frames, in ``scale`` units per metre (1000: mm), Z up when ``z_up``.
+    world-aligned joint frames, in ``scale`` units per metre (1000: mm), Z up when ``z_up`` (or
+    any file world: ``world`` maps Y-up coordinates to the file's).
 
     Returns a dict: ``names`` (SMPL names), ``parents``, ``rest_pos`` ``(J, 3)``, ``G`` ``(T, J, 3, 3)``
     world rotations of the custom joints, ``pos`` ``(T, J, 3)`` world positions (file units),
@@ -57,6 +58,8 @@ def custom_skeleton_motion(local: torch.Tensor, pelvis: torch.Tensor, rest: torc
     G_s, P_s = smpl_world(local, pelvis, rest)
     GA, XA = apose_globals(rest, arm_down_deg)
     W = Y_UP_TO_Z_UP.to(torch.float64) if z_up else torch.eye(3, dtype=torch.float64)
+    if world is not None:
+        W = world.to(torch.float64)  # maps wearpose (Y-up) coordinates to the file's
     idx = [JOINT_INDEX[n] for n in TREE_JOINTS]
     parents = []
     for n in TREE_JOINTS:

@@ -9,7 +9,9 @@ from wearpose.motion.asf import AsfSkeleton, find_asf_for, parse_amc_text, parse
 from wearpose.motion.bvh import (
     BvhMotion, BvhSkeleton, bvh_forward_kinematics, end_site_positions, parse_bvh_text, read_bvh,
 )
+from wearpose.motion.importer import ImportReport, Imported, collect_motion_files, import_motion, import_paths
 from wearpose.motion.load import load_motion
+from wearpose.motion.mapping import CMU_ASF, MIXAMO, NAMED_MAPS, RIGIFY, SMPL_NAMES, SkeletonMatch, match_skeleton
 from wearpose.motion.paths import cache_dir, data_dir
 from wearpose.motion.resample import resample
 from wearpose.motion.retarget import (
@@ -28,6 +30,8 @@ __all__ = [
     "bone_direction_errors", "lowest_foot_height", "RetargetError", "CMU_DAZ", "BANDAI", "BUILTIN_MAPS",
     "read_amass", "save_amass", "read_asf", "read_asf_amc", "parse_asf_text", "parse_amc_text", "find_asf_for",
     "AsfSkeleton", "read_smpl_bvh", "is_smpl_bvh",
+    "import_motion", "import_paths", "collect_motion_files", "ImportReport", "Imported",
+    "match_skeleton", "SkeletonMatch", "NAMED_MAPS", "CMU_ASF", "MIXAMO", "RIGIFY", "SMPL_NAMES",
     "prepare_corpus", "CorpusStore", "data_dir", "cache_dir",
     "default_rest_joints", "template_rest_joints",
 ]

@@ -142,6 +142,17 @@ class _Tokens:
         self.i += 1
         return tok
 
+    def name_on_line(self, line: int, expected: str) -> str:
+        """A joint name: the rest of ``line`` (names may hold spaces, e.g. ``Bip01 L Thigh``),
+        without a trailing ``{``."""
+        words = []
+        while self.i < len(self.items) and self.items[self.i][1] == line and self.items[self.i][0] != "{":
+            words.append(self.items[self.i][0])
+            self.i += 1
+        if not words:
+            raise InputFileError(self.path, "joint name missing", expected, field=f"line {line}")
+        return " ".join(words)
+
     def expect(self, word: str, expected: str | None = None) -> int:
         tok, line = self.next(expected or f"'{word}'")
         if tok != word:
@@ -199,8 +210,7 @@ def _parse_hierarchy(tokens: _Tokens) -> BvhSkeleton:
             if tok == "}":
                 return
             if tok == "JOINT":
-                child, _ = tokens.next("a joint name after JOINT")
-                joint(child, idx)
+                joint(tokens.name_on_line(line, "a joint name after JOINT"), idx)
             elif tok == "End":
                 tokens.expect("Site", "'End Site'")
                 tokens.expect("{", "'{' opening an End Site")
@@ -211,7 +221,7 @@ def _parse_hierarchy(tokens: _Tokens) -> BvhSkeleton:
 
     tokens.expect("HIERARCHY", "the file to start with 'HIERARCHY'")
     tokens.expect("ROOT", "'ROOT <name>' after HIERARCHY")
-    root, _ = tokens.next("a root joint name")
+    root = tokens.name_on_line(tokens.items[tokens.i - 1][1], "a root joint name")
     joint(root, -1)
     if tokens.peek() is not None:
         raise InputFileError(path, f"unexpected {tokens.peek()!r} after the root joint's closing brace", "'MOTION'", field=f"line {tokens.line()}")

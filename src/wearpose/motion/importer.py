@@ -1,0 +1,463 @@
+"""Bring your own motion: any BVH or ASF/AMC clip -> SMPL-24 :class:`MotionSequence`, with the
+skeleton map, length unit, up axis and rest pose detected and reported.
+
+Pipeline of :func:`import_motion` (each step's outcome goes into :class:`ImportReport`):
+
+1. **read**: ``.bvh``/``.bvh.gz`` (:func:`wearpose.motion.read_bvh`) or ``.amc``/``.amc.gz`` with its
+   ``.asf`` (:func:`wearpose.motion.read_asf_amc`; AMC has no frame rate: ``fps`` or 120 Hz).
+   A BVH on SMPL's own tree (our export) is read exactly (:func:`read_smpl_bvh`), no retargeting.
+2. **map** the skeleton onto SMPL-24 (:func:`wearpose.motion.mapping.match_skeleton`).
+3. **units** (:func:`detect_units`): the leg length hip -> knee -> ankle in file units, from the
+   bone vectors (pose independent), is read in each candidate unit (m, cm, mm, inch, Acclaim's
+   1/0.45 inch); a unit declared by the file (ASF ``:units``) or by a built-in corpus map is kept
+   when it gives a plausible adult-to-child leg (0.35-1.4 m), otherwise the candidate whose leg
+   is nearest 0.8 m wins. ``units=`` overrides.
+4. **up axis** (:func:`detect_up`): from the frames where the body is most extended (head to the
+   mid-ankle point at least 90% of its longest over the clip: standing frames), the mean
+   ankles -> head direction; the nearest signed world axis (``y``, ``z``, ``-z``, ...) is up and
+   the whole clip is turned about the origin so that it becomes +Y (Z up -> Y up is
+   :data:`wearpose.geometry.Z_UP_TO_Y_UP`). Facing is kept as captured. ``up=`` overrides.
+5. **rest pose**: retargeting (:func:`wearpose.motion.retarget_bvh`) rebuilds per joint the
+   rotation that takes the source's zero pose to SMPL's T-pose (bone directions, left-right
+   vectors, knee/elbow hinge axes), so an A-pose or any bind pose keeps SMPL pose parameters
+   meaningful; the report gives that correction per joint (:func:`rest_pose_correction`).
+   The root translation is scaled by SMPL's over the source's pelvis-to-ankle height.
+6. **check**: the angle between every mapped bone of the result and the same bone of the source,
+   per frame (:data:`IMPORT_BONE_PAIRS`), mean and worst bone, in degrees.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from wearpose.body.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
+from wearpose.errors import InputFileError, WearposeError
+from wearpose.geometry import Z_UP_TO_Y_UP, geodesic_angle, rotation_x, rotation_z
+from wearpose.geometry.units import CM_TO_M, INCH_TO_M, MM_TO_M
+from wearpose.motion.asf import read_asf_amc
+from wearpose.motion.bvh import BvhMotion, bvh_forward_kinematics, read_bvh
+from wearpose.motion.mapping import SkeletonMatch, match_skeleton
+from wearpose.motion.retarget import (
+    BANDAI, BONE_PAIRS, CMU_DAZ, RetargetError, Retargeted, SkeletonMap, TPose, _position_in, _rest_offsets,
+    bone_direction_errors, retarget_bvh,
+)
+from wearpose.motion.sequence import MotionSequence
+from wearpose.motion.smpl_bvh import is_smpl_bvh, read_smpl_bvh
+from wearpose.motion.template import default_rest_joints
+
+#: Length units a file may use: name -> metres per unit.
+UNITS: dict[str, float] = {"m": 1.0, "cm": CM_TO_M, "mm": MM_TO_M, "inch": INCH_TO_M, "acclaim": INCH_TO_M / 0.45}
+#: Leg length (hip -> knee -> ankle) of a typical adult, and the range taken as plausible, metres.
+TYPICAL_LEG_M = 0.80
+PLAUSIBLE_LEG_M = (0.35, 1.4)
+#: Up axes: name -> rotation taking that file axis to wearpose's +Y (right-handed, proper).
+_HALF_PI = torch.tensor(math.pi / 2, dtype=torch.float64)
+UP_AXES: dict[str, torch.Tensor] = {
+    "y": torch.eye(3, dtype=torch.float64),
+    "-y": rotation_x(2 * _HALF_PI),
+    "z": Z_UP_TO_Y_UP.to(torch.float64),
+    "-z": rotation_x(_HALF_PI),
+    "x": rotation_z(_HALF_PI),
+    "-x": rotation_z(-_HALF_PI),
+}
+#: Bones compared by the import check (SMPL joint pairs; skipped where either is unmapped).
+IMPORT_BONE_PAIRS: tuple[tuple[str, str], ...] = BONE_PAIRS + (
+    ("left_collar", "left_shoulder"), ("right_collar", "right_shoulder"),
+    ("left_ankle", "left_foot"), ("right_ankle", "right_foot"),
+)
+_CORPUS_MAPS = (CMU_DAZ.name, BANDAI.name)
+MOTION_SUFFIXES = (".bvh", ".bvh.gz", ".amc", ".amc.gz")
+
+
+@dataclass
+class ImportReport:
+    """What :func:`import_motion` found and did (all JSON-serialisable).
+
+    Attributes:
+        file: source file; format: ``"bvh"``, ``"asf/amc"`` or ``"bvh (wearpose SMPL export)"``;
+        skeleton: map name; map_source: how the map was chosen; mapping: rows ``[smpl, joint, how]``;
+        map_notes: remarks; units: ``{"name", "m_per_unit", "how", "leg_m"}``;
+        up: ``{"axis", "how", "agreement"}`` (agreement: cosine of the measured up with the axis);
+        rest_pose: ``{"kind", "max_deg", "max_joint", "swing_deg", "total_deg"}``; frames; fps;
+        translation_scale: SMPL/source leg ratio applied to the root trajectory;
+        bone_error_deg: ``{"mean", "worst_bone", "worst_bone_mean", "per_bone"}`` (means over
+        the clip); hinge_axes: where knee/elbow axes came from; seconds: wall time.
+    """
+
+    file: str
+    format: str = ""
+    skeleton: str = ""
+    map_source: str = ""
+    mapping: list[list[str]] = field(default_factory=list)
+    map_notes: list[str] = field(default_factory=list)
+    units: dict[str, Any] = field(default_factory=dict)
+    up: dict[str, Any] = field(default_factory=dict)
+    rest_pose: dict[str, Any] = field(default_factory=dict)
+    frames: int = 0
+    fps: float = 0.0
+    translation_scale: float = 1.0
+    bone_error_deg: dict[str, Any] = field(default_factory=dict)
+    hinge_axes: dict[str, str] = field(default_factory=dict)
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class Imported:
+    """Result of :func:`import_motion`: the SMPL motion, its report and (when retargeted) the
+    :class:`Retargeted` details."""
+
+    sequence: MotionSequence
+    report: ImportReport
+    retargeted: Retargeted | None = None
+
+
+# ---------------------------------------------------------------------------- reading
+def read_motion_file(path: str | Path, fps: float | None = None) -> BvhMotion:
+    """Read a BVH (``.bvh``/``.bvh.gz``) or an AMC (``.amc``/``.amc.gz``, its ASF beside it).
+
+    Raises:
+        InputFileError: unknown extension, a lone ``.asf``, or any reader error.
+    """
+    path = Path(path)
+    name = path.name.lower()
+    if name.endswith((".bvh", ".bvh.gz")):
+        return read_bvh(path)
+    if name.endswith((".amc", ".amc.gz")):
+        return read_asf_amc(path, fps=fps)
+    if name.endswith(".asf"):
+        raise InputFileError(path, "an .asf file holds only the skeleton", "the .amc motion files (their .asf beside them is found automatically)")
+    raise InputFileError(path, f"unsupported file type {path.suffix!r}", "a .bvh, .bvh.gz, .amc or .amc.gz motion file")
+
+
+# ---------------------------------------------------------------------------- units
+def leg_length(motion: BvhMotion, smap: SkeletonMap) -> float:
+    """Mean hip -> knee -> ankle length over both legs, in file units (from the bone vectors)."""
+    skel = motion.skeleton
+    offs = _rest_offsets(motion)
+    total = []
+    for side in ("left", "right"):
+        chain = [skel.index(smap.joints[f"{side}_{j}"]) for j in ("hip", "knee", "ankle")]
+        segs = [_position_in(skel, offs, c, a) for a, c in zip(chain[:-1], chain[1:])]
+        if any(s is None for s in segs):
+            raise RetargetError(f"{side} leg joints are not in one chain")
+        total.append(sum(float(s.norm()) for s in segs))  # type: ignore[union-attr]
+    return float(np.mean(total))
+
+
+def parse_units(value: str | float) -> tuple[str, float]:
+    """``"cm"`` -> ``("cm", 0.01)``; a number -> ``("<n> m/unit", n)``.
+
+    Raises:
+        WearposeError: unknown unit name.
+    """
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        if not value > 0:
+            raise WearposeError(f"units: {value!r} is not a positive number of metres per unit")
+        return f"{float(value):g} m/unit", float(value)
+    v = str(value).strip().lower()
+    aliases = {"meter": "m", "metre": "m", "centimeter": "cm", "centimetre": "cm", "millimeter": "mm",
+               "millimetre": "mm", "in": "inch", "inches": "inch"}
+    v = aliases.get(v, aliases.get(v[:-1], v) if v.endswith("s") else v)
+    if v in UNITS:
+        return v, UNITS[v]
+    try:
+        return parse_units(float(v))
+    except ValueError:
+        raise WearposeError(f"unknown length unit {value!r}; expected one of {', '.join(UNITS)} or metres per unit (a number)") from None
+
+
+def detect_units(leg_file_units: float, declared: tuple[str, float] | None = None) -> dict[str, Any]:
+    """Pick the length unit from the leg length (rule in the module doc).
+
+    Returns:
+        ``{"name", "m_per_unit", "how", "leg_m"}``.
+    """
+    lo, hi = PLAUSIBLE_LEG_M
+    if declared is not None:
+        leg = leg_file_units * declared[1]
+        if lo <= leg <= hi:
+            return {"name": declared[0], "m_per_unit": declared[1], "how": "declared", "leg_m": leg}
+    best = min(UNITS, key=lambda u: abs(math.log(max(leg_file_units * UNITS[u], 1e-12) / TYPICAL_LEG_M)))
+    leg = leg_file_units * UNITS[best]
+    how = f"detected from leg length ({leg_file_units:.4g} file units)"
+    if declared is not None:
+        how += f"; declared {declared[0]} gives an implausible {leg_file_units * declared[1]:.3g} m leg"
+    if not lo <= leg <= hi:
+        how += f"; WARNING: {leg:.3g} m is outside {lo}-{hi} m"
+    return {"name": best, "m_per_unit": UNITS[best], "how": how, "leg_m": leg}
+
+
+# ---------------------------------------------------------------------------- up axis
+def detect_up(motion: BvhMotion, smap: SkeletonMap, max_frames: int = 300) -> dict[str, Any]:
+    """Up axis of the file's world from its standing frames (rule in the module doc).
+
+    Returns:
+        ``{"axis": "y"|"-y"|"z"|..., "how", "agreement"}`` (agreement = cosine between the
+        measured up direction and the chosen axis).
+    """
+    T = motion.num_frames
+    step = max(1, T // max_frames)
+    sub = BvhMotion(motion.skeleton, motion.frame_time, motion.rotations[::step], motion.translations[::step], motion.path)
+    _, P = bvh_forward_kinematics(sub)
+    skel = motion.skeleton
+    top_name = next(smap.joints[k] for k in ("head", "neck", "spine3", "spine2", "spine1", "pelvis") if k in smap.joints)
+    top = P[:, skel.index(top_name)]
+    feet = 0.5 * (P[:, skel.index(smap.joints["left_ankle"])] + P[:, skel.index(smap.joints["right_ankle"])])
+    v = top - feet
+    ext = v.norm(dim=-1)
+    sel = ext >= 0.9 * ext.max()
+    u = (v[sel] / ext[sel, None].clamp_min(1e-12)).sum(0)
+    u = u / u.norm().clamp_min(1e-12)
+    k = int(u.abs().argmax())
+    axis = ("-" if float(u[k]) < 0 else "") + "xyz"[k]
+    return {"axis": axis, "how": f"detected from {int(sel.sum())} standing frames ({top_name} above the ankles)",
+            "agreement": float(u.abs().max())}
+
+
+def to_y_up(motion: BvhMotion, axis: str) -> BvhMotion:
+    """The motion with its world turned so that file axis ``axis`` becomes +Y (root joint only)."""
+    R = UP_AXES[axis]
+    if axis == "y":
+        return motion
+    rot = motion.rotations.clone()
+    trans = motion.translations.clone()
+    for j, p in enumerate(motion.skeleton.parents):
+        if p < 0:
+            rot[:, j] = R @ rot[:, j]
+            trans[:, j] = trans[:, j] @ R.T
+    return replace(motion, rotations=rot, translations=trans)
+
+
+# ---------------------------------------------------------------------------- rest pose
+def rest_pose_correction(tpose: TPose, rest_joints: torch.Tensor) -> dict[str, Any]:
+    """How far the source's zero pose is from SMPL's T-pose, per mapped joint: the SMPL local
+    rotation the zero pose retargets to (``T_parent @ T_j^T``), split into the **swing** of the
+    joint's bone (degrees; what makes an A-pose an A-pose) and the total angle (with twist).
+
+    ``kind`` (from the swings): ``"T-pose"`` (all < 20 deg), ``"A-pose"`` (shoulders lowered by
+    25-70 deg, the rest < 25 deg), else ``"other bind pose"``.
+    """
+    from wearpose.motion.retarget import _NEXT  # noqa: PLC0415 - the primary-bone table
+
+    T = tpose.rotations
+    rest = rest_joints.to(torch.float64)
+    swing: dict[str, float] = {}
+    total: dict[str, float] = {}
+    eye = torch.eye(3, dtype=torch.float64)
+    for j, Tj in T.items():
+        if j == 0:
+            continue
+        p = PARENTS[j]
+        while p >= 0 and p not in T:
+            p = PARENTS[p]
+        if p < 0:
+            continue
+        L = T[p] @ Tj.T  # source zero pose: G_j = R_up T_j^T
+        name = JOINT_NAMES[j]
+        total[name] = round(math.degrees(float(geodesic_angle(L, eye))), 2)
+        nxt = _NEXT.get(name)
+        if nxt is not None:
+            b = rest[JOINT_INDEX[nxt]] - rest[j]
+            b = b / b.norm()
+            swing[name] = round(math.degrees(math.acos(max(-1.0, min(1.0, float(b @ (L @ b)))))), 2)
+    if not swing:
+        return {"kind": "unknown", "max_deg": 0.0, "max_joint": "", "swing_deg": {}, "total_deg": total}
+    mj = max(swing, key=swing.get)  # type: ignore[arg-type]
+    shoulders = [swing.get(s) for s in ("left_shoulder", "right_shoulder")]
+    others = [v for k, v in swing.items() if k not in ("left_shoulder", "right_shoulder")]
+    if swing[mj] < 20:
+        kind = "T-pose"
+    elif all(s is not None and 25 <= s <= 70 for s in shoulders) and max(others, default=0) < 25:
+        kind = "A-pose"
+    else:
+        kind = "other bind pose"
+    return {"kind": kind, "max_deg": swing[mj], "max_joint": mj, "swing_deg": swing, "total_deg": total}
+
+
+# ---------------------------------------------------------------------------- import
+def bone_error_summary(res: Retargeted, rest_joints: torch.Tensor) -> dict[str, Any]:
+    """Mean (over the clip) angle between result and source bones, degrees: overall mean over
+    bones, the worst bone, and per bone."""
+    errs = bone_direction_errors(res, rest_joints, IMPORT_BONE_PAIRS)
+    per = {k: float(np.degrees(np.nanmean(v))) for k, v in errs.items()}
+    if not per:
+        return {"mean": float("nan"), "worst_bone": "", "worst_bone_mean": float("nan"), "per_bone": {}}
+    worst = max(per, key=per.get)  # type: ignore[arg-type]
+    return {"mean": float(np.mean(list(per.values()))), "worst_bone": worst, "worst_bone_mean": per[worst],
+            "per_bone": {k: round(v, 3) for k, v in per.items()}}
+
+
+def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
+                  joint_map: str | Path | Mapping[str, Any] | None = None, units: str | float | None = None,
+                  up: str | None = None, fps: float | None = None, betas: torch.Tensor | None = None,
+                  meta: Mapping[str, Any] | None = None) -> Imported:
+    """Import one BVH or AMC file onto SMPL-24 (pipeline in the module doc).
+
+    Args:
+        path: the ``.bvh``/``.bvh.gz``/``.amc``/``.amc.gz``.
+        rest_joints: ``(24, 3)`` rest joints (m) of the body to play it on (default body model).
+        joint_map: YAML file or loaded map overriding the skeleton match.
+        units: override: ``m``, ``cm``, ``mm``, ``inch``, ``acclaim`` or metres per unit.
+        up: override: ``y``, ``z``, ``-y``, ``-z``, ``x``, ``-x``.
+        fps: frame rate of AMC files (they store none; default 120).
+        betas: ``(10,)`` shape stored in the sequence.
+        meta: extra ``sequence.meta`` entries.
+
+    Returns:
+        :class:`Imported`; ``sequence.meta["import"]`` holds the report.
+
+    Raises:
+        InputFileError: unreadable or malformed file, unmappable skeleton (names the file,
+            line or joint, and the problem).
+    """
+    t0 = time.perf_counter()
+    path = Path(path)
+    if rest_joints is None:
+        rest_joints, _ = default_rest_joints()
+    rest = rest_joints.to(torch.float64)
+    if up is not None and up.lower() not in UP_AXES:
+        raise WearposeError(f"up axis {up!r}; expected one of {', '.join(UP_AXES)}")
+    motion = read_motion_file(path, fps=fps)
+    fmt = motion.meta.get("format", "bvh")
+    report = ImportReport(file=str(path), format=fmt)
+    if fmt == "bvh" and is_smpl_bvh(motion):
+        seq = read_smpl_bvh(motion, rest)
+        report.format = "bvh (wearpose SMPL export)"
+        report.skeleton, report.map_source = "smpl", "exact (SMPL tree, rotations read as written)"
+        report.mapping = [[n, n, "exact"] for n in JOINT_NAMES]
+        report.units = {"name": "cm", "m_per_unit": CM_TO_M, "how": "format (wearpose export)", "leg_m": float("nan")}
+        report.up = {"axis": "y", "how": "format (wearpose export)", "agreement": 1.0}
+        report.rest_pose = {"kind": "T-pose", "max_deg": 0.0, "max_joint": "", "swing_deg": {}, "total_deg": {}}
+        report.frames, report.fps = seq.num_frames, seq.fps
+        report.bone_error_deg = {"mean": 0.0, "worst_bone": "", "worst_bone_mean": 0.0, "per_bone": {}}
+        report.seconds = time.perf_counter() - t0
+        seq.meta.update(dict(meta or {}))
+        seq.meta["import"] = report.to_dict()
+        return Imported(seq, report)
+
+    offs = _rest_offsets(motion).numpy()
+    match: SkeletonMatch = match_skeleton(motion.skeleton, offs, joint_map, path)
+    smap = match.smap
+    opts = match.joint_map_options
+    # Units.
+    units = units if units is not None else opts.get("units")
+    leg_fu = leg_length(motion, smap)
+    if units is not None:
+        uname, m_per = parse_units(units)
+        ures = {"name": uname, "m_per_unit": m_per, "how": "given", "leg_m": leg_fu * m_per}
+    else:
+        declared = None
+        if "units_to_m" in motion.meta:
+            declared = (motion.meta.get("units_declared", "ASF :units"), float(motion.meta["units_to_m"]))
+            for k, v in UNITS.items():
+                if abs(v - declared[1]) < 1e-9 * v:
+                    declared = (k, v)
+        elif smap.name in _CORPUS_MAPS:
+            declared = ("cm", smap.units_to_m)
+        ures = detect_units(leg_fu, declared)
+    smap = replace(smap, units_to_m=ures["m_per_unit"])
+    # Up axis.
+    up = up if up is not None else opts.get("up")
+    if up is not None:
+        up_res = {"axis": str(up).lower(), "how": "given", "agreement": float("nan")}
+        if up_res["axis"] not in UP_AXES:
+            raise WearposeError(f"up axis {up!r}; expected one of {', '.join(UP_AXES)}")
+    else:
+        up_res = detect_up(motion, smap)
+    motion_y = to_y_up(motion, up_res["axis"])
+    m = {"source_format": fmt, "import": {}}
+    m.update(dict(meta or {}))
+    try:
+        res = retarget_bvh(motion_y, rest, smap, betas=betas, meta=m)
+    except RetargetError as exc:
+        raise InputFileError(path, f"cannot retarget: {exc}", "a humanoid skeleton with legs, or a --joint-map") from exc
+    report.skeleton, report.map_source = smap.name, match.source
+    report.mapping = [list(r) for r in match.table()]
+    report.map_notes = match.notes
+    report.units = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in ures.items()}
+    report.up = up_res
+    report.rest_pose = rest_pose_correction(res.tpose, rest)
+    report.frames, report.fps = res.sequence.num_frames, res.sequence.fps
+    report.translation_scale = round(res.tpose.scale, 5)
+    report.hinge_axes = dict(res.tpose.hinge_source)
+    report.bone_error_deg = bone_error_summary(res, rest)
+    if motion.meta.get("fps_assumed"):
+        report.map_notes.append(f"AMC stores no frame rate: {res.sequence.fps:g} fps assumed (pass fps/--fps)")
+    report.seconds = time.perf_counter() - t0
+    res.sequence.meta["import"] = report.to_dict()
+    return Imported(res.sequence, report, res)
+
+
+def collect_motion_files(paths: Iterable[str | Path]) -> list[Path]:
+    """Files to import: each given file, and every ``.bvh``/``.bvh.gz``/``.amc``/``.amc.gz`` below
+    each given folder (sorted). Lone ``.asf`` files in folders are skeletons, not clips: skipped."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            out += sorted(f for f in p.rglob("*") if f.is_file() and f.name.lower().endswith(MOTION_SUFFIXES))
+        else:
+            out.append(p)
+    return out
+
+
+def _out_name(f: Path, root: Path | None) -> Path:
+    name = f.name
+    for s in MOTION_SUFFIXES:
+        if name.lower().endswith(s):
+            name = name[: -len(s)]
+            break
+    rel = f.parent.relative_to(root) if root is not None and f.is_relative_to(root) else Path()
+    return rel / f"{name}.npz"
+
+
+def import_paths(paths: Sequence[str | Path], out_dir: str | Path, rest_joints: torch.Tensor | None = None,
+                 joint_map: str | Path | None = None, units: str | float | None = None, up: str | None = None,
+                 fps: float | None = None, on_file: Callable[[Path, dict[str, Any]], None] | None = None) -> dict[str, Any]:
+    """Import files and folders (mixed formats) into ``out_dir`` as MotionSequence ``.npz``.
+
+    A file that fails is reported and the others carry on.
+
+    Returns:
+        ``{"converted", "failed", "out", "files": [report dict + "out" or "error"]}``.
+    """
+    out_dir = Path(out_dir)
+    if rest_joints is None:
+        rest_joints, _ = default_rest_joints()
+    files: list[tuple[Path, Path | None]] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            files += [(f, p) for f in collect_motion_files([p])]
+        else:
+            files.append((p, None))
+    rows: list[dict[str, Any]] = []
+    for f, root in files:
+        try:
+            imp = import_motion(f, rest_joints, joint_map=joint_map, units=units, up=up, fps=fps)
+            dest = out_dir / _out_name(f, root)
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            imp.sequence.save(dest)
+            row = {**imp.report.to_dict(), "out": str(dest), "ok": True}
+        except WearposeError as exc:
+            row = {"file": str(f), "ok": False, "error": str(exc)}
+        except Exception as exc:  # noqa: BLE001 - one bad file must not stop the batch
+            row = {"file": str(f), "ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        rows.append(row)
+        if on_file is not None:
+            on_file(f, row)
+    return {"converted": sum(r["ok"] for r in rows), "failed": sum(not r["ok"] for r in rows), "out": str(out_dir), "files": rows}
+
+
+__all__ = ["import_motion", "import_paths", "collect_motion_files", "read_motion_file", "ImportReport", "Imported",
+           "detect_units", "detect_up", "leg_length", "parse_units", "rest_pose_correction", "to_y_up",
+           "UNITS", "UP_AXES", "IMPORT_BONE_PAIRS", "MOTION_SUFFIXES"]

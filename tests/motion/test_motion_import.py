@@ -1,0 +1,219 @@
+"""Bring-your-own-motion import: skeleton maps, units, up axis, rest pose, errors, folders."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from wearpose.body.kinematics import forward_kinematics
+from wearpose.body.skeleton import JOINT_NAMES
+from wearpose.errors import InputFileError, WearposeError
+from wearpose.export import write_smpl_bvh
+from wearpose.motion import MotionSequence, parse_bvh_text, template_rest_joints
+from wearpose.motion.importer import UP_AXES, detect_units, import_motion, import_paths, parse_units
+from wearpose.motion.mapping import CMU_ASF, MIXAMO, RIGIFY, builtin_match, match_skeleton, split_name
+from import_testutils import BIPED_NAMES, custom_bvh_text, custom_skeleton_motion, joint_tree_to_asf_amc
+from motion_testutils import corpus_dir, synthetic_smpl_motion
+
+REST = template_rest_joints()
+
+
+@pytest.fixture(scope="module")
+def smpl_motion() -> tuple[torch.Tensor, torch.Tensor]:
+    return synthetic_smpl_motion(REST, T=40, seed=0)
+
+
+@pytest.fixture(scope="module")
+def biped(smpl_motion) -> dict:
+    """The acceptance skeleton: renamed joints, A-pose rest, millimetres, Z up."""
+    return custom_skeleton_motion(*smpl_motion, REST, scale=1000.0, z_up=True)
+
+
+def _source_error_deg(imp, sk: dict) -> float:
+    """Mean angle (deg) between each retargeted SMPL bone and the true source bone (the known
+    motion the file was written from), over bones and frames."""
+    _, J = forward_kinematics(imp.sequence.pose.double(), REST)
+    names = sk["names"]
+    errs = []
+    for k, n in enumerate(names):
+        p = sk["parents"][k]
+        if p < 0 or n in ("spine2",):
+            continue
+        a, b = JOINT_NAMES.index(names[p]), JOINT_NAMES.index(n)
+        ds = J[:, b] - J[:, a]
+        dt = sk["smpl_pos"][:, k] - sk["smpl_pos"][:, p]
+        cos = (ds * dt).sum(-1) / ds.norm(dim=-1) / dt.norm(dim=-1)
+        errs.append(torch.rad2deg(torch.arccos(cos.clamp(-1, 1))).mean())
+    return float(torch.stack(errs).mean())
+
+
+def test_biped_apose_mm_zup_bvh(tmp_path, biped) -> None:
+    path = tmp_path / "biped.bvh"
+    path.write_text(custom_bvh_text(biped))
+    imp = import_motion(path, REST)
+    r = imp.report
+    assert r.map_source == "automatic"
+    table = {row[0]: row[1] for row in r.mapping}
+    for smpl, name in BIPED_NAMES.items():
+        assert table[smpl] == name, (smpl, table[smpl])
+    assert r.units["name"] == "mm" and r.up["axis"] == "z" and r.rest_pose["kind"] == "A-pose"
+    assert 40 < r.rest_pose["swing_deg"]["left_shoulder"] < 50
+    assert r.bone_error_deg["mean"] < 10.0 and _source_error_deg(imp, biped) < 10.0
+    # The pelvis lands where the source pelvis is (metres, Y up), scaled by the leg ratio 1.
+    assert r.translation_scale == pytest.approx(1.0, abs=1e-4)
+    pelvis = imp.sequence.trans.double() + REST[0]
+    assert torch.allclose(pelvis, biped["smpl_pos"][:, 0], atol=2e-3)
+
+
+def test_biped_apose_mm_zup_asf_amc(tmp_path, biped) -> None:
+    """The same skeleton as ASF/AMC, mm values under ':units length 1' (declared inches: the leg
+    would be 20 m, so the unit is detected)."""
+    asf, amc, _ = joint_tree_to_asf_amc(biped, BIPED_NAMES, length_mult=1.0, seed=4)
+    (tmp_path / "biped.asf").write_text(asf)
+    (tmp_path / "biped_01.amc").write_text(amc)
+    imp = import_motion(tmp_path / "biped_01.amc", REST, fps=30)
+    r = imp.report
+    assert r.format == "asf/amc" and r.units["name"] == "mm" and "implausible" in r.units["how"]
+    assert r.up["axis"] == "z" and r.fps == 30
+    err = _source_error_deg(imp, biped)
+    assert r.bone_error_deg["mean"] < 10.0 and err < 10.0, (r.bone_error_deg, err)
+
+
+@pytest.mark.parametrize("axis", ["y", "-z", "x"])
+def test_up_axis_detected(tmp_path, smpl_motion, axis: str) -> None:
+    sk = custom_skeleton_motion(*smpl_motion, REST, scale=100.0, world=UP_AXES[axis].T)
+    (tmp_path / "a.bvh").write_text(custom_bvh_text(sk))
+    imp = import_motion(tmp_path / "a.bvh", REST)
+    assert imp.report.up["axis"] == axis and imp.report.units["name"] == "cm"
+    assert _source_error_deg(imp, sk) < 1.0
+
+
+def test_overrides_and_joint_map(tmp_path, biped) -> None:
+    (tmp_path / "b.bvh").write_text(custom_bvh_text(biped))
+    jm = tmp_path / "map.yaml"
+    jm.write_text("left_foot: null\nright_foot: null\nneck: Bip01 Neck\nunits: mm\nup: z\n")
+    imp = import_motion(tmp_path / "b.bvh", REST, joint_map=jm)
+    r = imp.report
+    assert r.units["how"] == "given" and r.up["how"] == "given" and "joint map" in r.map_source
+    table = {row[0]: row for row in r.mapping}
+    assert table["left_foot"][1] == "-" and table["neck"][2] == "joint map"
+    # A wrong override is not silently accepted: inches make a 20 m person, yet the result is
+    # still a clean retarget (units only scale the root) -- the report says what was used.
+    imp2 = import_motion(tmp_path / "b.bvh", REST, units="inch", up="z")
+    assert imp2.report.units["leg_m"] > 15
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("left_thigh: Bip01 L Thigh\n")
+    with pytest.raises(InputFileError, match="unknown key 'left_thigh'"):
+        import_motion(tmp_path / "b.bvh", REST, joint_map=bad)
+    bad.write_text("left_hip: Bip01 L Thighs\n")
+    with pytest.raises(InputFileError, match="Thighs") as ei:
+        import_motion(tmp_path / "b.bvh", REST, joint_map=bad)
+    assert "b.bvh" in str(ei.value)
+    with pytest.raises(WearposeError, match="furlong"):
+        import_motion(tmp_path / "b.bvh", REST, units="furlong")
+
+
+def test_smpl_export_reimports_to_the_same_joints(tmp_path, smpl_motion) -> None:
+    local, pelvis = smpl_motion
+    seq = MotionSequence(local.float(), torch.zeros(10), (pelvis - REST[0]).float(), 30.0)
+    write_smpl_bvh(seq, tmp_path / "ours.bvh", REST)
+    imp = import_motion(tmp_path / "ours.bvh", REST)
+    _, J0 = forward_kinematics(seq.pose.double(), REST)
+    _, J1 = forward_kinematics(imp.sequence.pose.double(), REST)
+    J0 = J0 + seq.trans.double()[:, None]
+    J1 = J1 + imp.sequence.trans.double()[:, None]
+    assert float((J0 - J1).norm(dim=-1).max()) < 1e-3
+    assert imp.report.skeleton == "smpl" and imp.report.frames == 40
+
+
+def test_builtin_naming_schemes() -> None:
+    from wearpose.motion.bvh import BvhSkeleton
+
+    def skel(names: list[str]) -> BvhSkeleton:
+        return BvhSkeleton(tuple(names), tuple([-1] + [0] * (len(names) - 1)), np.zeros((len(names), 3)), tuple(() for _ in names))
+
+    mix = ["mixamorig:" + n for n in MIXAMO.joints.values() if "Middle" not in n]
+    assert builtin_match(skel(mix)).name == "mixamo"
+    assert builtin_match(skel(["DEF-" + n for n in RIGIFY.joints.values()])).name == "rigify"
+    assert builtin_match(skel(list(CMU_ASF.joints.values()))).name == "cmu_asf"
+    assert builtin_match(skel(["Hips", "Spine"])) is None
+    assert split_name("mixamorig:LeftUpLeg") == ("left", "upleg")
+    assert split_name("thigh.L") == ("left", "thigh")
+    assert split_name("Bip01 R Calf") == ("right", "calf")
+    assert split_name("lfemur") == ("left", "femur") and split_name("lowerback") == (None, "lowerback")
+
+
+def test_mixamo_bvh_retargets(tmp_path, smpl_motion) -> None:
+    """SMPL tree written with Mixamo names (no fingers) in cm, Y up: the built-in map is used."""
+    sk = custom_skeleton_motion(*smpl_motion, REST, scale=100.0, z_up=False, arm_down_deg=0.0)
+    names = {s: "mixamorig:" + n for s, n in MIXAMO.joints.items()}
+    (tmp_path / "m.bvh").write_text(custom_bvh_text(sk, names))
+    imp = import_motion(tmp_path / "m.bvh", REST)
+    assert imp.report.map_source == "built-in mixamo" and imp.report.rest_pose["kind"] == "T-pose"
+    assert _source_error_deg(imp, sk) < 1.0
+
+
+def test_units_rule() -> None:
+    assert detect_units(82.0)["name"] == "cm"
+    assert detect_units(820.0)["name"] == "mm"
+    assert detect_units(0.82)["name"] == "m"
+    assert detect_units(32.0)["name"] == "inch"
+    assert detect_units(14.5)["name"] == "acclaim"
+    assert detect_units(14.5, ("acclaim", 0.0254 / 0.45))["how"] == "declared"
+    assert parse_units("centimetres") == ("cm", 0.01) and parse_units(0.5)[1] == 0.5
+
+
+def test_malformed_files_name_the_problem(tmp_path, biped) -> None:
+    text = custom_bvh_text(biped)
+    lines = text.splitlines()
+    (tmp_path / "trunc.bvh").write_text("\n".join(lines[:-3]) + "\n")
+    with pytest.raises(InputFileError, match=r"trunc\.bvh.*truncated motion"):
+        import_motion(tmp_path / "trunc.bvh", REST)
+    bad = list(lines)
+    bad[-1] = bad[-1] + " 0.0"
+    (tmp_path / "chan.bvh").write_text("\n".join(bad) + "\n")
+    with pytest.raises(InputFileError, match=rf"chan\.bvh \[line {len(lines)}\].*values"):
+        import_motion(tmp_path / "chan.bvh", REST)
+    # Missing joint: no left leg names -> the error names the missing SMPL joint.
+    (tmp_path / "noleg.bvh").write_text(text.replace("Bip01 L Thigh", "Bip01 Thing").replace("Bip01 L Calf", "Bip01 Thang"))
+    with pytest.raises(InputFileError, match=r"noleg\.bvh \[joint \w+\]: no joint found for SMPL .*left_hip"):
+        import_motion(tmp_path / "noleg.bvh", REST)
+    asf, amc, _ = joint_tree_to_asf_amc(biped, BIPED_NAMES, seed=1)
+    (tmp_path / "u.asf").write_text(asf.replace("length 1", "length one"))
+    (tmp_path / "u_01.amc").write_text(amc)
+    with pytest.raises(InputFileError, match=r"u\.asf \[line 5\]"):
+        import_motion(tmp_path / "u_01.amc", REST)
+
+
+def test_folder_with_one_bad_file(tmp_path, biped) -> None:
+    src = tmp_path / "in"
+    (src / "sub").mkdir(parents=True)
+    text = custom_bvh_text(biped)
+    (src / "good.bvh").write_text(text)
+    asf, amc, _ = joint_tree_to_asf_amc(biped, BIPED_NAMES, seed=1)
+    (src / "sub" / "s.asf").write_text(asf)
+    (src / "sub" / "s_01.amc").write_text(amc)
+    (src / "broken.bvh").write_text(text[: len(text) // 2])
+    res = import_paths([src], tmp_path / "out", REST)
+    assert res["converted"] == 2 and res["failed"] == 1
+    failed = [r for r in res["files"] if not r["ok"]]
+    assert failed[0]["file"].endswith("broken.bvh") and "broken.bvh" in failed[0]["error"]
+    assert (tmp_path / "out" / "good.npz").is_file() and (tmp_path / "out" / "sub" / "s_01.npz").is_file()
+    seq = MotionSequence.load(tmp_path / "out" / "good.npz")
+    assert seq.meta["import"]["units"]["name"] == "mm" and seq.num_frames == 40
+
+
+@pytest.mark.corpus
+def test_corpus_skeletons_bone_directions() -> None:
+    """Every corpus skeleton (one clip each): bone directions within 10 deg of the source."""
+    data = corpus_dir()
+    if data is None:
+        pytest.skip("corpus not found")
+    for rel, name in (("cmu_daz/05/05_01.bvh.gz", "cmu_daz"), ("bandai/bandai-B/dataset-2_walk_feminine_001.bvh.gz", "bandai")):
+        imp = import_motion(data / rel, REST)
+        r = imp.report
+        assert r.skeleton == name and r.units["name"] == "cm" and r.up["axis"] == "y"
+        assert r.bone_error_deg["mean"] < 10.0 and math.isfinite(r.bone_error_deg["mean"])
