@@ -8,10 +8,15 @@ rotation *is* the SMPL local rotation of that joint and the free-flyer's rotatio
 orientation. The free-flyer's placement is the rest pelvis position, so its translation
 coordinate equals SMPL's ``trans`` (metres, world, Y up).
 
-Configuration / velocity layout (Pinocchio's):
-- ``q[0:3]`` = trans; ``q[3:]`` reshaped ``(24, 4)`` = joint quaternions ``(x, y, z, w)``.
+Configuration / velocity layout (Pinocchio's). Pinocchio's algorithms (CRBA in particular)
+need every joint's subtree to follow it contiguously, i.e. joints in depth-first order, which
+SMPL's order is not; so the joints are added in :data:`DFS_ORDER` and
+``PhysicsCharacter.pin_id[j]`` is the Pinocchio joint id of SMPL joint ``j``.
+- ``q[0:3]`` = trans; ``q[3:]`` reshaped ``(24, 4)`` = joint quaternions ``(x, y, z, w)`` in
+  ``DFS_ORDER``.
 - ``v[0:3]`` = root linear velocity *in the root frame*; ``v[3:]`` reshaped ``(24, 3)`` = angular
-  velocity of each joint relative to its parent, in the joint's own frame (root: w.r.t. world).
+  velocity of each joint relative to its parent, in the joint's own frame (root: w.r.t. world),
+  in ``DFS_ORDER``.
 
 Mass distribution (documented, deterministic):
 - **Total mass**: ``density * volume`` of the rest mesh for these betas (closed-mesh divergence
@@ -40,6 +45,25 @@ import torch
 from wearpose.body import JOINT_NAMES, NUM_JOINTS, PARENTS, BodyModel
 from wearpose.errors import ShapeError, WearposeError
 from wearpose.geometry import GRAVITY, matrix_to_quat, quat_to_matrix
+
+def _dfs_order() -> tuple[int, ...]:
+    children: dict[int, list[int]] = {j: [] for j in range(NUM_JOINTS)}
+    for j, p in enumerate(PARENTS):
+        if p >= 0:
+            children[p].append(j)
+    out: list[int] = []
+    stack = [0]
+    while stack:
+        j = stack.pop()
+        out.append(j)
+        stack.extend(reversed(children[j]))
+    return tuple(out)
+
+
+#: SMPL joint indices in the order they are added to the Pinocchio model (depth-first).
+DFS_ORDER: tuple[int, ...] = _dfs_order()
+#: Pinocchio joint id of each SMPL joint.
+PIN_ID: np.ndarray = np.argsort(np.array(DFS_ORDER)) + 1
 
 #: Whole-body density, kg/m^3 (see module docstring).
 BODY_DENSITY = 1010.0
@@ -94,8 +118,8 @@ class PhysicsCharacter:
     """Pinocchio model of one subject. Build with :meth:`from_body`.
 
     Attributes:
-        model: ``pinocchio.Model`` (free-flyer root + 23 spherical joints; Pinocchio joint id of
-            SMPL joint ``j`` is ``j + 1``), gravity ``(0, -9.81, 0)``.
+        model: ``pinocchio.Model`` (free-flyer root + 23 spherical joints in :data:`DFS_ORDER`;
+            Pinocchio joint id of SMPL joint ``j`` is ``pin_id[j]``), gravity ``(0, -9.81, 0)``.
         rest_joints: ``(24, 3)`` rest joint positions, m (model frame, zero trans).
         segment_mass: ``(24,)`` kg per SMPL body.
         mass_kg: total mass, kg.
@@ -108,6 +132,11 @@ class PhysicsCharacter:
     mass_kg: float
     mass_source: str
     betas: np.ndarray = field(default_factory=lambda: np.zeros(10))
+
+    @property
+    def pin_id(self) -> np.ndarray:
+        """``(24,)`` Pinocchio joint id of each SMPL joint."""
+        return PIN_ID
 
     @property
     def nq(self) -> int:
@@ -152,13 +181,14 @@ class PhysicsCharacter:
         model = pin.Model()
         model.name = "wearpose-pip-character"
         model.gravity.linear = np.array(GRAVITY, dtype=np.float64)
-        for j in range(NUM_JOINTS):
+        for j in DFS_ORDER:
             p = PARENTS[j]
             if p < 0:
                 jid = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3(np.eye(3), rest[0].copy()), JOINT_NAMES[0])
             else:
-                jid = model.addJoint(p + 1, pin.JointModelSpherical(), pin.SE3(np.eye(3), rest[j] - rest[p]), JOINT_NAMES[j])
-            assert jid == j + 1
+                jid = model.addJoint(int(PIN_ID[p]), pin.JointModelSpherical(), pin.SE3(np.eye(3), rest[j] - rest[p]),
+                                     JOINT_NAMES[j])
+            assert jid == PIN_ID[j]
             com, inertia = _cylinder_fit(verts[owner == j] - rest[j], seg_mass[j])
             model.appendBodyToJoint(jid, pin.Inertia(float(seg_mass[j]), com, inertia), pin.SE3.Identity())
         return cls(model=model, rest_joints=rest, segment_mass=seg_mass, mass_kg=total, mass_source=source,
@@ -173,12 +203,12 @@ class PhysicsCharacter:
         t = np.asarray(torch.as_tensor(trans, dtype=torch.float64).reshape(-1))
         if t.shape != (3,):
             raise ShapeError(f"trans: expected (3,) metres, got {t.shape}")
-        quat = matrix_to_quat(R).numpy()  # (24, 4) w, x, y, z
+        quat = matrix_to_quat(R[list(DFS_ORDER)]).numpy()  # (24, 4) w, x, y, z in Pinocchio order
         return np.concatenate([t, quat[:, [1, 2, 3, 0]].reshape(-1)])
 
     def pose_from_q(self, q: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         """Local rotations ``(24, 3, 3)`` and trans ``(3,)`` (float32 tensors) from a configuration."""
-        quat = torch.from_numpy(np.ascontiguousarray(q[3:].reshape(NUM_JOINTS, 4)[:, [3, 0, 1, 2]]))
+        quat = torch.from_numpy(np.ascontiguousarray(q[3:].reshape(NUM_JOINTS, 4)[PIN_ID - 1][:, [3, 0, 1, 2]]))
         return quat_to_matrix(quat).float(), torch.from_numpy(q[:3].copy()).float()
 
     def center_of_mass(self, q: np.ndarray) -> np.ndarray:

@@ -208,6 +208,9 @@ class PhysicsState:
         qp_ms: proxsuite solve time, ms (building the QP excluded).
         step_ms: wall time of the whole step, ms.
         qp_status: proxsuite status string.
+        contact_points: ``(nc, 3)`` float32 world positions of this step's contact points (m,
+            before the update; 4 per contact joint, in the order of ``contact_joints``).
+        contact_forces: ``(nc, 3)`` float32 force on each contact point, N, world.
     """
 
     pose_local: torch.Tensor
@@ -224,6 +227,8 @@ class PhysicsState:
     qp_ms: float
     step_ms: float
     qp_status: str = ""
+    contact_points: torch.Tensor | None = None
+    contact_forces: torch.Tensor | None = None
 
 
 @dataclass
@@ -295,14 +300,13 @@ class PhysicsOptimizer:
             ground_y = self.config.ground_y
         if ground_y is None:
             pin.forwardKinematics(self.model, self.data, self.q)
-            ys = [self.data.oMi[j + 1].translation[1] for j in self.config.contact_candidates]
-            ground_y = float(min(ys))
+            ground_y = float(self.joint_positions()[list(self.config.contact_candidates), 1].min())
         self.ground_y = float(ground_y)
 
     def joint_positions(self, q: np.ndarray | None = None) -> np.ndarray:
         """World joint positions ``(24, 3)`` m at ``q`` (default: the current state)."""
         pin.forwardKinematics(self.model, self.data, self.q if q is None else q)
-        return np.array([self.data.oMi[k].translation for k in range(1, NUM_JOINTS + 1)])
+        return np.array([self.data.oMi[int(k)].translation for k in self.char.pin_id])
 
     def _dynamics(self) -> _Dyn:
         m, d, q, v = self.model, self.data, self.q, self.v
@@ -313,10 +317,10 @@ class PhysicsOptimizer:
         pos = np.empty((NUM_JOINTS, 3))
         J = np.empty((NUM_JOINTS, 6, self.nv))
         dJ = np.empty((NUM_JOINTS, 6, self.nv))
-        for k in range(NUM_JOINTS):
-            pos[k] = d.oMi[k + 1].translation
-            J[k] = pin.getJointJacobian(m, d, k + 1, _LWA)
-            dJ[k] = pin.getJointJacobianTimeVariation(m, d, k + 1, _LWA)
+        for k, jid in enumerate(self.char.pin_id.tolist()):
+            pos[k] = d.oMi[jid].translation
+            J[k] = pin.getJointJacobian(m, d, jid, _LWA)
+            dJ[k] = pin.getJointJacobianTimeVariation(m, d, jid, _LWA)
         return _Dyn(M=M, h=h, pos=pos, J=J, dJv=(dJ[:, :3] @ v))
 
     # ------------------------------------------------------------------ contacts
@@ -457,16 +461,15 @@ class PhysicsOptimizer:
 
         grf_j = np.zeros((NUM_JOINTS, 3))
         zmp = np.full(2, np.nan)
+        pts = np.zeros((0, 3))
         if nj:
+            pts = (dyn.pos[cj][:, None] + offs).reshape(-1, 3)
             lam_pts = lam.reshape(nj, 4, 3)
             grf_j[cj] = lam_pts.sum(1)
             fy = lam_pts[..., 1].reshape(-1)
             if fy.sum() > 1e-6:
-                pts = (dyn.pos[cj][:, None] + offs).reshape(-1, 3)
                 zmp = (fy[:, None] * pts[:, [0, 2]]).sum(0) / fy.sum()
-        torques = np.zeros((NUM_JOINTS, 3))
-        torques[0] = tau[3:6]
-        torques[1:] = tau[6:].reshape(NUM_JOINTS - 1, 3)
+        torques = tau[3:].reshape(NUM_JOINTS, 3)[self.char.pin_id - 1]  # root: residual torque
         pose, trans = self.char.pose_from_q(self.q)
         f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
         return PhysicsState(
@@ -475,6 +478,7 @@ class PhysicsOptimizer:
             contacts=torch.from_numpy(cmask[list(c.foot_joints)].copy()), contact_joints=torch.from_numpy(cmask),
             zmp=f32(zmp), penetration_m=depth, qp_ms=qp_ms, step_ms=(time.perf_counter() - t_start) * 1000.0,
             qp_status=str(res.info.status).rsplit(".", 1)[-1],
+            contact_points=f32(pts), contact_forces=f32(lam.reshape(-1, 3)),
         )
 
     # ------------------------------------------------------------------ offline
