@@ -6,12 +6,22 @@ validation metric) and ``last.pt`` (every ``checkpoint_every`` steps and every e
 optimiser state) checkpoints, resume from ``last.pt`` (mid-epoch: the batch order of an epoch
 is a function of the seed and the epoch, so the batches already done are skipped), a
 JSON-lines log (``log.jsonl``) and rich progress. It runs unchanged on CUDA when available.
+
+Distributed: started by ``torchrun`` (``WORLD_SIZE`` > 1 in the environment), the same call
+trains with :class:`~torch.nn.parallel.DistributedDataParallel` (gloo on CPU, NCCL on CUDA).
+Every rank draws the same global batch (the batch order is a function of seed and epoch) and
+trains on its slice along the leading dimension (:func:`shard_batch`); the loss is re-weighted
+by the slice's share so the gradient DDP averages equals the single-process gradient of the
+global batch. Rank 0 validates, logs and saves checkpoints. The global batch is therefore the
+same for any number of processes: adding processes divides the work per step, not the batch.
+Batch norm statistics are per rank (one slice), the one known difference to a 1-process run.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -24,7 +34,13 @@ from wearpose.estimators.checkpoint import load_checkpoint
 
 
 class TrainTask(Protocol):
-    """What :func:`train` needs from a method."""
+    """What :func:`train` needs from a method.
+
+    ``loss`` must run the network through ``self.model`` (not a private reference): under
+    torchrun :func:`train` swaps ``task.model`` for its DistributedDataParallel wrapper while it
+    trains, and restores the plain module for ``validate`` and ``save``. ``batches`` yields
+    tensors, or dicts / lists / tuples of tensors, with the batch as leading dimension.
+    """
 
     model: nn.Module
     val_metric: str  #: key of :meth:`validate`'s result to minimise
@@ -67,6 +83,62 @@ def resolve_device(device: str) -> torch.device:
     return torch.device(device)
 
 
+def dist_info() -> tuple[int, int, int]:
+    """``(rank, world_size, local_rank)`` from torchrun's environment (``(0, 1, 0)`` when not distributed)."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    return int(os.environ.get("RANK", "0")), world, int(os.environ.get("LOCAL_RANK", "0"))
+
+
+def shard_batch(batch: Any, rank: int, world: int) -> tuple[Any, float]:
+    """This rank's contiguous slice of ``batch`` along the leading dimension and its weight.
+
+    Args:
+        batch: a tensor ``(B, ...)``, or a dict / list / tuple of them (non-tensors are kept whole).
+        rank, world: this process and the number of processes.
+
+    Returns:
+        ``(slice, weight)`` with ``weight = world * b / B`` (``b`` the slice size): scaling a
+        mean-reduced loss by it makes DDP's gradient average equal the global-batch gradient,
+        also when ``B`` is not a multiple of ``world``.
+
+    Raises:
+        ConfigError: when the batch has fewer samples than processes, or tensors disagree on ``B``.
+    """
+    from wearpose.errors import ConfigError
+
+    sizes: set[int] = set()
+
+    def scan(x: Any) -> None:
+        if isinstance(x, torch.Tensor) and x.dim() > 0:
+            sizes.add(int(x.shape[0]))
+        elif isinstance(x, dict):
+            for v in x.values():
+                scan(v)
+        elif isinstance(x, (list, tuple)):
+            for v in x:
+                scan(v)
+
+    scan(batch)
+    if len(sizes) != 1:
+        raise ConfigError(f"distributed training: batch tensors must share one leading batch size, got {sorted(sizes)}")
+    B = sizes.pop()
+    if B < world:
+        raise ConfigError(f"distributed training: global batch of {B} samples cannot feed {world} processes; "
+                          f"use a batch size >= the number of processes")
+    lo, hi = rank * B // world, (rank + 1) * B // world
+
+    def cut(x: Any) -> Any:
+        if isinstance(x, torch.Tensor) and x.dim() > 0:
+            return x[lo:hi]
+        if isinstance(x, dict):
+            return {k: cut(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return type(x)(cut(v) for v in x)
+        return x
+
+    return cut(batch), world * (hi - lo) / B
+
+
 def _lr_at(s: TrainSettings, step: int, total: int) -> float:
     if s.lr_schedule == "cosine" and total > 0:
         f = min(1.0, step / total)
@@ -80,61 +152,97 @@ def train(task: TrainTask, s: TrainSettings, console: Any = None) -> dict[str, A
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+    rank, world, local_rank = dist_info()
+    distributed = world > 1
+    lead = rank == 0
     console = console or Console(quiet=s.quiet)
+    if not lead:
+        console = Console(quiet=True)
     if s.threads:
         torch.set_num_threads(int(s.threads))
     device = resolve_device(s.device)
+    if distributed and device.type == "cuda":
+        device = torch.device("cuda", local_rank)
+        torch.cuda.set_device(device)
     out = Path(s.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    task.model.to(device)
-    opt = torch.optim.Adam(task.model.parameters(), lr=s.lr)
+    raw = task.model
+    raw.to(device)
+    opt = torch.optim.Adam(raw.parameters(), lr=s.lr)
+    own_group = False
+    if distributed:
+        import torch.distributed as dist
+        from torch.nn.parallel import DistributedDataParallel
+
+        if not dist.is_initialized():
+            dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
+            own_group = True
+        # find_unused_parameters: a method may leave parts of its network out of some steps
+        # (e.g. heads used only in validation); DDP would otherwise stop with a reduction error.
+        ddp = DistributedDataParallel(raw, device_ids=[device.index] if device.type == "cuda" else None,
+                                      find_unused_parameters=True)
     nb = task.num_batches()
     total = s.epochs * nb
     epoch, skip, gstep, best, history = 0, 0, 0, math.inf, []
     last = out / "last.pt"
     if s.resume and last.is_file():
         ck = load_checkpoint(last, map_location=device)
-        task.model.load_state_dict(ck.weights)
+        raw.load_state_dict(ck.weights)
         st = ck.train_state or {}
         if st.get("optimizer"):
             opt.load_state_dict(st["optimizer"])
         epoch, skip, gstep = int(st.get("epoch", 0)), int(st.get("step_in_epoch", 0)), int(st.get("global_step", 0))
         best, history = float(st.get("best", math.inf)), list(st.get("history", []))
         console.print(f"resumed from {last}: epoch {epoch + 1}, batch {skip}/{nb}, step {gstep}")
-    log = open(out / "log.jsonl", "a", encoding="utf-8")
+    log = open(out / "log.jsonl", "a", encoding="utf-8") if lead else None
 
     def write(row: dict[str, Any]) -> None:
-        log.write(json.dumps(row) + "\n")
-        log.flush()
+        if log is not None:
+            log.write(json.dumps(row) + "\n")
+            log.flush()
+
+    def save(path: Path, meta: dict[str, Any], st: dict[str, Any] | None) -> None:
+        if lead:
+            task.save(path, meta, st)
 
     def state(ep: int, k: int) -> dict[str, Any]:
         return {"epoch": ep, "step_in_epoch": k, "global_step": gstep, "optimizer": opt.state_dict(),
                 "best": best, "history": history, "settings": {k2: str(v) for k2, v in asdict(s).items()}}
 
-    write({"type": "start", "time": time.time(), "device": str(device), "threads": torch.get_num_threads(),
+    write({"type": "start", "time": time.time(), "device": str(device), "threads": torch.get_num_threads(), "world_size": world,
            "batches_per_epoch": nb, "epochs": s.epochs, "resume_epoch": epoch, "resume_step": skip})
     stop = False
     with Progress(TextColumn("[bold]epoch {task.fields[ep]}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TextColumn("loss {task.fields[loss]:.4f}"), TimeElapsedColumn(), TimeRemainingColumn(),
-                  console=console, disable=s.quiet) as prog:
+                  console=console, disable=s.quiet or not lead) as prog:
         while epoch < s.epochs and not stop:
             bar = prog.add_task("train", total=nb, completed=skip, ep=epoch + 1, loss=float("nan"))
             t0, run, n = time.time(), 0.0, 0
-            task.model.train()
+            raw.train()
+            if distributed:
+                task.model = ddp
             for k, batch in enumerate(task.batches(epoch, skip), start=skip):
                 for g in opt.param_groups:
                     g["lr"] = _lr_at(s, gstep, total)
+                weight = 1.0
+                if distributed:
+                    batch, weight = shard_batch(batch, rank, world)
                 loss, parts = task.loss(batch, device)
                 opt.zero_grad(set_to_none=True)
-                loss.backward()
-                gnorm = float(torch.nn.utils.clip_grad_norm_(task.model.parameters(), s.grad_clip)
+                (loss * weight if distributed else loss).backward()
+                gnorm = float(torch.nn.utils.clip_grad_norm_(raw.parameters(), s.grad_clip)
                               if s.grad_clip > 0 else 0.0)
                 opt.step()
                 gstep += 1
-                run, n = run + float(loss.detach()), n + 1
+                loss = loss.detach()
+                if distributed:  # the global-batch mean, for the log and the progress bar
+                    loss = loss * weight
+                    dist.all_reduce(loss)
+                    loss = loss / world
+                run, n = run + float(loss), n + 1
                 prog.update(bar, completed=k + 1, loss=run / n)
                 if gstep % s.log_every == 0:
-                    row = {"type": "step", "epoch": epoch + 1, "batch": k + 1, "step": gstep, "loss": float(loss.detach()),
+                    row = {"type": "step", "epoch": epoch + 1, "batch": k + 1, "step": gstep, "loss": float(loss),
                            "grad_norm": gnorm, "lr": opt.param_groups[0]["lr"], **parts,
                            "sec_per_step": (time.time() - t0) / n}
                     write(row)
@@ -142,16 +250,21 @@ def train(task: TrainTask, s: TrainSettings, console: Any = None) -> dict[str, A
                         console.print(f"epoch {epoch + 1} batch {k + 1}/{nb} loss {run / n:.5f} "
                                       f"({row['sec_per_step']:.2f} s/step)")
                 if gstep % s.checkpoint_every == 0:
-                    task.save(last, {"epoch": epoch + 1, "batch": k + 1}, state(epoch, k + 1))
+                    save(last, {"epoch": epoch + 1, "batch": k + 1}, state(epoch, k + 1))
                 if s.max_steps is not None and gstep >= s.max_steps:
                     stop = True
                     break
             prog.remove_task(bar)
+            task.model = raw
             if stop and k + 1 < nb:
-                task.save(last, {"epoch": epoch + 1, "batch": k + 1}, state(epoch, k + 1))
+                save(last, {"epoch": epoch + 1, "batch": k + 1}, state(epoch, k + 1))
                 break
             tv = time.time()
-            val = task.validate(device)
+            val = task.validate(device) if lead else {}
+            if distributed:  # every rank needs the same view of the validation result
+                box = [val]
+                dist.broadcast_object_list(box, src=0)
+                val = box[0]
             row = {"type": "epoch", "epoch": epoch + 1, "train_loss": run / max(n, 1), **val,
                    "train_seconds": tv - t0, "val_seconds": time.time() - tv, "steps": gstep,
                    "lr": opt.param_groups[0]["lr"]}
@@ -162,7 +275,13 @@ def train(task: TrainTask, s: TrainSettings, console: Any = None) -> dict[str, A
             epoch, skip = epoch + 1, 0
             if val.get(task.val_metric, math.inf) < best:
                 best = val[task.val_metric]
-                task.save(out / "best.pt", {"epoch": epoch, **val}, None)
-            task.save(last, {"epoch": epoch, **val}, state(epoch, 0))
-    log.close()
+                save(out / "best.pt", {"epoch": epoch, **val}, None)
+            save(last, {"epoch": epoch, **val}, state(epoch, 0))
+    task.model = raw
+    if log is not None:
+        log.close()
+    if distributed:
+        dist.barrier()
+        if own_group:
+            dist.destroy_process_group()
     return {"best": best, "history": history, "out_dir": str(out), "steps": gstep}
