@@ -1,0 +1,252 @@
+"""The IMU-only baseline of MI-Poser Sec. 5.2.2: IMUPoser's network (Mollyn et al., CHI 2023,
+a two-layer bidirectional LSTM) on three IMUs at MI-Poser's sensor places (head and both wrists).
+
+Sensors: kit ``imu3-head-wrists`` (registered here): 6-axis IMUs on the ``head`` and the two
+``*_wrist`` sites at 60 Hz, simulated with ``imu_orientation="segment"`` (the orientation of the
+bone the sensor rides on: head, forearms -- what a T-pose sensor-to-segment calibration gives,
+the "with sensor-position calibration" setting of Sec. 5.2.2) and the default IMU noise.
+
+Input per frame, in the head's heading frame of that frame (rotated about +Y so the head faces
++Z): each sensor's orientation (6D) and free acceleration (units of g): 27 numbers. Network:
+linear embedding, 2-layer BiLSTM (``hidden`` per direction), linear read-out of the root
+orientation (6D, heading frame) and 21 local joint rotations (6D) per frame. Loss:
+:func:`~wearpose.estimators.miposer.model.ik_loss`, the MI-Poser network's. Offline only
+(bidirectional): :meth:`ImuPoserEstimator.step` raises.
+
+No translation is estimated (IMUs give no position); ``trans`` is None.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from wearpose.errors import ShapeError
+from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
+from wearpose.estimators.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from wearpose.estimators.empose.baselines import OfflineOnlyError
+from wearpose.estimators.empose.data import clip_seed, num_batches
+from wearpose.estimators.miposer.config import PREDICTED_JOINTS, UPPER_BODY, MiposerConfig
+from wearpose.estimators.miposer.data import MiposerData, cached_split
+from wearpose.estimators.miposer.model import decode_pose, heading_frame, ik_loss
+from wearpose.estimators.registry import register_estimator
+from wearpose.geometry import matrix_to_rot6d
+from wearpose.sensors import SensorKit, SensorSpec, get_kit, list_kits, register_kit
+
+KIT = "imu3-head-wrists"
+if KIT not in list_kits():
+    register_kit(SensorKit(KIT, (SensorSpec("head_imu", "imu", "head", 60.0),
+                                 SensorSpec("left_wrist_imu", "imu", "left_wrist", 60.0),
+                                 SensorSpec("right_wrist_imu", "imu", "right_wrist", 60.0)),
+                           None, "MI-Poser Sec. 5.2.2 IMU-only baseline: head + wrist IMUs (IMUPoser), 60 Hz"))
+G = 9.81
+
+
+def imu_features(R: torch.Tensor, a: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-frame input (module doc) from orientations ``R`` ``(..., S, 3, 3)`` (head first) and free
+    accelerations ``a`` ``(..., S, 3)`` m/s^2: ``(x (..., 9 S), C (..., 3, 3))`` with ``C`` the
+    world -> heading-frame rotation of each frame."""
+    C, _ = heading_frame(R[..., 0, :, :], torch.zeros_like(a[..., 0, :]))
+    Rc = C.unsqueeze(-3) @ R
+    ac = (C.unsqueeze(-3) @ a.unsqueeze(-1)).squeeze(-1) / G
+    return torch.cat([matrix_to_rot6d(Rc), ac], -1).flatten(-2), C
+
+
+class ImuPoserNet(nn.Module):
+    """``forward(x (B, T, F)) -> (root6 (B, T, 6), local6 (B, T, 21, 6))`` (module doc)."""
+
+    def __init__(self, cfg: MiposerConfig, sensors: int = 3) -> None:
+        super().__init__()
+        self.embed = nn.Linear(9 * sensors, cfg.hidden)
+        self.lstm = nn.LSTM(cfg.hidden, cfg.hidden, cfg.layers, batch_first=True, bidirectional=True)
+        self.out = nn.Linear(2 * cfg.hidden, 6 * PREDICTED_JOINTS)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h, _ = self.lstm(torch.relu(self.embed(x)))
+        y = self.out(h)
+        return y[..., :6], y[..., 6:].reshape(*y.shape[:-1], PREDICTED_JOINTS - 1, 6)
+
+
+def simulate_imu_clip(motion: Any, cfg: MiposerConfig, body: Any, seed: int, noise: str | None = None) -> dict[str, Any]:
+    """Simulate the baseline's IMUs on a clip at ``cfg.rate``.
+
+    Returns:
+        ``{"R": (T, 3, 3, 3), "a": (T, 3, 3), "valid": (T, 3), "pose": (T, 24, 3, 3), "motion", "sim"}``.
+    """
+    from wearpose.motion import resample
+    from wearpose.sensors import simulate
+
+    m = motion if abs(motion.fps - cfg.rate) < 1e-9 else resample(motion, cfg.rate)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = simulate(m, KIT, body, seed=seed, noise=noise or cfg.train_noise, imu_orientation="segment", rate=cfg.rate)
+    names = get_kit(KIT).sensor_names
+    R = torch.stack([sim[n].orientation for n in names], 1).float()
+    a = torch.stack([sim[n].acceleration for n in names], 1).float()
+    v = torch.stack([sim[n].valid for n in names], 1)
+    return {"R": R, "a": torch.nan_to_num(a), "valid": v, "pose": m.pose.float(), "motion": m, "sim": sim}
+
+
+def build_imu_split(split: str, cfg: MiposerConfig, body: Any, *, store: Any = None, limit: int | None = None,
+                    cache_root: str | Path | None = None, progress: Any = None, clip_ids: Any = None) -> MiposerData:
+    """Simulate (or load from the cache) one split for the baseline. The returned
+    :class:`~wearpose.estimators.miposer.data.MiposerData` holds orientations in ``R`` and free
+    accelerations (m/s^2) in ``p``; there is no T-pose prefix (``in_clip`` all True)."""
+    from wearpose.estimators.checkpoint import fingerprint
+    from wearpose.estimators.miposer.data import DATA_VERSION
+    from wearpose.motion import CorpusStore
+
+    store = store or CorpusStore()
+    ids = list(clip_ids) if clip_ids is not None else store.clips(split=split)
+    if limit:
+        ids = ids[:limit]
+    settings = {"version": DATA_VERSION, "kit": KIT, "rate": cfg.rate, "noise": cfg.train_noise, "seed": cfg.seed,
+                "body_asset": body.asset_id, "imu_orientation": "segment"}
+    fp = fingerprint(ids, {**settings, "split": split})
+    root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "miposer"
+
+    def one(cid: str) -> dict[str, torch.Tensor]:
+        r = simulate_imu_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed, "imuposer"))
+        return {"R": r["R"], "p": r["a"], "valid": r["valid"], "pose6": matrix_to_rot6d(r["pose"][:, :PREDICTED_JOINTS]),
+                "in_clip": torch.ones(r["R"].shape[0], dtype=torch.bool)}
+
+    return cached_split(root / f"imu-{split}-{fp[:16]}.pt", ids, one, fp, settings, progress)
+
+
+class ImuPoserTask:
+    """:class:`~wearpose.estimators.train.TrainTask` of the baseline (every frame of a window
+    supervised; validation: upper-body MPJPE at every frame of non-overlapping windows)."""
+
+    val_metric = "val_mpjpe_upper_mm"
+
+    def __init__(self, est: ImuPoserEstimator, train_data: MiposerData, val_data: MiposerData | None) -> None:
+        self.est, self.cfg, self.model = est, est.config, est.model
+        self.train_data, self.val_data = train_data, val_data
+        self._nw = len(train_data.windows(self.cfg.window, self.cfg.stride))
+
+    def num_batches(self) -> int:
+        return num_batches(self._nw, self.cfg.batch_size)
+
+    def batches(self, epoch: int, skip: int):
+        g = torch.Generator().manual_seed(self.cfg.seed * 100_003 + epoch)
+        return self.train_data.iter_batches(self.cfg.window, self.cfg.stride, self.cfg.batch_size, g, skip=skip)
+
+    def _forward(self, b: dict[str, torch.Tensor], device: torch.device):
+        x, C = imu_features(b["R"].to(device), b["p"].to(device))
+        root6, local6 = self.model(x)
+        return ik_loss((root6.flatten(0, 1), local6.flatten(0, 1)), C.flatten(0, 1), b["pose6"].to(device).flatten(0, 1),
+                       self.est.body, self.cfg)
+
+    def loss(self, batch: dict[str, torch.Tensor], device: torch.device):
+        loss, parts, _, _ = self._forward(batch, device)
+        return loss, parts
+
+    @torch.no_grad()
+    def validate(self, device: torch.device) -> dict[str, float]:
+        from wearpose.evaluate import mpjpe
+
+        if self.val_data is None:
+            return {}
+        self.model.eval()
+        tot, n, pe = 0.0, 0, []
+        for b in self.val_data.iter_batches(self.cfg.window, self.cfg.window, 64, shuffle=False):
+            loss, _, J, Jg = self._forward(b, device)
+            tot, n = tot + float(loss), n + 1
+            pe.append(mpjpe(J, Jg, UPPER_BODY).cpu())
+        self.model.train()
+        return {"val_loss": tot / max(n, 1), "val_mpjpe_upper_mm": float(torch.cat(pe).mean()) * 1000 if pe else float("nan")}
+
+    def save(self, path: Path, meta: dict[str, Any], train_state: dict[str, Any] | None) -> None:
+        save_checkpoint(self.est.checkpoint(meta, train_state), path)
+
+
+@register_estimator("imuposer")
+class ImuPoserEstimator(Estimator):
+    """IMU-only head + wrists baseline (module doc). Offline only."""
+
+    name = "imuposer"
+    causal = False
+    lookahead = 0
+
+    def __init__(self, config: MiposerConfig | None = None, body: Any = None, device: str | torch.device = "cpu") -> None:
+        from wearpose.body import BodyModel
+
+        self.config = config or MiposerConfig.preset("cpu", model="imuposer")
+        if self.config.model != "imuposer":
+            raise ShapeError(f"ImuPoserEstimator needs model='imuposer', got {self.config.model!r}")
+        self.device = torch.device(device)
+        self.body = (body or BodyModel()).to(self.device)
+        self.kit_name = KIT
+        self.sensor_names = get_kit(KIT).sensor_names
+        self.body_asset_id = self.body.asset_id
+        self.fps = float(self.config.rate)
+        self.model = ImuPoserNet(self.config, len(self.sensor_names)).to(self.device)
+        self.data_fingerprint, self.train_command, self.meta = "", "", {}
+
+    def to(self, device: str | torch.device) -> ImuPoserEstimator:
+        self.device = torch.device(device)
+        self.model.to(self.device)
+        self.body.to(self.device)
+        return self
+
+    def build_data(self, split: str, **kw: Any) -> MiposerData:
+        return build_imu_split(split, self.config, self.body, **kw)
+
+    def make_task(self, tr: MiposerData, va: MiposerData | None) -> ImuPoserTask:
+        return ImuPoserTask(self, tr, va)
+
+    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
+        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name, sensors=list(self.sensor_names),
+                          body_asset=self.body_asset_id, weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
+                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
+                          meta={**self.meta, **(meta or {})}, train_state=train_state)
+
+    def save(self, path: str | Path) -> Path:
+        return save_checkpoint(self.checkpoint(), path)
+
+    @classmethod
+    def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
+             map_location: str | torch.device = "cpu") -> ImuPoserEstimator:
+        ck = load_checkpoint(path, map_location)
+        ck.check(method=cls.name, kit=kit, body_asset=getattr(body, "asset_id", None), path=path)
+        est = cls(MiposerConfig.from_dict(ck.config), body=body, device=map_location)
+        ck.check(body_asset=est.body_asset_id, sensors=est.sensor_names, path=path)
+        est.model.load_state_dict(ck.weights)
+        est.data_fingerprint, est.train_command, est.meta = ck.data_fingerprint, ck.train_command, dict(ck.meta)
+        return est
+
+    def fit(self, *args: Any, **kwargs: Any) -> Any:
+        from wearpose.estimators.miposer.train import train_miposer
+
+        return train_miposer(self, *args, **kwargs)
+
+    @torch.no_grad()
+    def infer(self, R: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
+        """Local rotations ``(T, 24, 3, 3)`` (root in the world) from ``R`` ``(T, 3, 3, 3)``, ``a`` ``(T, 3, 3)``."""
+        self.model.eval()
+        x, C = imu_features(R.float().to(self.device), a.float().to(self.device))
+        root6, local6 = self.model(x[None])
+        return decode_pose(root6[0], local6[0], C).cpu()
+
+    def estimate(self, recording: Any) -> PoseTrack:
+        """Offline estimate from a recording with the kit's three IMUs (canonical form, 60 Hz)."""
+        missing = [n for n in self.sensor_names if n not in recording.names]
+        if missing:
+            raise ShapeError(f"recording lacks sensors {missing} of kit {KIT!r} (has {list(recording.names)})")
+        grid = recording.to_canonical().on_common_grid(self.sensor_names)
+        R = torch.as_tensor(np.asarray(grid.channels["orientation"]), dtype=torch.float32)
+        a = torch.nan_to_num(torch.as_tensor(np.asarray(grid.channels["acceleration"]), dtype=torch.float32))
+        valid = torch.as_tensor(grid.valid).all(1)
+        return PoseTrack(self.infer(R, a), torch.zeros(10), None, valid, self.fps,
+                         extras={"frame": "world", "method": self.name})
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, frame: SensorFrame) -> PoseFrame:
+        raise OfflineOnlyError("imuposer is a bidirectional LSTM (offline only): use estimate(recording)")

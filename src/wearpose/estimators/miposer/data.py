@@ -1,0 +1,326 @@
+"""MI-Poser data: corpus clips -> simulated headset + wrist EM sensors -> T-pose calibration ->
+calibrated 6-DoF inputs, cached on disk.
+
+Per clip (sorted ids of one :class:`~wearpose.motion.CorpusStore` split):
+
+1. resample to ``cfg.rate`` (60 Hz, Sec. 4.2) and put ``cfg.tpose_s`` of the calibration T-pose
+   in front, facing the clip's initial heading, blended into the first frame over
+   ``cfg.blend_s`` (:func:`tpose_then`): the wearer's calibration of Sec. 4.2, then the motion;
+2. simulate the kit (``miposer`` / ``miposer1``: head VIO, wrist EM relative to the head-worn
+   source) with :func:`wearpose.sensors.simulate` (noise ``cfg.train_noise``, a random subject's
+   EM sensor offsets; seed from the clip id) and wrap it in a
+   :class:`~wearpose.recording.Recording`;
+3. calibrate on the T-pose window with :func:`wearpose.calibration.calibrate`
+   (``"miposer-tpose"``: arm-span scale, world alignment, per-sensor offsets) and map every
+   frame through it (:func:`calibrated_inputs`): head and wrist target-joint poses in the
+   calibrated world (subject facing +Z at the T-pose, model scale);
+4. ground truth: the clip's local joint rotations with the root orientation expressed in the
+   same calibrated world, ``R_root^cal = R^{WM} R_root`` (the VIO world is the corpus world up
+   to its drift, so the calibration's alignment is also the ground truth's).
+
+Training windows (:meth:`MiposerData.windows`) are the ``cfg.window`` frames ending at every
+``cfg.stride``-th frame (the T-pose prefix gives the first clip frames a full history); the target
+is the pose at the window's last frame (AvatarPoser predicts the current frame).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+import torch
+
+from wearpose.calibration import CalibrationResult, apply_miposer, calibrate, em_to_world
+from wearpose.errors import ShapeError
+from wearpose.estimators.checkpoint import fingerprint
+from wearpose.estimators.empose.data import clip_seed, hold_invalid, num_batches
+from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
+from wearpose.geometry import matrix_to_rot6d, rotation_y
+
+DATA_VERSION = 1
+#: Tolerance when picking 120 Hz EM samples at the 60 Hz headset instants, s.
+GRID_TOLERANCE_S = 1e-3
+
+
+def heading(R: torch.Tensor) -> torch.Tensor:
+    """Yaw (rad, about +Y) of the forward axis (+Z column) of ``R`` ``(..., 3, 3)``: 0 facing +Z."""
+    f = R[..., :, 2]
+    return torch.atan2(f[..., 0], f[..., 2])
+
+
+def tpose_then(motion: Any, hold_s: float, blend_s: float) -> tuple[Any, int]:
+    """``hold_s`` of the T-pose at the clip's first position and heading, a ``blend_s`` slerp
+    into the first frame, then the clip.
+
+    Returns:
+        ``(motion, prefix)``: the longer :class:`~wearpose.motion.MotionSequence` and the number
+        of frames before the clip's first frame.
+    """
+    from wearpose.calibration import calibration_pose
+    from wearpose.geometry import slerp_matrix
+    from wearpose.motion import MotionSequence
+
+    fps = motion.fps
+    nh, nb = int(round(hold_s * fps)), int(round(blend_s * fps))
+    pose = motion.pose.to(torch.float64)
+    base = calibration_pose("tpose").clone()
+    base[0] = rotation_y(heading(pose[0, 0]))  # the wearer faces where the clip starts
+    x = torch.arange(1, nb + 1, dtype=torch.float64) / (nb + 1)
+    w = x * x * (3 - 2 * x)  # smoothstep: no velocity jump at either end
+    blend = slerp_matrix(base.expand(nb, 24, 3, 3), pose[0].expand(nb, 24, 3, 3), w[:, None].expand(nb, 24))
+    full = torch.cat([base.expand(nh, 24, 3, 3), blend, pose]).to(motion.pose.dtype)
+    trans = torch.cat([motion.trans[:1].expand(nh + nb, 3), motion.trans])
+    return MotionSequence(full, motion.betas, trans, fps, dict(motion.meta)), nh + nb
+
+
+def _pick(ts: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the sample of ``ts`` at each ``grid`` instant and whether it is within tolerance."""
+    i = np.clip(np.searchsorted(ts, grid), 1, max(1, len(ts) - 1))
+    i = np.where(np.abs(ts[i - 1] - grid) <= np.abs(ts[np.minimum(i, len(ts) - 1)] - grid), i - 1, i)
+    i = np.clip(i, 0, len(ts) - 1)
+    return i, np.abs(ts[i] - grid) <= GRID_TOLERANCE_S
+
+
+def kit_streams(recording: Any, kit: str) -> tuple[str, list[str]]:
+    """The headset (``vio``) sensor name and the wrist EM sensor names of ``kit`` (kit order)."""
+    from wearpose.sensors import get_kit
+
+    k = get_kit(kit)
+    vio = [s.name for s in k.sensors if s.kind == "vio"]
+    em = [s.name for s in k.sensors if s.kind == "em6dof"]
+    missing = [n for n in (*vio, *em) if n not in recording.names]
+    if missing:
+        raise ShapeError(f"recording lacks sensors {missing} of kit {kit!r} (has {list(recording.names)})")
+    return vio[0], em
+
+
+def raw_inputs(recording: Any, kit: str, rate: float = 60.0) -> dict[str, torch.Tensor]:
+    """Headset and wrist sensor poses in the headset's world, on the headset's time grid.
+
+    Wrist EM poses (relative to the head-worn source, DESIGN: EM canonical form) are composed
+    with the headset pose (:func:`wearpose.calibration.em_to_world`); 120 Hz EM samples are
+    taken at the headset's 60 Hz instants (exact in simulation; a sample further than
+    :data:`GRID_TOLERANCE_S` counts as dropped). Dropped samples are held at the last valid one
+    (:func:`~wearpose.estimators.empose.data.hold_invalid`).
+
+    Returns:
+        ``{"t": (T,) s, "R": (T, S, 3, 3), "p": (T, S, 3) m, "valid": (T, S)}``, head first.
+
+    Raises:
+        ShapeError: missing sensors, or a headset not at ``rate`` Hz.
+    """
+    vio, em = kit_streams(recording, kit)
+    h = recording.sensor(vio)
+    if abs(float(h.info.rate) - rate) > 1e-3 * rate:
+        raise ShapeError(f"sensor {vio!r} runs at {h.info.rate} Hz; MI-Poser's IK model runs at {rate:g} Hz")
+    ts = np.asarray(h.timestamps, dtype=np.float64)
+    hR = torch.as_tensor(np.asarray(h.orientation), dtype=torch.float64)
+    hp = torch.as_tensor(np.asarray(h.position), dtype=torch.float64)
+    hv = torch.as_tensor(np.asarray(h.valid))
+    Rs, ps, vs = [hR], [hp], [hv]
+    for n in em:
+        s = recording.sensor(n)
+        i, ok = _pick(np.asarray(s.timestamps, dtype=np.float64), ts)
+        eR = torch.as_tensor(np.asarray(s.orientation)[i], dtype=torch.float64)
+        ep = torch.as_tensor(np.asarray(s.position)[i], dtype=torch.float64)
+        v = torch.as_tensor(np.asarray(s.valid)[i] & ok) & hv
+        if (s.info.reference or "source") == "source":
+            eR, ep = em_to_world(hR, hp, eR, ep)
+        Rs.append(eR)
+        ps.append(ep)
+        vs.append(v)
+    R, p, valid = torch.stack(Rs, 1), torch.stack(ps, 1), torch.stack(vs, 1)
+    p, R = hold_invalid(p, R, valid)
+    return {"t": torch.as_tensor(ts), "R": R, "p": p, "valid": valid}
+
+
+def uncalibrated(res: CalibrationResult) -> CalibrationResult:
+    """The "without sensor-position calibration" condition of Fig. 5: ``res``'s world alignment
+    (heading and origin) kept, but scale 1 and no per-sensor offsets (sensor poses taken as the
+    target joints' poses)."""
+    S = len(res.sensors)
+    head = res.extras.get("head_position")
+    wt = res.world_translation
+    if head is not None:  # origin shift for scale 1: h - R p_head
+        h = res.world_translation[0] + res.scale * (res.world_rotation[0] @ torch.as_tensor(head, dtype=wt.dtype))
+        wt = (h - res.world_rotation[0] @ torch.as_tensor(head, dtype=wt.dtype)).expand(S, 3).clone()
+    return CalibrationResult(res.method, res.sensors, rotation=torch.eye(3, dtype=res.rotation.dtype).expand(S, 3, 3).clone(),
+                             translation=torch.zeros(S, 3, dtype=res.translation.dtype), world_rotation=res.world_rotation,
+                             world_translation=wt, scale=1.0, extras=dict(res.extras), quality=dict(res.quality),
+                             params={**res.params, "uncalibrated": True})
+
+
+def calibrated_inputs(raw: dict[str, torch.Tensor], res: CalibrationResult) -> tuple[torch.Tensor, torch.Tensor]:
+    """Target-joint poses ``(R (T, S, 3, 3), p (T, S, 3))`` float32 in the calibrated world from
+    :func:`raw_inputs` (:func:`wearpose.calibration.apply_miposer`)."""
+    R, p = apply_miposer(res, raw["R"], raw["p"])
+    return R.float(), p.float()
+
+
+def simulate_clip(motion: Any, cfg: MiposerConfig, body: Any, seed: int, noise: str | None = None,
+                  native_rates: bool = False) -> dict[str, Any]:
+    """Steps 1-4 of the module doc for one clip.
+
+    Args:
+        motion: the clip. cfg: data settings. body: the body the sensors are worn on.
+        seed: simulation seed. noise: override ``cfg.train_noise``.
+        native_rates: simulate the kit at its own rates (EM 120 Hz, as a device streams) instead
+            of everything at ``cfg.rate`` (cheaper, for training).
+
+    Returns:
+        dict: ``recording`` (:class:`~wearpose.recording.Recording`, ground truth = the motion
+        with its T-pose prefix), ``calibration``, ``raw`` (:func:`raw_inputs`), ``R``/``p``
+        calibrated inputs ``(T, S, 3, 3)``/``(T, S, 3)``, ``valid`` ``(T, S)``, ``pose``
+        ``(T, 24, 3, 3)`` local rotations with the root in the calibrated world, ``betas``,
+        ``prefix`` frames before the clip, ``motion`` (with prefix, at ``cfg.rate``), ``sim``.
+    """
+    from wearpose.motion import resample
+    from wearpose.recording import Recording
+    from wearpose.sensors import simulate
+
+    m = motion if abs(motion.fps - cfg.rate) < 1e-9 else resample(motion, cfg.rate)
+    mm, prefix = tpose_then(m, cfg.tpose_s, cfg.blend_s)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = simulate(mm, cfg.kit, body, seed=seed, noise=noise or cfg.train_noise, offsets="random",
+                       rate=None if native_rates else cfg.rate)
+    rec = Recording.from_simulation(sim, mm)
+    hold = int(round(cfg.tpose_s * cfg.rate))
+    window = (min(0.1, 0.25 * cfg.tpose_s), max(hold - 1, 1) / cfg.rate)
+    res = calibrate(rec, "miposer-tpose", window=window, body=body)
+    raw = raw_inputs(rec, cfg.kit, cfg.rate)
+    R, p = calibrated_inputs(raw, res)
+    pose = mm.pose.float().clone()
+    pose[:, 0] = res.world_rotation[0].float() @ pose[:, 0]
+    return {"recording": rec, "calibration": res, "raw": raw, "R": R, "p": p, "valid": raw["valid"], "pose": pose,
+            "betas": mm.betas.float(), "prefix": prefix, "motion": mm, "sim": sim}
+
+
+@dataclass
+class MiposerData:
+    """One split, simulated, calibrated and frame-concatenated.
+
+    Attributes:
+        R ``(F, S, 3, 3)``, p ``(F, S, 3)``: calibrated inputs (head first); valid ``(F, S)``;
+        pose6 ``(F, 22, 6)`` ground-truth local rotations (root in the calibrated world);
+        in_clip ``(F,)`` False on the T-pose prefix; clip ``(F,)``; starts, lengths ``(C,)``;
+        clip_ids; fingerprint; settings.
+    """
+
+    R: torch.Tensor
+    p: torch.Tensor
+    valid: torch.Tensor
+    pose6: torch.Tensor
+    in_clip: torch.Tensor
+    clip: torch.Tensor
+    starts: torch.Tensor
+    lengths: torch.Tensor
+    clip_ids: list[str]
+    fingerprint: str
+    settings: dict[str, Any]
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.R.shape[0])
+
+    def windows(self, window: int, stride: int, clip_only: bool = False) -> torch.Tensor:
+        """``(N,)`` last frame of every ``window``-frame window inside one clip, every ``stride``
+        frames (``clip_only``: only windows ending on a clip frame, not on the T-pose prefix)."""
+        out = []
+        for c in range(len(self.clip_ids)):
+            s, L = int(self.starts[c]), int(self.lengths[c])
+            if L < window:  # a clip shorter than one window gives none
+                continue
+            out.append(torch.arange(s + window - 1, s + L, max(1, stride)))
+        ends = torch.cat(out) if out else torch.zeros(0, dtype=torch.long)
+        return ends[self.in_clip[ends]] if clip_only else ends
+
+    def batch(self, ends: torch.Tensor, window: int) -> dict[str, torch.Tensor]:
+        """Windows ending at ``ends`` ``(B,)``: ``R`` ``(B, W, S, 3, 3)``, ``p`` ``(B, W, S, 3)``,
+        ``valid`` ``(B, W, S)``, ``pose6`` ``(B, W, 22, 6)``, ``in_clip`` ``(B, W)``."""
+        idx = ends[:, None] - torch.arange(window - 1, -1, -1)
+        return {"R": self.R[idx], "p": self.p[idx], "valid": self.valid[idx], "pose6": self.pose6[idx],
+                "in_clip": self.in_clip[idx]}
+
+    def iter_batches(self, window: int, stride: int, batch_size: int, generator: torch.Generator | None = None,
+                     shuffle: bool = True, skip: int = 0, clip_only: bool = False) -> Iterator[dict[str, torch.Tensor]]:
+        ends = self.windows(window, stride, clip_only)
+        order = torch.randperm(len(ends), generator=generator) if shuffle else torch.arange(len(ends))
+        for i in range(skip, num_batches(len(ends), batch_size) if shuffle else math.ceil(len(ends) / batch_size)):
+            yield self.batch(ends[order[i * batch_size:(i + 1) * batch_size]], window)
+
+
+def data_settings(cfg: MiposerConfig, body: Any) -> dict[str, Any]:
+    """Everything that changes the simulated data (part of the fingerprint)."""
+    from wearpose.estimators.empose.data import kit_sites
+
+    return {"version": DATA_VERSION, "kit": cfg.kit, "rate": cfg.rate, "noise": cfg.train_noise, "seed": cfg.seed,
+            "tpose_s": cfg.tpose_s, "blend_s": cfg.blend_s, "body_asset": body.asset_id, "sites": kit_sites(cfg.kit, body),
+            "root_frame": "calibrated"}
+
+
+def build_split(split: str, cfg: MiposerConfig, body: Any, *, store: Any = None, limit: int | None = None,
+                clip_ids: Sequence[str] | None = None, cache_root: str | Path | None = None,
+                progress: Any = None) -> MiposerData:
+    """Simulate and calibrate (or load from the cache) one corpus split (module doc).
+
+    Args:
+        split: ``train`` / ``val`` / ``test``. cfg, body: data settings and body.
+        store: :class:`~wearpose.motion.CorpusStore` (default: the prepared cache).
+        limit: first ``limit`` clips (sorted ids). clip_ids: explicit clips instead of the split's.
+        cache_root: tensor cache directory (default ``<corpus cache>/estimators/miposer``).
+        progress: optional ``progress(done, total)``.
+    """
+    from wearpose.motion import CorpusStore
+
+    store = store or CorpusStore()
+    ids = list(clip_ids) if clip_ids is not None else store.clips(split=split)
+    if limit:
+        ids = ids[:limit]
+    settings = data_settings(cfg, body)
+    fp = fingerprint(ids, {**settings, "split": split})
+    root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "miposer"
+
+    def one(cid: str) -> dict[str, torch.Tensor]:
+        r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed, "miposer"))
+        inc = torch.ones(r["R"].shape[0], dtype=torch.bool)
+        inc[: r["prefix"]] = False
+        return {"R": r["R"], "p": r["p"], "valid": r["valid"], "pose6": matrix_to_rot6d(r["pose"][:, :PREDICTED_JOINTS]),
+                "in_clip": inc}
+
+    return cached_split(root / f"{split}-{fp[:16]}.pt", ids, one, fp, settings, progress)
+
+
+def cached_split(path: Path, ids: Sequence[str], clip_fn: Any, fp: str, settings: dict[str, Any],
+                 progress: Any = None) -> MiposerData:
+    """Load ``path`` or build it: ``clip_fn(clip_id)`` gives one clip's per-frame tensors
+    (``R``, ``p``, ``valid``, ``pose6``, ``in_clip``); they are concatenated and saved atomically."""
+    keys = ("R", "p", "valid", "pose6", "in_clip", "clip", "starts", "lengths")
+    if path.is_file():
+        d = torch.load(path, weights_only=True)
+        return MiposerData(**{k: d[k] for k in keys}, clip_ids=list(d["clip_ids"]), fingerprint=fp, settings=settings)
+    cols: dict[str, list[torch.Tensor]] = {k: [] for k in keys[:6]}
+    starts, lengths, total = [], [], 0
+    for c, cid in enumerate(ids):
+        r = clip_fn(cid)
+        T = r["R"].shape[0]
+        for k in keys[:5]:
+            cols[k].append(r[k])
+        cols["clip"].append(torch.full((T,), c, dtype=torch.long))
+        starts.append(total)
+        lengths.append(T)
+        total += T
+        if progress is not None:
+            progress(c + 1, len(ids))
+    d = {k: torch.cat(v) for k, v in cols.items()}
+    d.update(starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")  # per process: parallel builders never share a temp file
+    torch.save({**d, "clip_ids": list(ids), "fingerprint": fp}, tmp)
+    tmp.replace(path)
+    return MiposerData(**d, clip_ids=list(ids), fingerprint=fp, settings=settings)

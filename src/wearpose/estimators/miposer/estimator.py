@@ -1,0 +1,311 @@
+"""``MiposerEstimator``: MI-Poser behind the :class:`~wearpose.estimators.Estimator` protocol.
+
+Input: a recording of kit ``miposer`` (or ``miposer1``): the AR-glasses headset (``vio``, world,
+60 Hz) and wrist EM sensors relative to the head-worn source (120 Hz), each with a co-located
+IMU (used only by MIM). Pipeline per recording:
+
+1. optional **MIM** (``mim=True``, :mod:`wearpose.interference`): each wrist's EM stream is
+   checked against its gyro and corrected at the EM rate before anything else (Sec. 3);
+   per-frame interference flags, levels and "tracking degraded" notices go to
+   ``extras["interference"]``;
+2. wrist EM poses composed with the headset pose and sampled at the headset's 60 Hz instants
+   (:func:`~wearpose.estimators.miposer.data.raw_inputs`); dropped samples held;
+3. the **T-pose calibration** of Sec. 4.2 (:func:`wearpose.calibration.miposer_tpose`): from
+   ``calibration=`` (a :class:`~wearpose.calibration.CalibrationResult`), else
+   ``recording.meta["calibration"]`` (``wearpose calibrate --method miposer-tpose``), else from
+   ``calibration_window=(t0, t1)``; ``calibration="none"`` keeps only the world alignment (the
+   "without calibration" condition of Fig. 5); without any, identity (a warning);
+4. the **IK network** on the 40-frame window ending at each frame (causal; the first frames see
+   a window padded with the first frame), root translation anchored on the head.
+
+Output: local rotations ``(T, 24, 3, 3)`` with the root in the calibrated world (subject facing
++Z at the T-pose, model scale; ``extras["frame"] = "calibrated"``), mean-shape betas, root
+translation, ``valid`` = every input sensor valid at that frame.
+
+Online: :meth:`step` takes one 60 Hz :class:`~wearpose.estimators.base.SensorFrame` (see
+:func:`frames`), keeps the last 40 calibrated frames and runs the network on them; with MIM the
+wrist streams are checked/corrected frame by frame at 60 Hz (``MIM.step``).
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+import torch
+
+from wearpose.errors import ShapeError
+from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
+from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, load_checkpoint, save_checkpoint
+from wearpose.estimators.miposer.config import MiposerConfig
+from wearpose.estimators.miposer.data import calibrated_inputs, kit_streams, raw_inputs, uncalibrated
+from wearpose.estimators.miposer.model import AvatarPoserNet, decode_pose, head_anchored_translation, window_features
+from wearpose.estimators.registry import register_estimator
+
+
+def resolve_calibration(recording: Any, calibration: Any, window: tuple[float, float] | None, body: Any) -> Any:
+    """The :class:`~wearpose.calibration.CalibrationResult` to use (module doc, step 3), or None."""
+    from wearpose.calibration import CalibrationResult, calibrate
+
+    if isinstance(calibration, CalibrationResult):
+        return calibration
+    stored = (recording.meta or {}).get("calibration") if recording is not None else None
+    res = None
+    if stored and stored.get("method") == "miposer-tpose":
+        res = CalibrationResult.from_dict(stored)
+    elif window is not None:
+        res = calibrate(recording, "miposer-tpose", window=window, body=body)
+    if calibration == "none":
+        if res is None:
+            return None
+        return uncalibrated(res)
+    return res
+
+
+def window_batches(R: torch.Tensor, p: torch.Tensor, window: int, chunk: int = 512,
+                   frames: torch.Tensor | None = None) -> Iterator[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
+    """Causal windows ending at every frame (or at ``frames``) of ``R`` ``(T, S, 3, 3)`` /
+    ``p`` ``(T, S, 3)``, the start padded with the first frame: yields
+    ``(frame_indices (B,), R (B, W, S, 3, 3), p (B, W, S, 3))``."""
+    T = R.shape[0]
+    Rp = torch.cat([R[:1].expand(window - 1, *R.shape[1:]), R])
+    pp = torch.cat([p[:1].expand(window - 1, *p.shape[1:]), p])
+    frames = torch.arange(T) if frames is None else torch.as_tensor(frames, dtype=torch.long)
+    for a in range(0, len(frames), chunk):
+        f = frames[a:a + chunk]
+        idx = (f + window - 1)[:, None] - torch.arange(window - 1, -1, -1)
+        yield f, Rp[idx], pp[idx]
+
+
+def frames(recording: Any, kit: str = "miposer", rate: float = 60.0) -> Iterator[SensorFrame]:
+    """Replay a MI-Poser recording as 60 Hz :class:`SensorFrame` s for :meth:`MiposerEstimator.step`.
+
+    Sensors (names): the headset and the wrist EM sensors of ``kit``; channels ``position``
+    ``(S, 3)``, ``orientation`` ``(S, 3, 3)`` as recorded (headset in its world, EM relative to
+    the source), plus ``angular_velocity`` / ``acceleration`` ``(S, 3)`` of each wrist's
+    co-located IMU (NaN for the headset and when the kit has no IMU).
+    """
+    from wearpose.estimators.miposer.data import _pick
+    from wearpose.sensors import get_kit
+
+    vio, em = kit_streams(recording, kit)
+    h = recording.sensor(vio)
+    ts = np.asarray(h.timestamps, dtype=np.float64)
+    names = (vio, *em)
+    S, T = len(names), len(ts)
+    pos = np.full((T, S, 3), np.nan, np.float32)
+    ori = np.full((T, S, 3, 3), np.nan, np.float32)
+    gyr = np.full((T, S, 3), np.nan, np.float32)
+    acc = np.full((T, S, 3), np.nan, np.float32)
+    valid = np.zeros((T, S), bool)
+    pos[:, 0], ori[:, 0], valid[:, 0] = h.position, h.orientation, h.valid
+    imus = {s.site: s.name for s in get_kit(kit).sensors if s.kind == "imu"}
+    for j, n in enumerate(em, start=1):
+        s = recording.sensor(n)
+        i, ok = _pick(np.asarray(s.timestamps, dtype=np.float64), ts)
+        pos[:, j], ori[:, j], valid[:, j] = np.asarray(s.position)[i], np.asarray(s.orientation)[i], np.asarray(s.valid)[i] & ok
+        site = get_kit(kit).sensor(n).site
+        if site in imus and imus[site] in recording.names:
+            u = recording.sensor(imus[site])
+            k, ok2 = _pick(np.asarray(u.timestamps, dtype=np.float64), ts)
+            if u.angular_velocity is not None:
+                gyr[:, j] = np.where(ok2[:, None], np.asarray(u.angular_velocity)[k], np.nan)
+            if u.acceleration is not None:
+                acc[:, j] = np.where(ok2[:, None], np.asarray(u.acceleration)[k], np.nan)
+    for t in range(T):
+        yield SensorFrame(float(ts[t]), names, valid[t],
+                          {"position": pos[t], "orientation": ori[t], "angular_velocity": gyr[t], "acceleration": acc[t]})
+
+
+@register_estimator("miposer")
+class MiposerEstimator(Estimator):
+    """MI-Poser (module doc).
+
+    Args:
+        config: :class:`MiposerConfig` (``model="avatarposer"``).
+        body: :class:`~wearpose.body.BodyModel` (default: the embedded asset).
+        device: torch device.
+        mim: run metal-interference mitigation on the wrist EM streams (needs
+            :mod:`wearpose.interference`).
+        mim_config: a ``wearpose.interference.MIMConfig`` (default settings if None).
+    """
+
+    name = "miposer"
+    causal = True
+    lookahead = 0
+
+    def __init__(self, config: MiposerConfig | None = None, body: Any = None, device: str | torch.device = "cpu",
+                 mim: bool = False, mim_config: Any = None) -> None:
+        from wearpose.body import BodyModel
+        from wearpose.sensors import get_kit
+
+        self.config = config or MiposerConfig.preset("cpu")
+        if self.config.model != "avatarposer":
+            raise ShapeError(f"MiposerEstimator needs model='avatarposer', got {self.config.model!r}")
+        self.device = torch.device(device)
+        self.body = (body or BodyModel()).to(self.device)
+        self.kit_name = self.config.kit
+        self.sensor_names = get_kit(self.kit_name).sensor_names
+        self.body_asset_id = self.body.asset_id
+        self.fps = float(self.config.rate)
+        self.model = AvatarPoserNet(self.config, 1 + self.config.wrists).to(self.device)
+        self.data_fingerprint = ""
+        self.train_command = ""
+        self.meta: dict[str, Any] = {}
+        self.mim = bool(mim)
+        self.mim_config = mim_config
+        self._calibration: Any = None
+        self.reset()
+
+    def to(self, device: str | torch.device) -> MiposerEstimator:
+        self.device = torch.device(device)
+        self.model.to(self.device)
+        self.body.to(self.device)
+        return self
+
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
+        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name,
+                          sensors=list(self.sensor_names), body_asset=self.body_asset_id,
+                          weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
+                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
+                          meta={**self.meta, **(meta or {})}, train_state=train_state)
+
+    def save(self, path: str | Path) -> Path:
+        return save_checkpoint(self.checkpoint(), path)
+
+    @classmethod
+    def from_checkpoint(cls, ckpt: Checkpoint, *, kit: str | None = None, body: Any = None,
+                        device: str | torch.device = "cpu", path: str | Path = "<checkpoint>", **kw: Any) -> MiposerEstimator:
+        ckpt.check(method=cls.name, kit=kit, body_asset=getattr(body, "asset_id", None), path=path)
+        if body is None:
+            from wearpose.body import BodyModel
+
+            body = BodyModel()
+            ckpt.check(body_asset=body.asset_id, path=path)
+        est = cls(MiposerConfig.from_dict(ckpt.config), body=body, device=device, **kw)
+        if list(est.sensor_names) != list(ckpt.sensors):
+            raise CheckpointMismatchError(f"{path}: checkpoint expects sensors {ckpt.sensors}, kit {est.kit_name!r} "
+                                          f"has {list(est.sensor_names)}")
+        est.model.load_state_dict(ckpt.weights)
+        est.data_fingerprint, est.train_command, est.meta = ckpt.data_fingerprint, ckpt.train_command, dict(ckpt.meta)
+        return est
+
+    @classmethod
+    def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
+             map_location: str | torch.device = "cpu", **kw: Any) -> MiposerEstimator:
+        return cls.from_checkpoint(load_checkpoint(path, map_location), kit=kit, body=body, device=map_location,
+                                   path=path, **kw)
+
+    def fit(self, *args: Any, **kwargs: Any) -> Any:
+        """Train (:func:`wearpose.estimators.miposer.train.train_miposer`)."""
+        from wearpose.estimators.miposer.train import train_miposer
+
+        return train_miposer(self, *args, **kwargs)
+
+    # ------------------------------------------------------------------ network
+    @torch.no_grad()
+    def infer(self, R: torch.Tensor, p: torch.Tensor, frames: torch.Tensor | None = None,
+              chunk: int = 512) -> tuple[torch.Tensor, torch.Tensor]:
+        """Poses from calibrated inputs ``R`` ``(T, S, 3, 3)``, ``p`` ``(T, S, 3)`` (causal windows).
+
+        Args:
+            frames: ``(N,)`` frame indices to estimate (default all ``T``); each estimate depends
+                only on its own window, so a subset gives the same values at those frames.
+
+        Returns:
+            ``(local_rot (N, 24, 3, 3), trans (N, 3))`` in the calibrated world.
+        """
+        self.model.eval()
+        W = self.config.window
+        rots, trans = [], []
+        for _, Rw, pw in window_batches(R.float(), p.float(), W, chunk, frames):
+            x, C, _ = window_features(Rw.to(self.device), pw.to(self.device), self.fps)
+            pose = decode_pose(*self.model(x), C)
+            rots.append(pose.cpu())
+            trans.append(head_anchored_translation(self.body, pose, pw[:, -1, 0].to(self.device)).cpu())
+        return torch.cat(rots), torch.cat(trans)
+
+    # ------------------------------------------------------------------ offline
+    def _check(self, recording: Any) -> None:
+        kit_streams(recording, self.kit_name)
+
+    def estimate(self, recording: Any, calibration: Any = None,
+                 calibration_window: tuple[float, float] | None = None) -> PoseTrack:
+        """Offline estimate of a MI-Poser recording (module doc).
+
+        Args:
+            recording: a :class:`~wearpose.recording.Recording` with the kit's sensors.
+            calibration: a ``miposer-tpose`` :class:`~wearpose.calibration.CalibrationResult`,
+                ``None`` (use the recording's stored one or ``calibration_window``) or ``"none"``.
+            calibration_window: ``(t0, t1)`` s of the T-pose, to calibrate here.
+        """
+        self._check(recording)
+        extras: dict[str, Any] = {"frame": "calibrated", "method": self.name, "mim": self.mim}
+        if self.mim:
+            from wearpose.estimators.miposer.mim import mitigate_recording
+
+            recording, extras["interference"] = mitigate_recording(recording, self.kit_name, self.mim_config)
+        res = resolve_calibration(recording, calibration, calibration_window, self.body)
+        raw = raw_inputs(recording, self.kit_name, self.fps)
+        if res is None:
+            warnings.warn("MI-Poser: no calibration (pass calibration=, calibration_window= or store one with "
+                          "wearpose calibrate --method miposer-tpose); sensor poses are used as they are", stacklevel=2)
+            R, p = raw["R"].float(), raw["p"].float()
+        else:
+            R, p = calibrated_inputs(raw, res)
+            extras["calibration"] = res.to_dict()
+        local_rot, trans = self.infer(R, p)
+        return PoseTrack(local_rot, torch.zeros(10), trans, raw["valid"].all(1), self.fps, extras=extras)
+
+    # ------------------------------------------------------------------ online
+    def set_calibration(self, calibration: Any) -> None:
+        """The ``miposer-tpose`` calibration :meth:`step` applies (None: sensor poses as they are)."""
+        self._calibration = calibration
+
+    def reset(self) -> None:
+        self._R: list[torch.Tensor] = []
+        self._p: list[torch.Tensor] = []
+        self._last: tuple[torch.Tensor, torch.Tensor] | None = None
+        self._mims: list[Any] | None = None
+        self._prev_t: float | None = None
+
+    @torch.no_grad()
+    def step(self, frame: SensorFrame) -> PoseFrame:
+        """One 60 Hz frame (:func:`frames`): headset + wrist EM (+ wrist gyro/accelerometer for MIM)."""
+        from wearpose.calibration import apply_miposer, em_to_world
+        from wearpose.estimators.empose.data import frame_measurements
+
+        names = [n for n in self.sensor_names if n in frame.names and not n.endswith("_imu")]
+        p, R, v = frame_measurements(frame, names, self._last)
+        self._last = (p, R)
+        extras: dict[str, Any] = {"frame": "calibrated"}
+        if self.mim:
+            from wearpose.estimators.miposer.mim import step_mim
+
+            dt = 1.0 / self.fps if self._prev_t is None else max(1e-4, frame.timestamp - self._prev_t)
+            if self._mims is None:
+                self._mims = [None] * (len(names) - 1)
+            R, p, extras["interference"] = step_mim(self._mims, frame, names, R, p, dt, self.mim_config)
+        self._prev_t = frame.timestamp
+        wR, wp = em_to_world(R[:1].expand(len(names) - 1, 3, 3), p[:1].expand(len(names) - 1, 3), R[1:], p[1:])
+        Rw = torch.cat([R[:1].double(), wR])
+        pw = torch.cat([p[:1].double(), wp])
+        if self._calibration is not None:
+            Rw, pw = apply_miposer(self._calibration, Rw[None], pw[None])
+            Rw, pw = Rw[0], pw[0]
+        self._R.append(Rw.float())
+        self._p.append(pw.float())
+        W = self.config.window
+        self._R, self._p = self._R[-W:], self._p[-W:]
+        Rs, ps = torch.stack(self._R), torch.stack(self._p)
+        if Rs.shape[0] < W:  # pad the stream start with the first frame
+            k = W - Rs.shape[0]
+            Rs, ps = torch.cat([Rs[:1].expand(k, *Rs.shape[1:]), Rs]), torch.cat([ps[:1].expand(k, *ps.shape[1:]), ps])
+        self.model.eval()
+        x, C, _ = window_features(Rs[None].to(self.device), ps[None].to(self.device), self.fps)
+        pose = decode_pose(*self.model(x), C)
+        trans = head_anchored_translation(self.body, pose, ps[-1:, 0].to(self.device))
+        return PoseFrame(pose[0].cpu(), torch.zeros(10), trans[0].cpu(), bool(v.all()), frame.timestamp, extras=extras)
