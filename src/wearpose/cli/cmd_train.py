@@ -27,7 +27,8 @@ app.add_typer(train_app, name="train")
 def train_empose_cmd(
     sensors: int = typer.Option(12, help="Number of sensors: 12 (kit em12) or 6 (kit em6)."),
     config: str = typer.Option("cpu", help="Preset: tiny (smoke test), cpu (CPU-sized), paper (supp. Table 5)."),
-    model: str = typer.Option("lgd", help="empose network: lgd (LGD-RNN), or a Table 2 baseline: resnet, birnn."),
+    model: str = typer.Option("lgd", help="empose network: lgd (LGD-RNN), a Table 2 baseline: resnet, birnn, or "
+                                          "twostage (joint mapper + LGD IK for dropped sensors, supp. Sec. 9)."),
     epochs: Optional[int] = typer.Option(None, help="Override the preset's number of epochs."),
     out: Optional[Path] = typer.Option(None, help="Run directory (default runs/<method><sensors>_<config>)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from <out>/last.pt."),
@@ -51,8 +52,8 @@ def train_empose_cmd(
     from wearpose.estimators.empose.baselines import baseline_config, estimator_class
     from wearpose.estimators.empose.train import train_empose
 
-    if model not in ("lgd", "resnet", "birnn"):
-        raise typer.BadParameter(f"unknown model {model!r}; expected lgd, resnet or birnn", param_hint="--model")
+    if model not in ("lgd", "resnet", "birnn", "twostage"):
+        raise typer.BadParameter(f"unknown model {model!r}; expected lgd, resnet, birnn or twostage", param_hint="--model")
     if offsets not in (None, "random", "none"):
         raise typer.BadParameter(f"expected random or none, got {offsets!r}", param_hint="--offsets")
     cfg = baseline_config(config, sensors, model).override(hidden=hidden, width=width, iterations=iterations,
