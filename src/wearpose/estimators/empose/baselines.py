@@ -54,7 +54,8 @@ from wearpose.estimators.empose.model import (
 from wearpose.estimators.registry import register_estimator
 
 #: Config model name -> registry name of the estimator.
-ESTIMATOR_NAMES: dict[str, str] = {"lgd": "empose", "resnet": "empose-resnet", "birnn": "empose-birnn"}
+ESTIMATOR_NAMES: dict[str, str] = {"lgd": "empose", "resnet": "empose-resnet", "birnn": "empose-birnn",
+                                   "twostage": "empose-twostage"}
 
 
 class OfflineOnlyError(WearposeError, RuntimeError):
@@ -72,6 +73,10 @@ def baseline_config(preset: str, sensors: int, model: str) -> EmposeConfig:
     base = EmposeConfig.preset(preset, sensors)
     if model == "lgd":
         return base
+    if model == "twostage":
+        from wearpose.estimators.empose.twostage import twostage_config
+
+        return twostage_config(preset, sensors)
     if model not in ("resnet", "birnn"):
         raise ConfigError(f"model: expected lgd, resnet or birnn, got {model!r}")
     kw: dict[str, Any] = {"model": model, "lambda_joints": 10.0, "lambda_rec": 0.0, "iterations": 0,
@@ -291,11 +296,13 @@ class BiRNNEstimator(BaselineEstimator):
 
 
 def estimator_class(model: str) -> type[EmposeEstimator]:
-    """``lgd`` / ``resnet`` / ``birnn`` -> the estimator class (ConfigError otherwise)."""
+    """``lgd`` / ``resnet`` / ``birnn`` / ``twostage`` -> the estimator class (ConfigError otherwise)."""
+    from wearpose.estimators.empose.twostage import TwoStageEstimator
+
     classes: dict[str, type[EmposeEstimator]] = {"lgd": EmposeEstimator, "resnet": ResNetEstimator,
-                                                 "birnn": BiRNNEstimator}
+                                                 "birnn": BiRNNEstimator, "twostage": TwoStageEstimator}
     if model not in classes:
-        raise ConfigError(f"model: expected lgd, resnet or birnn, got {model!r}")
+        raise ConfigError(f"model: expected lgd, resnet, birnn or twostage, got {model!r}")
     return classes[model]
 
 

@@ -41,6 +41,7 @@ class EmposeConfig:
     ``batch_size``, ``epochs``, ``grad_clip`` (max global grad norm, 0 = off), ``val_clips``
     (validation clips used each epoch, 0 = all).
     Network: ``model`` = ``"lgd"`` (LGD-RNN, default) or a learned baseline of Table 2,
+    ``"twostage"`` (:mod:`wearpose.estimators.empose.twostage`, supp. Sec. 9) or
     ``"resnet"`` / ``"birnn"`` (:mod:`wearpose.estimators.empose.baselines`; ``width`` /
     ``mlp_layers`` are the ResNet's width / residual blocks, ``hidden`` / ``rnn_layers`` the
     BiRNN's).
@@ -87,8 +88,8 @@ class EmposeConfig:
             raise ConfigError(f"EmposeConfig.lr_schedule: expected 'constant' or 'cosine', got {self.lr_schedule!r}")
         if self.train_noise not in ("default", "none") or self.offsets not in ("random", "none"):
             raise ConfigError("EmposeConfig: train_noise must be 'default'/'none' and offsets 'random'/'none'")
-        if self.model not in ("lgd", "resnet", "birnn"):
-            raise ConfigError(f"EmposeConfig.model: expected 'lgd', 'resnet' or 'birnn', got {self.model!r}")
+        if self.model not in ("lgd", "resnet", "birnn", "twostage"):
+            raise ConfigError(f"EmposeConfig.model: expected 'lgd', 'resnet', 'birnn' or 'twostage', got {self.model!r}")
 
     @property
     def kit(self) -> str:
