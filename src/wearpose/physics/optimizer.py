@@ -207,6 +207,8 @@ class PhysicsState:
             update, m (0 when none is below).
         qp_ms: proxsuite solve time, ms (building the QP excluded).
         step_ms: wall time of the whole step, ms.
+        step_cpu_ms: CPU time of this thread in the step, ms (less inflated than the wall time
+            when other processes compete for the cores).
         qp_status: proxsuite status string.
         contact_points: ``(nc, 3)`` float32 world positions of this step's contact points (m,
             before the update; 4 per contact joint, in the order of ``contact_joints``).
@@ -226,6 +228,7 @@ class PhysicsState:
     penetration_m: float
     qp_ms: float
     step_ms: float
+    step_cpu_ms: float = 0.0
     qp_status: str = ""
     contact_points: torch.Tensor | None = None
     contact_forces: torch.Tensor | None = None
@@ -354,7 +357,7 @@ class PhysicsOptimizer:
         """One frame: reference pose ``(24, 3, 3)`` (local rotations), reference joint velocities
         ``(24, 3)`` m/s in the world frame (root = row 0), foot contact probabilities ``(2,)``
         (left, right) in [0, 1]. Returns the state after the update (see :class:`PhysicsState`)."""
-        t_start = time.perf_counter()
+        t_start, c_start = time.perf_counter(), time.thread_time()
         if self.q is None:
             raise ConfigError("PhysicsOptimizer.step: call reset(pose, trans) first")
         c, dt, nv = self.config, self.config.dt, self.nv
@@ -477,6 +480,7 @@ class PhysicsOptimizer:
             grf=f32(grf_j[list(c.foot_joints)]), grf_joints=f32(grf_j),
             contacts=torch.from_numpy(cmask[list(c.foot_joints)].copy()), contact_joints=torch.from_numpy(cmask),
             zmp=f32(zmp), penetration_m=depth, qp_ms=qp_ms, step_ms=(time.perf_counter() - t_start) * 1000.0,
+            step_cpu_ms=(time.thread_time() - c_start) * 1000.0,
             qp_status=str(res.info.status).rsplit(".", 1)[-1],
             contact_points=f32(pts), contact_forces=f32(lam.reshape(-1, 3)),
         )
@@ -496,7 +500,7 @@ class PhysicsOptimizer:
             dict of stacked tensors: ``pose_local (T, 24, 3, 3)``, ``trans (T, 3)``,
             ``joints (T, 24, 3)``, ``torques (T, 24, 3)``, ``residual (T, 6)``, ``grf (T, 2, 3)``,
             ``grf_joints (T, 24, 3)``, ``contacts (T, 2)``, ``zmp (T, 2)``, ``penetration_m (T,)``,
-            ``qp_ms (T,)``, ``step_ms (T,)``; plus ``ground_y`` (scalar tensor).
+            ``qp_ms (T,)``, ``step_ms (T,)``, ``step_cpu_ms (T,)``; plus ``ground_y`` (scalar tensor).
         """
         T = poses.shape[0]
         if joint_vel.shape[0] != T or contact.shape[0] != T:
@@ -507,7 +511,7 @@ class PhysicsOptimizer:
         out: dict[str, torch.Tensor] = {}
         for k in ("pose_local", "trans", "joints", "torques", "residual", "grf", "grf_joints", "contacts", "zmp"):
             out[k] = torch.stack([getattr(s, k) for s in states])
-        for k in ("penetration_m", "qp_ms", "step_ms"):
+        for k in ("penetration_m", "qp_ms", "step_ms", "step_cpu_ms"):
             out[k] = torch.tensor([getattr(s, k) for s in states], dtype=torch.float32)
         out["ground_y"] = torch.tensor(self.ground_y)
         return out
