@@ -1,0 +1,424 @@
+"""Browser viewer built on `viser <https://viser.studio>`_ (three.js client bundled with the
+package and served from localhost: nothing is downloaded).
+
+Two entry points share one scene description (:class:`BodyLayer`):
+
+- :class:`RecordingViewer` (offline): a recording's ground truth and/or an estimated
+  :class:`~wearpose.estimators.PoseTrack`, side by side, with a timeline (frame slider,
+  play/pause, speed).
+- :class:`LiveViewer` (live): subscribes to a :class:`wearpose.stream.StreamServer` and shows
+  every subject's latest pose; the timeline scrubs back through the last ``history_s`` seconds.
+
+Each body is drawn as a skinned mesh (linear blend skinning in the browser, same maths as
+:class:`~wearpose.body.BodyModel` without pose correctives), its skeleton (bones as lines,
+joints as points coloured by per-joint uncertainty when the estimator gives one) and its
+sensors at their body sites: green valid, red dropped (masked) in that frame, and shaded
+green -> orange -> red by an interference level in [0, 1] when the pose carries
+``extras["interference"]`` (one value per sensor).
+
+World: wearpose's Y-up frame (the viewer's up direction is set to +Y), metres. EM estimates
+whose root is relative to the EM source (``extras["frame"] == "em_source"``) are shown as
+estimated: their root orientation is the source-relative one.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import torch
+
+from wearpose.body import PARENTS, BodyModel, forward_kinematics
+from wearpose.geometry import matrix_to_quat
+
+VALID = np.array([40, 190, 80], np.uint8)
+DROPPED = np.array([230, 40, 40], np.uint8)
+ESTIMATE_COLOUR = (90, 170, 250)
+TRUTH_COLOUR = (200, 200, 200)
+BONES = [(j, p) for j, p in enumerate(PARENTS) if p >= 0]
+
+
+def sensor_colours(valid: np.ndarray, interference: np.ndarray | None = None) -> np.ndarray:
+    """``(S, 3)`` uint8: green valid / red dropped; with ``interference`` ``(S,)`` in [0, 1] valid
+    sensors shade green -> orange -> red."""
+    valid = np.asarray(valid, bool)
+    col = np.where(valid[:, None], VALID, DROPPED).astype(np.float32)
+    if interference is not None:
+        x = np.clip(np.nan_to_num(np.asarray(interference, np.float32), nan=0.0), 0.0, 1.0)[:, None]
+        warm = np.where(x < 0.5, VALID + (np.array([250, 160, 30]) - VALID) * (2 * x),
+                        np.array([250, 160, 30]) + (DROPPED - np.array([250, 160, 30])) * (2 * x - 1))
+        col = np.where(valid[:, None], warm, col)
+    return col.astype(np.uint8)
+
+
+def joint_colours(uncertainty: np.ndarray | None, scale: float | None = None) -> np.ndarray:
+    """``(24, 3)`` uint8: white, or blue (certain) -> red (``uncertainty >= scale``)."""
+    if uncertainty is None:
+        return np.full((24, 3), 250, np.uint8)
+    u = np.nan_to_num(np.asarray(uncertainty, np.float32), nan=0.0)
+    s = float(scale) if scale else float(u.max() or 1.0)
+    x = np.clip(u / s, 0, 1)[:, None]
+    return (np.array([40, 90, 250]) * (1 - x) + np.array([240, 40, 40]) * x).astype(np.uint8)
+
+
+class BodyLayer:
+    """One body in a viser scene: skinned mesh, skeleton, joints and sensor sites.
+
+    Args:
+        server: a ``viser.ViserServer``.
+        body: the body model whose mesh/skinning weights are drawn.
+        name: scene node prefix and label.
+        betas: ``(10,)`` shape of this body.
+        offset: ``(3,)`` m, display shift (side-by-side bodies).
+        sites: body site names of the sensors drawn on this body (``()``: none).
+    """
+
+    def __init__(self, server: Any, body: BodyModel, name: str, betas: torch.Tensor, colour: tuple[int, int, int],
+                 offset: Sequence[float] = (0.0, 0.0, 0.0), sites: Sequence[str] = (), opacity: float | None = None) -> None:
+        self.server, self.body, self.name = server, body, name
+        self.offset = np.asarray(offset, np.float32)
+        with torch.no_grad():
+            b = torch.as_tensor(betas, dtype=body.dtype).reshape(-1)[: body.num_betas]
+            self.betas = b
+            self.J_rest = body.rest_joints(b)
+            v = body.v_template + torch.einsum("vcs,s->vc", body.shapedirs[..., : b.shape[0]], b)
+        J = self.J_rest.cpu().numpy().astype(np.float32)
+        self.sites = tuple(sites)
+        self.mesh = server.scene.add_mesh_skinned(
+            f"/{name}/mesh", v.cpu().numpy().astype(np.float32), body.faces.cpu().numpy().astype(np.uint32),
+            bone_wxyzs=np.tile(np.array([1.0, 0, 0, 0], np.float32), (24, 1)), bone_positions=J,
+            skin_weights=body.weights.cpu().numpy().astype(np.float32), color=colour, opacity=opacity,
+            position=tuple(self.offset), cast_shadow=False, receive_shadow=False)  # shadows cost a pass per light
+        self.skeleton = server.scene.add_line_segments(f"/{name}/skeleton", self._bone_points(J),
+                                                       colors=(30, 30, 30), thickness=0.012, position=tuple(self.offset))
+        self.joints = server.scene.add_point_cloud(f"/{name}/joints", J, colors=joint_colours(None), point_size=0.035,
+                                                   point_shape="circle", position=tuple(self.offset))
+        self.sensors = None
+        if self.sites:
+            sp = body.sites(None, b, None, self.sites).positions.cpu().numpy().astype(np.float32)
+            self.sensors = server.scene.add_point_cloud(f"/{name}/sensors", sp, colors=sensor_colours(np.ones(len(sp), bool)),
+                                                        point_size=0.06, point_shape="circle", position=tuple(self.offset))
+        self.label = server.scene.add_label(f"/{name}/label", name, position=tuple(self.offset + np.array([0, 1.0, 0], np.float32)))
+
+    @staticmethod
+    def _bone_points(J: np.ndarray) -> np.ndarray:
+        return np.stack([np.stack([J[j], J[p]]) for j, p in BONES]).astype(np.float32)  # (23, 2, 3)
+
+    @torch.no_grad()
+    def show(self, local_rot: torch.Tensor, trans: torch.Tensor | None = None, sensor_valid: np.ndarray | None = None,
+             interference: np.ndarray | None = None, uncertainty: np.ndarray | None = None,
+             uncertainty_scale: float | None = None) -> None:
+        """Pose the body: ``local_rot`` ``(24, 3, 3)``, ``trans`` ``(3,)`` m (None: zero)."""
+        R = torch.as_tensor(local_rot, dtype=self.body.dtype)
+        t = torch.zeros(3, dtype=self.body.dtype) if trans is None else torch.as_tensor(trans, dtype=self.body.dtype)
+        G, J = forward_kinematics(R, self.J_rest)
+        J = J + t
+        q = matrix_to_quat(G).cpu().numpy()
+        Jn = J.cpu().numpy().astype(np.float32)
+        with self.server.atomic():
+            for j in range(24):
+                self.mesh.bones[j].wxyz = q[j]
+                self.mesh.bones[j].position = Jn[j]
+            self.skeleton.points = self._bone_points(Jn)
+            self.joints.points = Jn
+            self.joints.colors = joint_colours(uncertainty, uncertainty_scale)
+            if self.sensors is not None:
+                sp = self.body.sites(R[None], self.betas, t[None], self.sites).positions[0].cpu().numpy()
+                self.sensors.points = sp.astype(np.float32)
+                v = np.ones(len(self.sites), bool) if sensor_valid is None else np.asarray(sensor_valid, bool)
+                self.sensors.colors = sensor_colours(v, interference)
+            self.label.position = tuple(Jn[15] + self.offset + np.array([0, 0.35, 0], np.float32))
+
+
+def _new_server(host: str, port: int) -> Any:
+    import viser
+
+    server = viser.ViserServer(host=host, port=port, verbose=False)
+    server.scene.set_up_direction("+y")
+    server.scene.configure_default_lights(True, cast_shadow=False)
+    server.scene.configure_environment_map(None)  # the default HDRI washes the colours out
+    server.scene.add_grid("/ground", width=8.0, height=8.0, plane="xz", position=(0.0, -1.15, 0.0))
+    server.gui.configure_theme(control_width="small", show_share_button=False)
+    # Bodies stand at x = 0, 1, 2 ... m, facing +Z: look at them from the front.
+    server.initial_camera.position = (0.5, 0.3, 4.0)
+    server.initial_camera.look_at = (0.5, -0.3, 0.0)
+    return server
+
+
+def _kit_sites(kit: str | None, sensor_names: Sequence[str], body: BodyModel) -> tuple[str, ...]:
+    """Body sites of ``sensor_names`` of ``kit`` on ``body`` (``()`` if the kit is unknown)."""
+    import warnings
+
+    from wearpose.sensors import get_kit, resolve_sites
+
+    try:
+        k = get_kit(kit) if kit else None
+        if k is None:
+            return ()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sites, _ = resolve_sites(k, body.site_names, body.asset_id)
+        return tuple(sites[n] for n in sensor_names)
+    except Exception:  # noqa: BLE001 - an unknown kit or site just means no sensor dots
+        return ()
+
+
+class _Timeline:
+    """GUI: frame slider, play/pause, speed, and a text panel."""
+
+    def __init__(self, server: Any, num_frames: int, fps: float, title: str, live: bool = False) -> None:
+        self.server, self.fps = server, fps
+        server.gui.add_markdown(f"**{title}**")
+        self.follow = server.gui.add_checkbox("follow live", True) if live else None
+        self.slider = server.gui.add_slider("frame", min=0, max=max(1, num_frames - 1), step=1, initial_value=0)
+        self.playing = server.gui.add_checkbox("play", not live)
+        self.speed = server.gui.add_slider("speed", min=0.1, max=4.0, step=0.1, initial_value=1.0)
+        self.info = server.gui.add_markdown("")
+
+
+class RecordingViewer:
+    """Offline viewer of a recording and/or an estimate (module doc).
+
+    Args:
+        recording: a :class:`~wearpose.recording.Recording` (its ``ground_truth`` is shown when
+            present; its sensors' validity colours the sensor dots) or None.
+        track: an estimated :class:`~wearpose.estimators.PoseTrack` or None; its extras
+            ``interference`` ``(T, S)`` and ``uncertainty`` ``(T, 24)`` colour sensors / joints.
+        sensor_names: the track's sensors (default: the recording's), for the sensor dots.
+        body: body model (default: the embedded asset).
+        autoplay: start playing.
+    """
+
+    def __init__(self, recording: Any = None, track: Any = None, *, sensor_names: Sequence[str] | None = None,
+                 body: BodyModel | None = None, host: str = "127.0.0.1", port: int = 8080, title: str = "wearpose",
+                 autoplay: bool = True) -> None:
+        from wearpose.errors import ShapeError
+
+        gt = getattr(recording, "ground_truth", None)
+        if track is None and gt is None:
+            raise ShapeError("RecordingViewer: nothing to show (no estimate and the recording has no ground truth)")
+        self.body = body or BodyModel()
+        self.track, self.gt = track, gt
+        self.gt_start = float(getattr(recording, "ground_truth_start", 0.0))
+        self.fps = float(track.fps if track is not None else gt.fps)
+        self.num_frames = int(track.num_frames if track is not None else gt.num_frames)
+        self.grid = recording.on_common_grid(sensor_names) if recording is not None and recording.names else None
+        names = tuple(self.grid.names) if self.grid is not None else ()
+        infos = [recording.sensor(n).info for n in names]
+        keep = [i for i, inf in enumerate(infos) if inf.site in self.body.site_names]
+        self.sensor_idx = keep
+        sites = tuple(infos[i].site for i in keep)
+        self.server = _new_server(host, port)
+        self.port = self.server.get_port()
+        self.layers: dict[str, BodyLayer] = {}
+        if track is not None:
+            self.layers["estimate"] = BodyLayer(self.server, self.body, "estimate", track.betas, ESTIMATE_COLOUR, sites=sites)
+        if gt is not None:
+            self.layers["ground truth"] = BodyLayer(self.server, self.body, "ground truth", gt.betas, TRUTH_COLOUR,
+                                                    offset=(1.0 if track is not None else 0.0, 0, 0),
+                                                    sites=() if track is not None else sites)
+        unc = getattr(track, "uncertainty", None) if track is not None else None
+        self.unc_scale = float(torch.nan_to_num(unc).max()) if unc is not None else None
+        self.timeline = _Timeline(self.server, self.num_frames, self.fps, title)
+        self.timeline.playing.value = autoplay
+        self.timeline.slider.on_update(self._on_slider)
+        self._stop = threading.Event()
+        self.show(0)
+        self._player = threading.Thread(target=self._play, daemon=True, name="wearpose-viewer-play")
+        self._player.start()
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.server.get_host()}:{self.port}"
+
+    def _on_slider(self, event: Any) -> None:
+        if event.client is not None:  # a user dragged it (the player draws its own frames)
+            self.show(int(self.timeline.slider.value))
+
+    def show(self, i: int) -> None:
+        """Draw frame ``i`` of the timeline."""
+        i = int(np.clip(i, 0, self.num_frames - 1))
+        t = i / self.fps
+        valid = interference = None
+        if self.grid is not None:
+            g = int(np.clip(np.searchsorted(self.grid.timestamps, self.grid.timestamps[0] + t - 1e-6), 0,
+                            len(self.grid.timestamps) - 1))
+            valid = self.grid.valid[g][self.sensor_idx]
+        text = [f"t = {t:6.2f} s (frame {i} / {self.num_frames - 1})"]
+        if self.track is not None:
+            tr = self.track
+            inter = tr.extras.get("interference")
+            if inter is not None:
+                interference = np.asarray(inter[i])[self.sensor_idx]
+            self.layers["estimate"].show(tr.local_rot[i], None if tr.trans is None else tr.trans[i], valid, interference,
+                                         None if tr.uncertainty is None else tr.uncertainty[i].numpy(), self.unc_scale)
+            text.append(f"estimate: {'valid' if bool(tr.valid[i]) else 'INVALID (masked input)'}, "
+                        f"frame {tr.extras.get('frame', 'world')}")
+        if self.gt is not None:
+            k = int(np.clip(round((t - self.gt_start) * self.gt.fps), 0, self.gt.num_frames - 1))
+            self.layers["ground truth"].show(self.gt.pose[k], self.gt.trans[k], valid if self.track is None else None)
+        if valid is not None:
+            text.append(f"sensors valid: {int(valid.sum())} / {len(valid)}")
+        self.timeline.info.content = "  \n".join(text)
+
+    def _play(self) -> None:
+        last = time.perf_counter()
+        pos = float(self.timeline.slider.value)
+        while not self._stop.is_set():
+            time.sleep(1 / 30)
+            now = time.perf_counter()
+            if self.timeline.playing.value:
+                if int(pos) != int(self.timeline.slider.value):  # the user moved the slider
+                    pos = float(self.timeline.slider.value)
+                pos = (pos + (now - last) * self.fps * float(self.timeline.speed.value)) % self.num_frames
+                if int(pos) != int(self.timeline.slider.value):
+                    self.timeline.slider.value = int(pos)
+                    self.show(int(pos))
+            last = now
+
+    def close(self) -> None:
+        self._stop.set()
+        self._player.join(2)
+        self.server.stop()
+
+
+class LiveViewer:
+    """Live viewer of a streaming server's poses (module doc).
+
+    Args:
+        url: ``ws://host:port`` of the server.
+        subjects: subject ids to show (None: all).
+        history_s: seconds of poses kept for the timeline.
+    """
+
+    def __init__(self, url: str, *, subjects: list[int] | None = None, body: BodyModel | None = None,
+                 host: str = "127.0.0.1", port: int = 8080, history_s: float = 30.0) -> None:
+        self.url_server = url
+        self.subjects = subjects
+        self.body = body or BodyModel()
+        self.history_s = history_s
+        self.server = _new_server(host, port)
+        self.port = self.server.get_port()
+        self.history: dict[int, deque] = {}
+        self.meta: dict[int, dict[str, Any]] = {}
+        self.layers: dict[int, BodyLayer] = {}
+        self.received = 0
+        self.shown = 0
+        self.timeline = _Timeline(self.server, 2, 30.0, f"live: {url}", live=True)
+        self._lock = threading.Lock()
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.server.get_host()}:{self.port}"
+
+    def _on_pose(self, t: float, p: Any) -> None:
+        with self._lock:
+            h = self.history.get(p.subject)
+            if h is None:
+                rate = float(self.meta.get(p.subject, {}).get("rate") or 120.0)
+                h = self.history[p.subject] = deque(maxlen=max(2, int(self.history_s * rate)))
+            h.append(p)
+            self.received += 1
+
+    def _layer(self, k: int, p: Any) -> BodyLayer:
+        if k not in self.layers:
+            m = self.meta.get(k, {})
+            names = m.get("estimator_sensors") or []
+            sites = _kit_sites(m.get("kit"), names, self.body)
+            self.layers[k] = BodyLayer(self.server, self.body, f"subject {k}", torch.as_tensor(p.betas), ESTIMATE_COLOUR,
+                                       offset=(1.2 * len(self.layers), 0, 0), sites=sites)
+        return self.layers[k]
+
+    def render(self) -> None:
+        """Draw each subject's pose: the latest, or the one at the timeline when not following."""
+        with self._lock:
+            hist = {k: list(h) for k, h in self.history.items()}
+        if not hist:
+            return
+        follow = bool(self.timeline.follow.value)
+        n = max(len(h) for h in hist.values())
+        self.timeline.slider.max = max(1, n - 1)
+        if follow:
+            self.timeline.slider.value = n - 1
+        i = int(self.timeline.slider.value)
+        lines = []
+        for k, h in sorted(hist.items()):
+            p = h[min(i, len(h) - 1)] if not follow else h[-1]
+            layer = self._layer(k, p)
+            inter = p.extras.get("interference")
+            valid = p.extras.get("sensor_valid")
+            layer.show(torch.as_tensor(p.local_rot), None if p.trans is None else torch.as_tensor(p.trans),
+                       None if valid is None or len(valid) != len(layer.sites) else np.asarray(valid, bool),
+                       None if inter is None or len(inter) != len(layer.sites) else np.asarray(inter, np.float32),
+                       p.uncertainty)
+            lines.append(f"subject {k}: t = {p.timestamp:.2f} s, seq {p.seq}, {'valid' if p.valid else 'INVALID'}, "
+                         f"estimator {p.compute_ms:.1f} ms, server {p.server_ms:.1f} ms")
+        self.shown += 1
+        self.timeline.info.content = "  \n".join(lines + [f"poses received: {self.received}"])
+
+    async def run(self, stop: asyncio.Event | None = None, fps: float = 30.0) -> None:
+        """Subscribe and render at ``fps`` until ``stop`` is set (or forever)."""
+        from wearpose.stream.client import StreamClient
+
+        client = StreamClient(self.url_server, on_pose=self._on_pose)
+        await client.connect()
+        await client.subscribe(self.subjects, "json")
+        stop = stop or asyncio.Event()
+        try:
+            while not stop.is_set():
+                for m in list(client.messages):
+                    if m.get("type") == "subject":
+                        self.meta[int(m["subject"])] = m
+                self.render()
+                try:
+                    await asyncio.wait_for(stop.wait(), 1.0 / fps)
+                except asyncio.TimeoutError:
+                    pass
+        finally:
+            await client.close()
+
+    def close(self) -> None:
+        self.server.stop()
+
+
+def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subjects: list[int] | None = None,
+                    body: str | None = None) -> None:
+    """Blocking: the live viewer until Ctrl-C (``wearpose view-live``)."""
+    v = LiveViewer(url, subjects=subjects, body=BodyModel(body), host=host, port=port)
+    print(f"viewer on {v.url} (poses from {url}); Ctrl-C to stop", flush=True)
+    try:
+        asyncio.run(v.run())
+    except KeyboardInterrupt:
+        pass
+    finally:
+        v.close()
+
+
+def run_recording_viewer(path: str | Path, *, model: str | None = None, host: str = "127.0.0.1", port: int = 8080,
+                         body: str | None = None) -> None:
+    """Blocking: the offline viewer of a recording file (and an estimate by ``model``) until Ctrl-C."""
+    from wearpose.recording import load_recording
+
+    rec = load_recording(path)
+    track, names = None, None
+    bm = BodyModel(body)
+    if model is not None:
+        from wearpose.stream import estimator_factory
+
+        est = estimator_factory(model)()
+        track, names = est.estimate(rec), est.sensor_names
+        bm = getattr(est, "body", bm)
+    v = RecordingViewer(rec, track, sensor_names=names, body=bm, host=host, port=port, title=f"wearpose: {Path(path).name}")
+    print(f"viewer on {v.url}; Ctrl-C to stop", flush=True)
+    try:
+        while True:
+            time.sleep(1)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        v.close()
