@@ -93,21 +93,24 @@ def info(
 
 @data_app.command("prepare")
 def data_prepare(
-    folders: Optional[list[Path]] = typer.Argument(None, help="Corpus folder (with manifest.csv) or folders of BVH/AMASS files; default $WEARPOSE_DATA or ../shared/data."),
+    folders: Optional[list[Path]] = typer.Argument(None, help="Corpus folder (with manifest.csv) or your own folders of BVH, ASF/AMC or AMASS files (any skeleton, see docs/motion-import.md); default $WEARPOSE_DATA or ../shared/data."),
     cache: Optional[Path] = typer.Option(None, help="Output store; default $WEARPOSE_CACHE or ~/.cache/wearpose."),
     fps: Optional[float] = typer.Option(None, help="Resample every clip to this rate (default: keep each clip's rate)."),
     workers: Optional[int] = typer.Option(None, help="Worker processes (default: up to 2)."),
     limit: Optional[int] = typer.Option(None, help="Convert only the first N clips (quick check)."),
+    joint_map: Optional[Path] = typer.Option(None, "--joint-map", help="YAML joint map for the BVH/AMC of your own folders (see wearpose motion import)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
-    """Convert the motion corpus into the cached, indexed store (train/val/test by subject).
+    """Convert the motion corpus (or your own folders of motion files) into the cached, indexed store
+    (train/val/test by subject; your folders: subject = parent folder, split by a hash of it).
 
-    Example: wearpose data prepare --fps 60
+    Example: wearpose data prepare --fps 60    |    wearpose data prepare ~/mocap --cache ~/mocap_store
     """
     from wearpose.motion import cache_dir, data_dir, prepare_corpus
 
     src = [data_dir(f) for f in folders] if folders else data_dir()
-    res = prepare_corpus(src, cache_dir(cache), fps=fps, progress=not as_json, workers=workers, limit=limit)
+    res = prepare_corpus(src, cache_dir(cache), fps=fps, progress=not as_json, workers=workers, limit=limit,
+                         joint_map=joint_map)
     _emit(res, as_json, lambda r: console.print(_kv_table("prepared", {k: v for k, v in r.items() if k != "failures"}))
           or [err_console.print(f"[red]failed[/] {k}: {v}") for k, v in r.get("failures", {}).items()])
 
