@@ -53,7 +53,8 @@ import torch
 from wearpose.body import JOINT_INDEX, NUM_JOINTS, PARENTS
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.physics._blas import limit_blas_threads
-from wearpose.physics.character import PhysicsCharacter
+from wearpose.geometry import matrix_to_axis_angle
+from wearpose.physics.character import DFS_ORDER, PhysicsCharacter
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _NO_CONTACT = ("left_ankle", "right_ankle", "neck", "left_wrist", "right_wrist", "left_collar", "right_collar", "pelvis")
@@ -239,6 +240,7 @@ class _Dyn:
     """Dynamics quantities at the current state (float64 numpy)."""
 
     M: np.ndarray  # (nv, nv)
+    R: np.ndarray  # (24, 3, 3) local joint rotations (SMPL order)
     h: np.ndarray  # (nv,)
     pos: np.ndarray  # (24, 3) joint positions, world
     J: np.ndarray  # (24, 6, nv) LWA joint Jacobians (linear rows 0:3, angular 3:6)
@@ -283,6 +285,9 @@ class PhysicsOptimizer:
         rot = np.zeros((self.nv - 3, self.nv))
         rot[:, 3:] = np.eye(self.nv - 3)
         self._S_rot = rot
+        self._dfs = np.array(DFS_ORDER)
+        self._pin_ids = [int(j) for j in character.pin_id]
+        self._rot_diag = (np.arange(3, self.nv), np.arange(3, self.nv))
         self.q: np.ndarray | None = None
         self.v = np.zeros(self.nv)
         self.ground_y = 0.0
@@ -309,7 +314,7 @@ class PhysicsOptimizer:
     def joint_positions(self, q: np.ndarray | None = None) -> np.ndarray:
         """World joint positions ``(24, 3)`` m at ``q`` (default: the current state)."""
         pin.forwardKinematics(self.model, self.data, self.q if q is None else q)
-        return np.array([self.data.oMi[int(k)].translation for k in self.char.pin_id])
+        return np.array([self.data.oMi[k].translation for k in self._pin_ids])
 
     def _dynamics(self) -> _Dyn:
         m, d, q, v = self.model, self.data, self.q, self.v
@@ -318,13 +323,15 @@ class PhysicsOptimizer:
         M = np.triu(d.M) + np.triu(d.M, 1).T  # crba fills the upper triangle
         h = pin.nonLinearEffects(m, d, q, v).copy()
         pos = np.empty((NUM_JOINTS, 3))
+        R = np.empty((NUM_JOINTS, 3, 3))
         J = np.empty((NUM_JOINTS, 6, self.nv))
         dJ = np.empty((NUM_JOINTS, 6, self.nv))
-        for k, jid in enumerate(self.char.pin_id.tolist()):
+        for k, jid in enumerate(self._pin_ids):
             pos[k] = d.oMi[jid].translation
+            R[k] = d.liMi[jid].rotation
             J[k] = pin.getJointJacobian(m, d, jid, _LWA)
             dJ[k] = pin.getJointJacobianTimeVariation(m, d, jid, _LWA)
-        return _Dyn(M=M, h=h, pos=pos, J=J, dJv=(dJ[:, :3] @ v))
+        return _Dyn(M=M, R=R, h=h, pos=pos, J=J, dJv=(dJ[:, :3] @ v))
 
     # ------------------------------------------------------------------ contacts
     def contact_mask(self, heights: np.ndarray, contact_prob: np.ndarray) -> np.ndarray:
@@ -367,12 +374,17 @@ class PhysicsOptimizer:
             raise ShapeError(f"joint_vel: expected (24, 3) world joint velocities in m/s, got {v_ref.shape}")
         if probs.shape != (2,):
             raise ShapeError(f"contact_prob: expected (2,) left/right foot probabilities, got {probs.shape}")
-        q_ref = self.char.q_from_pose(pose_target, self.q[:3])
+        R_ref = np.asarray(torch.as_tensor(pose_target, dtype=torch.float64))
+        if R_ref.shape != (NUM_JOINTS, 3, 3):
+            raise ShapeError(f"pose_target: expected (24, 3, 3) local rotation matrices, got {R_ref.shape}")
         dyn = self._dynamics()
         v = self.v
 
         # --- dual PD controller (Eq. 3-6)
-        rot_err = pin.difference(self.model, self.q, q_ref)[3:]  # log(R^T R_ref) per rotational DoF
+        # log(R^T R_ref) per joint, in the joint's frame = Pinocchio's difference(q, q_ref) on the
+        # rotational DoFs (tested), without building q_ref.
+        rel = np.swapaxes(dyn.R, 1, 2) @ R_ref
+        rot_err = matrix_to_axis_angle(torch.from_numpy(rel)).numpy()[self._dfs].reshape(-1)
         qdd_rot_des = c.kp_theta * rot_err - c.kd_theta * v[3:]
         pj = np.array(c.position_joints if c.dual_pd else (0,))
         Jp = dyn.J[pj, :3].reshape(-1, nv)  # (3P, nv)
@@ -397,8 +409,10 @@ class PhysicsOptimizer:
 
         # --- QP (Eq. 7-12); energy sum_k w_k |A_k x - b_k|^2 -> H = sum A^T W A, g = -sum A^T W b
         k_th, k_r = (c.k_theta ** 2, c.k_r ** 2) if c.weights_in_norm else (c.k_theta, c.k_r)
-        H_qq = k_th * np.diag(np.r_[np.zeros(3), np.ones(nv - 3)]) + k_r * (Jp.T @ Jp)
-        g_q = -k_th * np.r_[np.zeros(3), qdd_rot_des] - k_r * (Jp.T @ b_r)
+        H_qq = k_r * (Jp.T @ Jp)
+        H_qq[self._rot_diag] += k_th
+        g_q = -k_r * (Jp.T @ b_r)
+        g_q[3:] -= k_th * qdd_rot_des
         lam_w = np.repeat(c.k_lambda * d_c, 3)
         if c.weights_in_norm:
             lam_w = lam_w ** 2
@@ -425,10 +439,11 @@ class PhysicsOptimizer:
         n = nv + n_l if c.eliminate_torques else 2 * nv + n_l
         # Inequalities l <= C x <= u: friction pyramid on lambda (F lambda <= 0), kinematic rows on qdd.
         C = np.zeros((4 * npts + n_k, n))
-        C[:4 * npts, nv:nv + n_l] = np.kron(np.eye(npts), self._fric)
+        blocks = C[:4 * npts, nv:nv + n_l].reshape(npts, 4, npts, 3)  # a view: block-diagonal fill
+        blocks[np.arange(npts), :, np.arange(npts), :] = self._fric
         C[4 * npts:, :nv] = Jk
-        l = np.r_[np.full(4 * npts, -np.inf), *lows]
-        u = np.r_[np.zeros(4 * npts), *highs]
+        l = np.concatenate([np.full(4 * npts, -np.inf), *lows])
+        u = np.concatenate([np.zeros(4 * npts), *highs])
         if c.eliminate_torques:
             # tau = M qdd + h - Jc^T lambda: A_tau = [M, -Jc^T], b_tau = -h.
             A_t = np.hstack([dyn.M, -Jc.T])
@@ -473,7 +488,10 @@ class PhysicsOptimizer:
             if fy.sum() > 1e-6:
                 zmp = (fy[:, None] * pts[:, [0, 2]]).sum(0) / fy.sum()
         torques = tau[3:].reshape(NUM_JOINTS, 3)[self.char.pin_id - 1]  # root: residual torque
-        pose, trans = self.char.pose_from_q(self.q)
+        # Local rotations straight from Pinocchio's joint transforms (joint placements carry no
+        # rotation, so liMi's rotation is the joint's own); trans is q[:3].
+        pose = torch.from_numpy(np.stack([self.data.liMi[j].rotation for j in self._pin_ids]).astype(np.float32))
+        trans = torch.from_numpy(self.q[:3].astype(np.float32))
         f32 = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
         return PhysicsState(
             pose_local=pose, trans=trans, joints=f32(pos_new), torques=f32(torques), residual=f32(tau[:6]),
