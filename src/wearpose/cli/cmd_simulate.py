@@ -34,6 +34,9 @@ def simulate(
     cache: Optional[Path] = typer.Option(None, help="Prepared corpus; default $WEARPOSE_CACHE or ~/.cache/wearpose."),
     body: Optional[str] = typer.Option(None, help="Body asset: default, smpl or a file path."),
     overwrite: bool = typer.Option(False, help="Replace a set in --out that was made with other settings."),
+    executor: str = typer.Option("local", help="local (this machine's processes) or ray (a Ray cluster; "
+                                               "pip install 'wearpose[ray]'; corpus and --out on a shared filesystem)."),
+    ray_address: Optional[str] = typer.Option(None, help="Ray cluster address (default $RAY_ADDRESS, else a local Ray)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (progress goes to stderr)."),
 ) -> None:
     """Simulate a sensor kit on every clip of a corpus split: a recording set for training or tests.
@@ -44,17 +47,18 @@ def simulate(
     (exit code 1 if any clip failed). Run `wearpose data prepare` first.
 
     Example: wearpose simulate --kit em12 --split train --out data/sim/em12-train --seed 0
+    On a Ray cluster: wearpose simulate --kit imu6 --split all --out /shared/sim/imu6 --executor ray --ray-address auto
     """
     from wearpose.recording.dataset import simulate_corpus
 
     res = simulate_corpus(out, kit, None if split == "all" else split, cache_dir=cache, source=source or None,
                           licence=licence or None, include_nc=include_nc, seed=seed, noise=noise, offsets=offsets,
                           rate=rate, limit=limit, workers=workers, source_pose=source_pose, body=body,
-                          overwrite=overwrite, progress=True)
+                          overwrite=overwrite, progress=True, executor=executor, ray_address=ray_address)
 
     def render(r: dict[str, Any]) -> None:
         t = Table(title=f"simulated {r['kit']} ({r['split'] or 'all splits'}) -> {r['out']}", show_header=False)
-        for k in ("selected", "simulated", "skipped", "failed", "excluded_nc", "workers", "seconds", "clips_per_s",
+        for k in ("selected", "simulated", "skipped", "failed", "excluded_nc", "executor", "workers", "seconds", "clips_per_s",
                   "sensor_frames", "sensor_frames_per_s"):
             t.add_row(k, f"{r[k]:,}" if isinstance(r[k], int) else str(r[k]))
         t.add_row("written", f"{r['bytes'] / 1e6:.1f} MB")

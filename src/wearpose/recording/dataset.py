@@ -50,6 +50,7 @@ SET_VERSION = 1
 #: Bump when what a clip's recording contains changes, so that existing sets are regenerated.
 GENERATOR_VERSION = "simset-1"
 NOISE_CHOICES = ("default", "none")
+EXECUTORS = ("local", "ray")
 OFFSETS_CHOICES = ("random", "none")
 #: How often (seconds) the index is rewritten during a long run, so an interrupted run keeps
 #: most of its work (the next run skips what the index lists).
@@ -175,7 +176,8 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
                     noise: str = "default", offsets: str = "random", rate: float | None = None,
                     limit: int | None = None, workers: int | None = None, source_pose: bool = True,
                     body: str | None = None, overwrite: bool = False, progress: bool = True,
-                    clip_ids: Sequence[str] | None = None) -> dict[str, Any]:
+                    clip_ids: Sequence[str] | None = None, executor: str = "local",
+                    ray_address: str | None = None) -> dict[str, Any]:
     """Simulate ``kit`` on the prepared corpus clips and write one recording per clip + an index.
 
     Args:
@@ -201,6 +203,13 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
             its index lists are deleted, then the selected clips are simulated).
         progress: show a ``rich`` progress bar (on stderr).
         clip_ids: simulate exactly these clip ids (after the other filters), e.g. for tests.
+        executor: ``"local"`` (this process or a local process pool of ``workers``) or
+            ``"ray"``: ``workers`` Ray actors (default: the cluster's CPUs), each loading the body
+            once, on the cluster at ``ray_address`` (default ``$RAY_ADDRESS``, else a local Ray
+            started for this run). On a cluster the prepared corpus and ``out_dir`` must be on a
+            filesystem every node sees at the same path (workers read clips and write recordings
+            themselves). Needs the optional extra: ``pip install "wearpose[ray]"``.
+        ray_address: Ray cluster address (``"auto"``, ``"ray://head:10001"``...).
 
     Returns:
         ``{"out", "index", "selected", "simulated", "skipped", "failed", "excluded_nc",
@@ -226,6 +235,9 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         raise ConfigError(f"rate must be > 0 Hz, got {rate!r}")
     if limit is not None and limit < 1:
         raise ConfigError(f"limit must be >= 1, got {limit!r}")
+    if executor not in EXECUTORS:
+        raise ConfigError(f"executor must be one of {EXECUTORS}, got {executor!r}")
+    ray = _import_ray() if executor == "ray" else None
     try:
         store = CorpusStore(cache_dir)
     except InputFileError as exc:
@@ -292,7 +304,10 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
                               "noncommercial": is_noncommercial(e.get("licence")), "motion_stamp": e.get("stamp")}})
     skipped = len(ids) - len(todo)
 
-    if workers is None:
+    if executor == "ray":
+        _ray_init(ray, ray_address)
+        n_workers = max(1, int(workers) if workers is not None else int(ray.cluster_resources().get("CPU", 1)))
+    elif workers is None:
         todo_s = sum(float(store.entry(j["id"]).get("seconds", 0.0)) for j in todo)
         n_workers = idle_cores() if todo_s > AUTO_PARALLEL_MOTION_S else 1
     else:
@@ -337,37 +352,9 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
             def advance() -> None:
                 bar.update(task, advance=1, failed=f"[red]{n_failed[0]} failed" if n_failed[0] else "")
 
-            if n_workers <= 1:
-                import warnings
-
-                import torch
-
-                threads = torch.get_num_threads()
-                try:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore")
-                        _init_worker(body, quiet=False)
-                        for job in todo:
-                            finish(job, _simulate_one(job))
-                            advance()
-                finally:
-                    torch.set_num_threads(threads)
-            else:
-                # "spawn": forking a parent that already ran torch can deadlock its OpenMP pool.
-                ctx = multiprocessing.get_context("spawn")
-                with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_init_worker,
-                                         initargs=(body,)) as ex:
-                    futures = {ex.submit(_simulate_one, {k: v for k, v in job.items() if k != "_row"}): job for job in todo}
-                    for fut in as_completed(futures):
-                        job = futures[fut]
-                        try:
-                            res = fut.result()
-                        except Exception as exc:  # noqa: BLE001 - a crashed worker (e.g. out of memory) fails its clip only
-                            res = {"id": job["id"], "ok": False, "error": f"worker crashed: {type(exc).__name__}: {exc} (a worker "
-                                   "process died: out of memory, or a script without `if __name__ == '__main__':` that "
-                                   "'spawn' cannot re-import; workers=1 runs in this process)"}
-                        finish(job, res)
-                        advance()
+            for job, res in _run_jobs(todo, n_workers, body, executor, ray_address):
+                finish(job, res)
+                advance()
     finally:
         # Also on Ctrl-C or an unexpected error: the finished clips stay indexed, so the next
         # run skips them.
@@ -382,8 +369,79 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         "clips_per_s": round(stats["simulated"] / sim_s, 4) if stats["simulated"] else 0.0,
         "sensor_frames": stats["sensor_frames"],
         "sensor_frames_per_s": round(stats["sensor_frames"] / sim_s, 1) if stats["simulated"] else 0.0,
-        "bytes": stats["bytes"], "workers": n_workers, "settings": settings,
+        "bytes": stats["bytes"], "workers": n_workers, "executor": executor, "settings": settings,
     }
+
+
+def _import_ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError("executor 'ray' needs Ray, an optional extra: pip install \"wearpose[ray]\" "
+                          "(or use the default local executor)") from None
+    return ray
+
+
+def _ray_init(ray: Any, address: str | None) -> None:
+    if ray.is_initialized():
+        return
+    address = address or os.environ.get("RAY_ADDRESS") or None
+    # Without an address Ray starts a local instance for this run (no dashboard, quiet).
+    ray.init(address=address, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True,
+             **({} if address else {"num_cpus": os.cpu_count() or 1}))
+
+
+def _run_jobs(todo: list[dict[str, Any]], n_workers: int, body: str | None, executor: str,
+              ray_address: str | None) -> Iterable[tuple[dict[str, Any], dict[str, Any]]]:
+    """Run ``_simulate_one`` on every job; yields ``(job, result)`` in completion order."""
+    def payload(job: dict[str, Any]) -> dict[str, Any]:
+        return {k: v for k, v in job.items() if k != "_row"}
+
+    if executor == "ray":
+        import ray
+        from ray.util import ActorPool
+
+        @ray.remote(num_cpus=1)
+        class _Worker:  # one body model per actor, loaded once (as the process pool's initialiser)
+            def __init__(self, body: str | None) -> None:
+                _init_worker(body)
+
+            def run(self, job: dict[str, Any]) -> dict[str, Any]:
+                return _simulate_one(job)
+
+        pool = ActorPool([_Worker.remote(body) for _ in range(min(n_workers, len(todo)))])
+        by_id = {j["id"]: j for j in todo}
+        for res in pool.map_unordered(lambda a, j: a.run.remote(j), [payload(j) for j in todo]):
+            yield by_id[res["id"]], res
+        return
+    if n_workers <= 1:
+        import warnings
+
+        import torch
+
+        threads = torch.get_num_threads()
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                _init_worker(body, quiet=False)
+                for job in todo:
+                    yield job, _simulate_one(job)
+        finally:
+            torch.set_num_threads(threads)
+        return
+    # "spawn": forking a parent that already ran torch can deadlock its OpenMP pool.
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_init_worker, initargs=(body,)) as ex:
+        futures = {ex.submit(_simulate_one, payload(job)): job for job in todo}
+        for fut in as_completed(futures):
+            job = futures[fut]
+            try:
+                res = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a crashed worker (e.g. out of memory) fails its clip only
+                res = {"id": job["id"], "ok": False, "error": f"worker crashed: {type(exc).__name__}: {exc} (a worker "
+                       "process died: out of memory, or a script without `if __name__ == '__main__':` that "
+                       "'spawn' cannot re-import; workers=1 runs in this process)"}
+            yield job, res
 
 
 def _body_asset_id(body: str | None) -> str:
