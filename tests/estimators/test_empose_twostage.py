@@ -85,3 +85,30 @@ def test_tiny_training_and_estimate_with_dropped_sensors(tmp_path: Path, body: B
     assert torch.allclose(loaded.estimate(rec).local_rot, track.local_rot, atol=1e-5)
     with pytest.raises(OfflineOnlyError):
         est.step(None)
+
+
+def test_drop_sensors_and_table10_evaluation(tmp_path: Path, body: BodyModel) -> None:
+    from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
+    from wearpose.estimators.empose.evaluate import drop_sensors, evaluate_dropped, table10_markdown
+
+    cfg = EmposeConfig.preset("tiny", 12)
+    r = simulate_clip(synthetic_motion(3, T=120), cfg, body, seed=2, noise="none")
+    rec = recording_from_clip(r, cfg)
+    names = [s.name for s in rec.sensors if s.kind == "em6dof"][:12]
+    new, removed = drop_sensors(rec, names, torch.Generator().manual_seed(0))
+    per_frame = removed.sum(1)
+    assert int(per_frame.max()) <= 2 and 0.2 < float((per_frame > 0).float().mean()) < 0.9
+    grid = new.on_common_grid(names)
+    assert np.array_equal(~grid.valid, removed.numpy())  # noise-free: only our removals
+    assert np.isnan(grid.channels["position"][~grid.valid]).all()
+    # The same generator seed gives the same removals (a reproducible table).
+    assert torch.equal(drop_sensors(rec, names, torch.Generator().manual_seed(0))[1], removed)
+    store = FakeStore(tmp_path, {"test": 1})
+    res = evaluate_dropped({"LGD-RNN": EmposeEstimator(cfg, body=body),
+                            "2-stage": TwoStageEstimator(twostage_config("tiny", 12), body=body)}, store=store)
+    c = res["frame_counts"]
+    assert c["all"] == c["avail"] + c["miss"] and c["miss"] >= c["miss1"] + c["miss2"] > 0
+    for m in res["models"].values():
+        assert set(m["sets"]) == {"all", "avail", "miss", "miss1", "miss2"}
+        assert m["sets"]["all"]["mpjpe_mm"] > 0
+    assert "| miss | 2-stage |" in table10_markdown(res)

@@ -179,3 +179,150 @@ def write_table2(result: Mapping[str, Any], path_stem: str | Path, extra: Mappin
                         "processor": platform.processor() or platform.machine(), "threads": torch.get_num_threads()}}
     (stem.with_suffix(".json")).write_text(json.dumps(blob, indent=2, default=str) + "\n", encoding="utf-8")
     return stem.with_suffix(".md"), stem.with_suffix(".json")
+
+
+# --------------------------------------------------------------------------- Table 10 (dropped sensors)
+#: Drop events of :func:`drop_sensors`: span length and gap between spans, frames (30 Hz: 0.5-1.5 s
+#: spans, 0.5-2 s gaps), and the number of sensors removed per span.
+DROP_SPAN = (15, 45)
+DROP_GAP = (15, 60)
+DROP_COUNTS = (1, 2)
+
+
+def drop_sensors(recording: Any, sensor_names: list[str], g: torch.Generator) -> tuple[Any, torch.Tensor]:
+    """A copy of ``recording`` with EM sensors removed over random spans (Table 10 protocol).
+
+    Spans of ``DROP_SPAN`` frames separated by ``DROP_GAP`` frames (uniform), each removing 1 or
+    2 (``DROP_COUNTS``, equally likely) random sensors of ``sensor_names``: their samples become
+    invalid (NaN), the way a recording marks dropped EM frames.
+
+    Returns:
+        the new recording and ``removed`` ``(T, S)`` bool (True = removed by this function).
+    """
+    import dataclasses
+
+    import numpy as np
+
+    streams = {s.name: s for s in recording.sensors}
+    T = len(streams[sensor_names[0]].valid)
+    S = len(sensor_names)
+    removed = torch.zeros(T, S, dtype=torch.bool)
+    t = int(torch.randint(0, min(DROP_GAP[1], T // 4) + 1, (), generator=g))  # first span starts early enough
+    while t < T:
+        L = int(torch.randint(DROP_SPAN[0], DROP_SPAN[1] + 1, (), generator=g))
+        k = DROP_COUNTS[int(torch.randint(0, len(DROP_COUNTS), (), generator=g))]
+        removed[t:t + L, torch.randperm(S, generator=g)[:k]] = True
+        t += L + int(torch.randint(DROP_GAP[0], DROP_GAP[1] + 1, (), generator=g))
+    new = []
+    for s in recording.sensors:
+        if s.name not in sensor_names:
+            new.append(s)
+            continue
+        rm = removed[:, sensor_names.index(s.name)].numpy()
+        valid = s.valid & ~rm
+        pos, ori = s.position.copy(), s.orientation.copy()
+        pos[~valid], ori[~valid] = np.nan, np.nan
+        new.append(dataclasses.replace(s, valid=valid, position=pos, orientation=ori))
+    return dataclasses.replace(recording, sensors=new), removed
+
+
+def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit: int | None = None, *,
+                     noise: str = "default", seed: int = 0, store: Any = None, progress: Any = None) -> dict[str, Any]:
+    """EM-POSE Table 10 on our data: models on recordings with dropped sensors.
+
+    Each clip is simulated as in :func:`evaluate_models` (same subjects and noise), then
+    :func:`drop_sensors` removes 1-2 sensors over random spans (generator seeded per clip in the
+    ``"table10"`` namespace). Every model estimates the whole recording and *every* frame is scored
+    (a model's own ``valid`` flag is ignored: the LGD-RNN holds a dropped sensor at its last value,
+    the two-stage model fills it in). Frame sets: ``all``; ``avail`` (every sensor valid);
+    ``miss`` (at least one sensor missing), and ``miss1`` / ``miss2`` (exactly one / two missing).
+
+    Returns:
+        ``{"split", "clips", "frame_counts": {set: n}, "models": {name: {set: {"mpjpe_mm", ...}}},
+        ...}`` (mean and std per set, mm / degrees, 15 major joints).
+    """
+    from wearpose.body.skeleton import MAJOR_JOINTS
+    from wearpose.estimators.empose.baselines import load_any
+    from wearpose.estimators.empose.data import clip_seed, recording_from_clip, simulate_clip
+    from wearpose.evaluate import mpjae, mpjpe, pa_mpjpe
+    from wearpose.motion import CorpusStore
+
+    if not checkpoints:
+        raise ConfigError("evaluate_dropped: no checkpoints given")
+    ests = {name: (c if not isinstance(c, (str, Path)) else load_any(c)) for name, c in checkpoints.items()}
+    first = next(iter(ests.values()))
+    for name, e in ests.items():
+        if (e.kit_name, e.fps, e.body_asset_id) != (first.kit_name, first.fps, first.body_asset_id):
+            raise ConfigError(f"evaluate_dropped: {name!r} is for kit {e.kit_name} at {e.fps} Hz, the first model for "
+                              f"kit {first.kit_name} at {first.fps} Hz; one table needs one setting")
+    store = store or CorpusStore()
+    ids = store.clips(split=split)[: limit or None]
+    names = list(first.sensor_names)
+    errs: dict[str, dict[str, list[torch.Tensor]]] = {n: {"pe": [], "pa": [], "ae": []} for n in ests}
+    nmiss: list[torch.Tensor] = []
+    secs = {n: 0.0 for n in ests}
+    for i, cid in enumerate(ids):
+        r = simulate_clip(store.load(cid), first.config, first.body, clip_seed(cid, seed, "eval"), noise=noise,
+                          offsets="random")
+        g = torch.Generator().manual_seed(clip_seed(cid, seed, "table10"))
+        rec, _ = drop_sensors(recording_from_clip(r, first.config), names, g)
+        grid = rec.on_common_grid(names)
+        nmiss.append((~torch.as_tensor(grid.valid)).sum(1))
+        for name, est in ests.items():
+            t0 = time.perf_counter()
+            track = est.estimate(rec)
+            secs[name] += time.perf_counter() - t0
+            with torch.no_grad():
+                pj = est.body(track.local_rot, track.betas, None, return_vertices=False).joints
+            errs[name]["pe"].append(mpjpe(pj, r["joints"], MAJOR_JOINTS))
+            errs[name]["pa"].append(pa_mpjpe(pj, r["joints"], MAJOR_JOINTS))
+            errs[name]["ae"].append(mpjae(track.local_rot, r["pose"]))
+        if progress is not None:
+            progress(i + 1, len(ids))
+    miss = torch.cat(nmiss) if nmiss else torch.zeros(0, dtype=torch.long)
+    sets = {"all": torch.ones_like(miss, dtype=torch.bool), "avail": miss == 0, "miss": miss > 0,
+            "miss1": miss == 1, "miss2": miss == 2}
+    models: dict[str, Any] = {}
+    for name, est in ests.items():
+        pe, pa, ae = (torch.cat(errs[name][k]) for k in ("pe", "pa", "ae"))
+        rows = {}
+        for sname, m in sets.items():
+            (m1, s1), (m2, s2), (m3, s3) = _stats([pe[m]], 1000.0), _stats([pa[m]], 1000.0), _stats([ae[m]], 180.0 / math.pi)
+            rows[sname] = {"mpjpe_mm": m1, "mpjpe_std_mm": s1, "pa_mpjpe_mm": m2, "pa_mpjpe_std_mm": s2,
+                           "mpjae_deg": m3, "mpjae_std_deg": s3}
+        src = checkpoints[name]
+        models[name] = {"sets": rows, "method": est.name, "checkpoint": str(src) if isinstance(src, (str, Path)) else None,
+                        "epoch": est.meta.get("epoch"), "val_mpjpe_mm": est.meta.get("val_mpjpe_mm"),
+                        "train_command": est.train_command, "config": est.config.to_dict(),
+                        "parameters": sum(p.numel() for p in est.model.parameters()), "seconds": secs[name]}
+    return {"split": split, "clips": len(ids), "noise": noise, "seed": seed, "kit": first.kit_name, "rate_hz": first.fps,
+            "body_asset": first.body_asset_id, "joints": "15 major (DIP/EM-POSE)",
+            "frame_counts": {k: int(v.sum()) for k, v in sets.items()},
+            "drops": {"span_frames": DROP_SPAN, "gap_frames": DROP_GAP, "sensors_per_span": DROP_COUNTS},
+            "subjects": "random synthetic offsets per clip, evaluation seed namespace (never drawn for training)",
+            "models": models}
+
+
+#: Paper's Table 10 (12 sensors, real test set): set -> model -> MPJPE, PA-MPJPE, MPJAE (mean, std).
+PAPER_TABLE10_12 = {
+    "all": {"LGD-RNN": ((33.3, 24.3), (26.2, 18.8), (13.4, 9.2)), "2-stage": ((38.8, 22.0), (28.2, 17.3), (13.8, 9.1))},
+    "avail": {"LGD-RNN": ((31.8, 21.0), (24.8, 16.4), (13.3, 9.2)), "2-stage": ((39.1, 21.3), (28.1, 16.7), (13.7, 9.1))},
+    "miss": {"LGD-RNN": ((45.6, 40.6), (37.7, 30.0), (15.0, 9.3)), "2-stage": ((36.2, 27.0), (29.1, 21.9), (14.6, 9.1))},
+}
+
+
+def table10_markdown(result: Mapping[str, Any], digits: int = 1) -> str:
+    """Markdown in the structure of EM-POSE Table 10: rows (frame set, model), best mean per set in bold."""
+    cols = [("mpjpe_mm", "mpjpe_std_mm"), ("pa_mpjpe_mm", "pa_mpjpe_std_mm"), ("mpjae_deg", "mpjae_std_deg")]
+    lines = ["| Frames | Model | frames | MPJPE [mm] | PA-MPJPE [mm] | MPJAE [°] |", "| --- | --- | --- | --- | --- | --- |"]
+    counts = result["frame_counts"]
+    for sname in ("all", "avail", "miss", "miss1", "miss2"):
+        rows = {n: m["sets"][sname] for n, m in result["models"].items()}
+        best = {k: min((r[k] for r in rows.values() if not math.isnan(r[k])), default=math.nan) for k, _ in cols}
+        for n, r in rows.items():
+            cells = []
+            for k, ks in cols:
+                s = f"{r[k]:.{digits}f} ± {r[ks]:.{digits}f}"
+                cells.append(f"**{s}**" if r[k] == best[k] and len(rows) > 1 else s)
+            lines.append(f"| {sname} | {n} | {counts[sname]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
