@@ -283,3 +283,22 @@ def test_finetune_improves_the_fit_on_target_motions(trained, tmp_path: Path) ->
     after = evaluate(tuned, recs, mc_samples=0)["mpjae_all_deg"]
     assert after < before and "finetuned_on" in tuned.meta
     assert len(scenario_recordings("test", "clean", store=store)) == 1
+
+
+def test_demo_runs_with_given_weights(trained, tmp_path: Path, monkeypatch) -> None:
+    """The mimu6 demo on a motion file, with the tiny model standing in for the shipped weights."""
+    import json
+
+    import wearpose.weights as weights
+    from wearpose.cli.demo import kit_demo
+
+    est, tmp, _ = trained
+    p = est.save(tmp_path / "w.pt")
+    monkeypatch.setattr(weights, "weight_path", lambda name: p)
+    monkeypatch.setattr(weights, "card", lambda name: {"licence": "test"})
+    clip = synthetic_motion(9, T=30, fps=30.0).save(tmp_path / "clip.npz")
+    res = kit_demo("mimu6")(str(clip), tmp_path / "demo")
+    assert res["frames"] == 59 and Path(res["html"]).is_file() and Path(res["plot"]).stat().st_size > 10_000
+    assert {"mpjae_all_deg", "within_1sigma_pct", "magnetic_mpjae_3param_deg"} <= set(res["metrics"])
+    assert all(math.isfinite(v) for v in res["metrics"].values())
+    assert json.loads((tmp_path / "demo" / "metrics.json").read_text())["clip"] == str(clip)

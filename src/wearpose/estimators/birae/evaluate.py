@@ -57,8 +57,8 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
 
     Args:
         mode: ``"offline"`` (:meth:`BiraeEstimator.estimate`) or ``"online"``
-            (:meth:`BiraeEstimator.estimate_windowed` with ``window``, on every
-            ``frame_stride``-th frame; the offline figures of the same frames are not computed here).
+            (:meth:`BiraeEstimator.estimate_windowed` with ``window``); both count every
+            ``frame_stride``-th frame only.
         mc_samples: MC-dropout passes (``0``: one deterministic pass, aleatoric sigma only).
         keep_uncertainty: also return pooled residuals and sigmas ``(N, 15, 3)`` (calibrated with
             the estimator's current ``sigma_scale``), per-joint geodesic errors ``(N, 15)`` and
@@ -75,7 +75,9 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
         T = gt.shape[0]
         if mode == "offline":
             track = est.estimate(rec, mc_samples=mc_samples)
-            keep = track.valid
+            keep = track.valid.clone()
+            if frame_stride > 1:
+                keep[torch.arange(T) % frame_stride != 0] = False
         else:
             idx = torch.arange(0, T, frame_stride)
             track = est.estimate_windowed(rec, window=window, mc_samples=mc_samples, frames=idx)
@@ -109,7 +111,7 @@ def public(res: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in res.items() if not k.startswith("_")}
 
 
-def calibrate(est: Any, val_recs: Sequence[tuple[str, Any, torch.Tensor]], method: str = "nll",
+def calibrate(est: Any, val_recs: Sequence[tuple[str, Any, torch.Tensor]], method: str = "quantile",
               mc_samples: int | None = None) -> dict[str, Any]:
     """Fit the post-hoc sigma scale on validation recordings and store it in ``est``.
 
