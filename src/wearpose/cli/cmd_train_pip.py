@@ -1,0 +1,52 @@
+"""``wearpose train pip``: train PIP's kinematics module on simulated IMUs from the corpus."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+from typing import Any, Optional
+
+import typer
+
+from wearpose.cli.app import _emit, console
+from wearpose.cli.cmd_train import train_app
+
+
+@train_app.command("pip")
+def train_pip_cmd(
+    config: str = typer.Option("cpu", help="Preset: tiny (smoke test), cpu (CPU-sized), paper (PIP appendix)."),
+    epochs: Optional[int] = typer.Option(None, help="Override the preset's number of epochs."),
+    out: Optional[Path] = typer.Option(None, help="Run directory (default runs/pip_<config>[_noinit])."),
+    resume: bool = typer.Option(False, "--resume", help="Continue from <out>/last.pt."),
+    threads: Optional[int] = typer.Option(None, help="torch CPU threads (default: torch's choice)."),
+    device: str = typer.Option("auto", help="auto (CUDA when available), cpu or cuda[:i]."),
+    hidden: Optional[int] = typer.Option(None, help="Override LSTM width."),
+    batch_size: Optional[int] = typer.Option(None, help="Override the batch size."),
+    learned_init: bool = typer.Option(True, "--learned-init/--no-learned-init",
+                                      help="Learned RNN initialisation I_PL / I_VA (off: Table 2 ablation)."),
+    limit: Optional[int] = typer.Option(None, help="Use only N training clips spread over the split (quick runs)."),
+    checkpoint_every: int = typer.Option(100, help="Save last.pt every N optimiser steps (and every epoch)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+) -> None:
+    """Train PIP's kinematics RNNs (P_L, P_A, R_A, V_A, C_F, I_PL, I_VA) on virtual IMUs (kit imu6).
+
+    Example: wearpose train pip --config cpu --threads 1 --out runs/pip_cpu
+    """
+    from wearpose.estimators.pip import PipConfig, PipEstimator, train_pip
+
+    cfg = PipConfig.preset(config).override(hidden=hidden, batch_size=batch_size, learned_init=learned_init)
+    if hidden is not None:
+        cfg = cfg.override(init_widths=(hidden, 2 * hidden))
+    out = out or Path("runs") / f"pip_{config}{'' if learned_init else '_noinit'}"
+    est = PipEstimator(cfg, physics=False)
+    command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    res = train_pip(est, out, epochs=epochs, resume=resume, threads=threads, device=device, limit_train=limit,
+                    checkpoint_every=checkpoint_every, train_command=command, quiet=as_json,
+                    console=None if as_json else console)
+    res = {"method": "pip", "config": cfg.to_dict(), **res}
+
+    def render(r: dict[str, Any]) -> None:
+        console.print(f"done: best val joint error {r['best']:.1f} mm; checkpoints in {r['out_dir']}")
+
+    _emit(res, as_json, render)
