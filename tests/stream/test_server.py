@@ -133,3 +133,17 @@ def test_refusal_stats_endpoint_and_clean_shutdown() -> None:
     assert stats["type"] == "stats" and "0" in stats["subjects"]
     assert http_stats["malformed_total"] == 1
     assert n_poses == 40 and final["finished"]["0"]["estimated"] == 40
+
+
+def test_null_estimator_passes_any_stream_through() -> None:
+    from wearpose.stream import estimator_factory
+
+    rec = tiny_recording(30)
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(estimator_factory("null"), port=0, stride="auto") as srv:
+            return await replay(rec, srv.url, realtime=False)
+
+    r = _run(main())
+    assert r["frames_lost"] == 0 and r["poses_received"] == 30 and r["ready"]["stride"] == 1
+    assert r["invalid_pose_frames"] == 5  # frames 10-14 have a dropped sensor

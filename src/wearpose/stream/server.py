@@ -341,11 +341,12 @@ class StreamServer:
             await ws.send(json.dumps({"type": "error", "subject": hello.subject, "error": str(exc)}))
             return
         est = s.estimator
-        s.stride = max(1, round(hello.rate / est.fps)) if self.stride == "auto" else int(self.stride)
+        s.stride = max(1, round(hello.rate / est.fps)) if self.stride == "auto" and est.fps > 0 else (
+            1 if self.stride == "auto" else int(self.stride))
         s.worker = asyncio.create_task(self._work(hello.subject, s))
         s.ready.set()
         est_rate = hello.rate / s.stride
-        note = "" if abs(est_rate - est.fps) <= 0.05 * est.fps else (
+        note = "" if est.fps <= 0 or abs(est_rate - est.fps) <= 0.05 * est.fps else (
             f"the estimator was trained at {est.fps:g} Hz but receives {est_rate:g} Hz "
             f"(stream {hello.rate:g} Hz, stride {s.stride}); its output may be degraded")
         await ws.send(json.dumps({"type": "ready", "subject": hello.subject, "estimator": est.name,
@@ -468,8 +469,9 @@ def _timed_step(est: Estimator, frame: SensorFrame) -> tuple[Any, float]:
 
 
 def estimator_factory(model: str, method: str | None = None, threads: int | None = None) -> Callable[[], Estimator]:
-    """``() -> Estimator`` for shipped weights (``wearpose.weights`` name, e.g. ``empose12_cpu``)
-    or a checkpoint file; ``method`` overrides the registry name read from the card/checkpoint."""
+    """``() -> Estimator`` for shipped weights (``wearpose.weights`` name, e.g. ``empose12_cpu``),
+    a checkpoint file, or ``"null"`` (:class:`NullEstimator`, transport only); ``method``
+    overrides the registry name read from the card/checkpoint."""
     from pathlib import Path
 
     from wearpose.errors import ConfigError
@@ -477,6 +479,8 @@ def estimator_factory(model: str, method: str | None = None, threads: int | None
     from wearpose.estimators.registry import get_estimator
     from wearpose.weights import card, list_weights, weight_path
 
+    if model == "null":
+        return NullEstimator
     if model in list_weights():
         path, name = weight_path(model), method or card(model)["method"]
     elif Path(model).is_file():
@@ -512,3 +516,38 @@ def run_server(estimator_factory: Callable[[], Estimator], host: str = "127.0.0.
         return server.stats()
 
     return asyncio.run(main())
+
+
+class NullEstimator(Estimator):
+    """Pass-through estimator for measuring the server and transport alone (``--model null``):
+    rest pose, valid when every sensor is, no compute. Accepts any sensors."""
+
+    name = "null"
+    kit_name = "any"
+    sensor_names: tuple[str, ...] = ()
+    body_asset_id = "none"
+    fps = 0.0  # any rate
+
+    def fit(self, *args: Any, **kwargs: Any) -> Any:
+        raise NotImplementedError("the null estimator has nothing to train")
+
+    def save(self, path: Any) -> Any:
+        raise NotImplementedError("the null estimator has no weights")
+
+    @classmethod
+    def load(cls, path: Any, **kwargs: Any) -> NullEstimator:
+        return cls()
+
+    def estimate(self, recording: Any) -> Any:
+        raise NotImplementedError("the null estimator is online only")
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, frame: SensorFrame) -> Any:
+        import torch
+
+        from wearpose.estimators.base import PoseFrame
+
+        return PoseFrame(torch.eye(3).repeat(24, 1, 1), torch.zeros(10), None, bool(np.all(frame.valid)), frame.timestamp,
+                         extras={"frame": "none"})
