@@ -18,7 +18,8 @@ slower than 0.48 m/s and within 10 cm of its lowest height). It reports, per cli
 - ``joint_err_cm``: root-relative joint position error against the ground truth;
 - timing: QP solve (proxsuite) and whole step (wall and thread CPU time), median and p99
   (first 5 frames excluded);
-- the single-PD ablation on the longest clip (translation error with ``dual_pd=False``).
+- the single-PD ablation on the longest clip (translation error with ``dual_pd=False``) and the
+  sensitivity to the residual weight ``k_res`` (0.3 and 1.0 against the paper's 0.1).
 
 ``--plots`` also writes ``docs/img/pip_grf_walk.png`` (GRF of both feet vs time on the longest
 walking clip) and ``docs/img/pip_arm_torque_wave.png`` (shoulder/elbow torques while waving,
@@ -81,7 +82,8 @@ def run_clip(store: CorpusStore, body: BodyModel, clip: str, cfg: PhysicsConfig)
         "clip": clip, "seconds": len(fy) / cfg.fps, "frames": len(fy), "mass_kg": char.mass_kg,
         "grf_over_weight": float(fy.sum(1).mean() / mg),
         "max_penetration_m": float(out["penetration_m"].max()),
-        "stance_agreement": float((dominant[single & loaded] == stance[single & loaded]).mean()),
+        "stance_agreement": float((dominant[single & loaded] == stance[single & loaded]).mean())
+        if (single & loaded).any() else float("nan"),
         "load_switches_per_s": switches(dominant[loaded]), "gt_stance_switches_per_s": switches(stance[single]),
         "frames_without_foot_contact": float((~out["contacts"].numpy().any(1)).mean()),
         "trans_err_mean_m": float(err.mean()), "trans_err_final_m": float(err[-1]), "travelled_m": travelled,
@@ -174,11 +176,13 @@ def main() -> None:
         print(f"{clip}: GRF/weight {res['grf_over_weight']:.3f}, step median {res['step_ms_median']:.2f} ms", file=sys.stderr)
     longest = rows[0]
     single, _, _ = run_clip(store, body, longest["clip"], PhysicsConfig(dual_pd=False))
+    # Sensitivity to the residual weight (paper: k_res = 0.1), longest clip.
+    k_res_rows = {str(k): run_clip(store, body, longest["clip"], PhysicsConfig(k_res=k))[0] for k in (0.3, 1.0)}
     keys = ("grf_over_weight", "max_penetration_m", "stance_agreement", "load_switches_per_s", "gt_stance_switches_per_s",
             "trans_err_mean_m", "trans_err_final_m", "travelled_m", "joint_err_cm", "residual_force_mean_n",
             "frames_without_foot_contact")
     qp_all = np.array([r["qp_ms_median"] for r in rows])
-    summary = {k: float(np.mean([r[k] for r in rows])) for k in keys}
+    summary = {k: float(np.nanmean([r[k] for r in rows])) for k in keys}
     summary["max_penetration_m"] = float(max(r["max_penetration_m"] for r in rows))
     summary["grf_over_weight_min"] = float(min(r["grf_over_weight"] for r in rows))
     summary["grf_over_weight_max"] = float(max(r["grf_over_weight"] for r in rows))
@@ -195,7 +199,8 @@ def main() -> None:
                                                 "min_contact_weight", "foot_contact_requires_prob", "ground_bound",
                                                 "guard_all_candidates", "foot_square_shift")},
         "targets": {"grf_over_weight": "within 0.15 of 1", "max_penetration_m": "< 0.01", "step_ms_median": "<= 5 (whole PIP)"},
-        "longest_clip": longest, "longest_clip_single_pd": single, "mean_over_clips": summary, "per_clip": rows,
+        "longest_clip": longest, "longest_clip_single_pd": single,
+        "longest_clip_k_res": k_res_rows, "mean_over_clips": summary, "per_clip": rows,
         "machine": {"platform": platform.platform(), "load_average_1m": os.getloadavg()[0], "cpus": os.cpu_count()},
     }
     if args.plots:
@@ -209,7 +214,9 @@ def main() -> None:
     for c in ("", "GRF/weight", "max pen. cm", "stance agree", "trans err mean/final m", "travelled m", "joint err cm",
               "QP ms med/p99", "step ms med/p99", "step CPU ms med/p99"):
         tab.add_column(c)
-    for name, r in (("longest (dual PD)", longest), ("longest (single PD)", single)):
+    named = [("longest (dual PD)", longest), ("longest (single PD)", single)]
+    named += [(f"longest (k_res={k})", r) for k, r in k_res_rows.items()]
+    for name, r in named:
         tab.add_row(name, f"{r['grf_over_weight']:.3f}", f"{r['max_penetration_m'] * 100:.2f}", f"{r['stance_agreement']:.2f}",
                     f"{r['trans_err_mean_m']:.3f} / {r['trans_err_final_m']:.3f}", f"{r['travelled_m']:.1f}",
                     f"{r['joint_err_cm']:.1f}", f"{r['qp_ms_median']:.2f} / {r['qp_ms_p99']:.2f}",

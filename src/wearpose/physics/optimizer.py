@@ -470,6 +470,8 @@ class PhysicsOptimizer:
             qp_ms = (time.perf_counter() - t_qp) * 1000.0
             qdd, lam, tau = res.x[:nv], res.x[nv:nv + n_l], res.x[nv + n_l:]
 
+        if not np.all(np.isfinite(qdd)):  # solver breakdown: coast one frame rather than poison the state
+            qdd, lam, tau = np.zeros(nv), np.zeros(n_l), dyn.h.copy()
         # --- state update (Eq. 13, semi-implicit)
         self.v = v + qdd * dt
         self.q = pin.integrate(self.model, self.q, self.v * dt)
