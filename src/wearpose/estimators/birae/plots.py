@@ -18,6 +18,15 @@ def _plt() -> Any:
     return plt
 
 
+def _save(plt: Any, fig: Any, path: str | Path) -> Path:
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def uncertainty_bands(path: str | Path, fps: float, mean: torch.Tensor, sigma: torch.Tensor, truth: torch.Tensor,
                       joints: Sequence[tuple[str, int]], title: str = "") -> Path:
     """One panel per joint: its three exp-map components (deg) over time, ground truth, mean and +-1 sigma.
@@ -46,12 +55,7 @@ def uncertainty_bands(path: str | Path, fps: float, mean: torch.Tensor, sigma: t
     axes[0][0].legend(fontsize=7, loc="upper left")
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def reliability_diagram(path: str | Path, curves: dict[str, dict[str, list[float]]], title: str = "") -> Path:
@@ -68,9 +72,4 @@ def reliability_diagram(path: str | Path, curves: dict[str, dict[str, list[float
     ax.legend(fontsize=7, loc="upper left")
     if title:
         ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
