@@ -104,7 +104,7 @@ class PipEstimator(Estimator):
         self.meta: dict[str, Any] = {}
         self._init: dict[str, torch.Tensor] | None = None
         self._optimizer: Any = None
-        self._opt_key: Any = None
+        self._char: tuple[tuple[float, ...], Any] | None = None
         self.reset()
 
     def to(self, device: str | torch.device) -> PipEstimator:
@@ -231,13 +231,16 @@ class PipEstimator(Estimator):
         return {"pose": global_to_local(glob), "vel": vel, "contact": torch.sigmoid(out["contact_logit"])}
 
     def _physics_optimizer(self) -> Any:
-        key = (self.dual_pd, tuple(self.betas.tolist()))
-        if self._optimizer is None or self._opt_key != key:
-            from wearpose.physics import PhysicsCharacter, PhysicsConfig, PhysicsOptimizer
+        """The optimizer for the current shape and PD option (the character, costly to build, is
+        kept while the shape stays the same)."""
+        from wearpose.physics import PhysicsCharacter, PhysicsConfig, PhysicsOptimizer
 
-            char = PhysicsCharacter.from_body(self.body, self.betas)
-            self._optimizer = PhysicsOptimizer(char, PhysicsConfig(fps=self.fps, dual_pd=self.dual_pd))
-            self._opt_key = key
+        shape = tuple(self.betas.tolist())
+        if self._char is None or self._char[0] != shape:
+            self._char = (shape, PhysicsCharacter.from_body(self.body, self.betas))
+            self._optimizer = None
+        if self._optimizer is None or self._optimizer.config.dual_pd != self.dual_pd:
+            self._optimizer = PhysicsOptimizer(self._char[1], PhysicsConfig(fps=self.fps, dual_pd=self.dual_pd))
         return self._optimizer
 
     def _use_physics(self) -> bool:

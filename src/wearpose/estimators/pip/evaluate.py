@@ -1,0 +1,214 @@
+"""PIP evaluation: Table 2/3-style metrics on simulated held-out recordings, the translation
+error vs travelled distance curve (Fig. 3) and the long-sitting drift test (Fig. 9).
+
+Protocol (:func:`evaluate_variants`): every clip of the split (or ``limit`` clips spread over
+it) is resampled to 60 Hz, simulated with kit ``imu6`` (bone orientations as after a T-pose
+calibration, free accelerations, the default IMU error model, seeds in an evaluation namespace
+never used for training), trimmed by :data:`~wearpose.estimators.pip.data.EDGE_FRAMES` at both
+ends, and given to each variant from the ground-truth first frame (pose, joint velocities,
+translation, shape: PIP assumes the initial state known, Sec. 3.1.2). Metrics are
+:func:`wearpose.evaluate.compute_all` per clip (rotation metrics with PIP's protocol of masking
+the ignored joints, ``mask_ignored=True``), averaged over frames of all clips.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Callable
+
+import torch
+
+from wearpose.estimators.empose.data import clip_seed
+from wearpose.estimators.pip.data import simulate_clip
+
+#: Travelled-distance thresholds of the translation error curve, m.
+DISTANCES = tuple(float(d) for d in range(0, 21, 2))
+#: Metrics averaged over frames (keys of :func:`wearpose.evaluate.compute_all`).
+FRAME_METRICS = ("sip_error_deg", "angular_error_deg", "positional_error_cm", "mesh_error_cm", "jitter_abs_km_s3",
+                 "jitter_rel_km_s3", "mpjpe_major_mm", "translation_error_cm")
+
+
+def _init(est: Any, r: dict[str, Any]) -> None:
+    est.set_initial_state(r["pose"][0], r["vel"][0].view(24, 3) * est.config.vel_scale, r["trans"][0], r["betas"])
+
+
+@torch.no_grad()
+def clip_metrics(est: Any, r: dict[str, Any], body: Any) -> tuple[dict[str, float], dict[str, Any]]:
+    """Run ``est`` on one simulated clip ``r`` (:func:`simulate_clip`) and score it.
+
+    Returns ``(metrics, info)``: :func:`compute_all` figures, and the translation curve / physics
+    diagnostics of the clip.
+    """
+    from wearpose.evaluate.metrics import compute_all, cumulative_translation_error
+
+    _init(est, r)
+    t0 = time.perf_counter()
+    track = est.estimate_tensors(r["acc"], r["ori"])
+    sec = time.perf_counter() - t0
+    betas = r["betas"]
+    pred = body(track.local_rot, betas, track.trans)
+    gt = body(r["pose"], betas, r["trans"])
+    m = compute_all({"local_rot": track.local_rot, "joints": pred.joints, "vertices": pred.vertices, "trans": track.trans},
+                    {"local_rot": r["pose"], "joints": gt.joints, "vertices": gt.vertices, "trans": r["trans"]},
+                    fps=est.fps, mask_ignored=True)
+    curve = cumulative_translation_error(track.trans, r["trans"], DISTANCES)
+    info: dict[str, Any] = {"frames": track.num_frames, "seconds": sec, "error_at": curve.error_at.tolist(),
+                            "travelled_m": float(curve.travelled[-1]), "final_error_m": float(curve.final_error)}
+    ex = track.extras
+    if ex.get("physics"):
+        info.update(qp_ms=ex["qp_ms"].tolist(), max_penetration_m=float(ex["penetration_m"].max()))
+    return m, info
+
+
+def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int | None = None, *, noise: str = "default",
+                      seed: int = 0, store: Any = None, progress: Callable[[int, int], None] | None = None
+                      ) -> dict[str, Any]:
+    """Evaluate several estimators (name -> :class:`PipEstimator`, all with one body) on the same
+    simulated clips (module doc). Returns ``{"rows": {name: {...}}, "clips", "frames", ...}``."""
+    from wearpose.motion import CorpusStore
+
+    store = store or CorpusStore()
+    ids = store.clips(split=split)
+    if limit and limit < len(ids):
+        ids = [ids[int(i * len(ids) / limit)] for i in range(limit)]
+    first = next(iter(variants.values()))
+    body, cfg = first.body, first.config
+    acc: dict[str, dict[str, Any]] = {n: {"sums": {}, "frames": 0, "curves": [], "drift": [], "qp_ms": [], "pen": [],
+                                          "seconds": 0.0} for n in variants}
+    frames = 0
+    for c, cid in enumerate(ids):
+        r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, seed, "pip-eval"), noise=noise)
+        T = int(r["x"].shape[0])
+        frames += T
+        for name, est in variants.items():
+            m, info = clip_metrics(est, r, body)
+            a = acc[name]
+            for k, v in m.items():
+                if isinstance(v, float) and math.isfinite(v):
+                    s = a["sums"].setdefault(k, [0.0, 0])
+                    s[0] += v * T
+                    s[1] += T
+            a["frames"] += T
+            a["seconds"] += info["seconds"]
+            a["curves"].append(info["error_at"])
+            if info["travelled_m"] > 1.0:
+                a["drift"].append(info["final_error_m"] / info["travelled_m"])
+            a["qp_ms"].extend(info.get("qp_ms", []))
+            if "max_penetration_m" in info:
+                a["pen"].append(info["max_penetration_m"])
+        if progress is not None:
+            progress(c + 1, len(ids))
+    rows: dict[str, Any] = {}
+    for name, a in acc.items():
+        est = variants[name]
+        row: dict[str, Any] = {k: s[0] / s[1] for k, s in a["sums"].items() if s[1]}
+        cur = torch.tensor(a["curves"], dtype=torch.float64)
+        row["translation_error_vs_distance_cm"] = {f"{d:g}m": (float(torch.nanmean(cur[:, i])) * 100 if
+                                                               bool((~cur[:, i].isnan()).any()) else None)
+                                                   for i, d in enumerate(DISTANCES)}
+        row["clips_reaching_m"] = {f"{d:g}m": int((~cur[:, i].isnan()).sum()) for i, d in enumerate(DISTANCES)}
+        row["final_drift_pct"] = float(torch.tensor(a["drift"]).mean() * 100) if a["drift"] else None
+        row["options"] = {"physics": est.physics, "dual_pd": est.dual_pd, "learned_init": est.learned_init and
+                          est.config.learned_init}
+        row["ms_per_frame"] = a["seconds"] / max(a["frames"], 1) * 1000
+        if a["qp_ms"]:
+            q = torch.tensor(a["qp_ms"])
+            row["qp_ms"] = {"median": float(q.median()), "p99": float(torch.quantile(q, 0.99)), "max": float(q.max())}
+        if a["pen"]:
+            row["max_penetration_cm"] = max(a["pen"]) * 100
+        row["checkpoint"] = getattr(est, "source", "")
+        row["data_fingerprint"] = est.data_fingerprint
+        rows[name] = row
+    return {"split": split, "clips": len(ids), "frames": frames, "noise": noise, "seed": seed, "rows": rows,
+            "protocol": "simulated imu6 (bone orientations, free acc, default IMU noise), known initial state, "
+                        "rotation metrics with ignored joints masked (PIP protocol)"}
+
+
+def sitting_pose() -> torch.Tensor:
+    """A seated pose ``(24, 3, 3)``: thighs forward (hips -90 deg about X), shanks down (knees
+    +90 deg), arms down by the sides (the calibration I-pose), torso upright. The corpus has no
+    sitting clip, so the long-sitting test is built from this pose."""
+    from wearpose.calibration import calibration_pose
+    from wearpose.body.skeleton import JOINT_INDEX
+    from wearpose.geometry import rotation_x
+
+    P = calibration_pose("ipose").float()
+    for side in ("left", "right"):
+        P[JOINT_INDEX[f"{side}_hip"]] = rotation_x(torch.tensor(-math.pi / 2))
+        P[JOINT_INDEX[f"{side}_knee"]] = rotation_x(torch.tensor(math.pi / 2))
+    return P
+
+
+def sitting_sequence(body: Any, seconds_down: float = 1.5, seconds_stand: float = 1.0, fps: float = 60.0) -> Any:
+    """Stand (arms down) -> sit down (slerp of every joint, pelvis lowered by the thigh length)
+    -> one frame seated: a :class:`~wearpose.motion.MotionSequence` for the sitting test."""
+    from wearpose.calibration import calibration_pose
+    from wearpose.geometry import slerp_matrix
+    from wearpose.motion import MotionSequence
+
+    stand, sit = calibration_pose("ipose").float(), sitting_pose()
+    n0, n1 = int(seconds_stand * fps), int(seconds_down * fps)
+    s = torch.cat([torch.zeros(n0), 0.5 - 0.5 * torch.cos(torch.linspace(0, math.pi, n1)), torch.ones(int(fps))])
+    pose = slerp_matrix(stand.expand(len(s), 24, 3, 3), sit.expand(len(s), 24, 3, 3), s[:, None].expand(len(s), 24))
+    rest = body.rest_joints(torch.zeros(10)).cpu()
+    drop = float(rest[1, 1] - rest[4, 1])  # hip to knee: the pelvis sinks by about a thigh length
+    trans = torch.zeros(len(s), 3)
+    trans[:, 1] = 0.95 - drop * s
+    trans[:, 2] = 0.1 * s
+    return MotionSequence(pose, torch.zeros(10), trans, fps, {"clip": "synthetic/sit-down"})
+
+
+@torch.no_grad()
+def sitting_drift(est: Any, hours: float = 1.0, start: str = "standing", chunk: int = 36_000, seed: int = 0,
+                  noise: str = "none") -> dict[str, Any]:
+    """PIP Fig. 9: a sit-down (or already seated, ``start="seated"``) followed by ``hours`` of
+    perfectly still input (zero accelerations, the seated orientations), kinematics only.
+
+    Returns the root-relative angular error (all joints, deg) of the estimate against the seated
+    pose at the start of the still period, after 1 min and at the end, and the drift: the mean
+    joint angle between the estimates at the start and at the end of the still period (total
+    and per hour).
+    """
+    from wearpose.evaluate.metrics import joint_angle_errors
+
+    body, cfg = est.body, est.config
+    seq = sitting_sequence(body)
+    r = simulate_clip(seq, cfg, body, seed, noise=noise, trim=0)
+    if start == "seated":
+        n = int(r["x"].shape[0])
+        keep = slice(n - int(cfg.rate), n)
+        r = {k: (v[keep] if isinstance(v, torch.Tensor) and v.dim() > 0 and v.shape[0] == n else v) for k, v in r.items()}
+    _init(est, r)
+    est.model.eval()
+    from wearpose.estimators.pip.data import imu_features
+
+    x = imu_features(r["acc"], r["ori"], cfg.acc_scale)
+    x_still = imu_features(torch.zeros_like(r["acc"][-1]), r["ori"][-1], cfg.acc_scale)
+    states = est._start_states()
+    out, states = est.model(x[None], states)
+    target = sitting_pose()
+
+    def err(rot6: torch.Tensor, ori_root: torch.Tensor) -> tuple[float, torch.Tensor]:
+        pose = est._decode({"rot6": rot6, "vel": torch.zeros(1, 72), "contact_logit": torch.zeros(1, 2)},
+                           ori_root[None])["pose"][0]
+        return math.degrees(float(joint_angle_errors(pose, target, "root_relative").mean())), pose
+
+    root = r["ori"][-1, 5]
+    e0, p0 = err(out["rot6"][0, -1:], root)
+    total = int(hours * 3600 * cfg.rate)
+    done, e1min = 0, None
+    t0 = time.perf_counter()
+    last = out["rot6"][0, -1:]
+    while done < total:
+        n = min(chunk, total - done)
+        o, states = est.model(x_still.expand(1, n, -1), states)
+        if e1min is None and done + n >= int(60 * cfg.rate):
+            e1min = err(o["rot6"][0, int(60 * cfg.rate) - done - 1:int(60 * cfg.rate) - done], root)[0]
+        last = o["rot6"][0, -1:]
+        done += n
+    e_end, p_end = err(last, root)
+    drift = math.degrees(float(joint_angle_errors(p_end, p0, "root_relative").mean()))
+    return {"start": start, "hours": hours, "frames": total, "error_at_start_deg": e0, "error_after_1min_deg": e1min,
+            "error_at_end_deg": e_end, "drift_total_deg": drift, "drift_per_hour_deg": drift / hours if hours else None,
+            "learned_init": bool(est.learned_init and est.config.learned_init), "seconds": time.perf_counter() - t0}

@@ -1,0 +1,49 @@
+"""PIP estimator with the physics module (wearpose.physics): outputs, online == offline,
+single vs dual PD option passed through. A tiny untrained network drives it for a few frames."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from wearpose.estimators.pip import PipConfig, PipEstimator
+from wearpose.estimators.pip.estimator import physics_available
+
+pytestmark = pytest.mark.skipif(not physics_available(), reason="wearpose.physics not available")
+
+
+def _inputs(T: int = 8):
+    ori = torch.eye(3).repeat(T, 6, 1, 1)
+    return torch.zeros(T, 6, 3), ori
+
+
+@pytest.fixture(scope="module")
+def est(body) -> PipEstimator:
+    torch.manual_seed(0)
+    return PipEstimator(PipConfig.preset("tiny"), body=body, physics=True)
+
+
+def test_physics_outputs_and_online_equals_offline(est) -> None:
+    est.dual_pd = True
+    est.set_initial_state(trans=torch.tensor([0.0, 0.9, 0.0]))
+    acc, ori = _inputs(5)
+    track = est.estimate_tensors(acc, ori)
+    ex = track.extras
+    assert ex["physics"] and ex["frame"] == "world"
+    assert ex["torques"].shape == (5, 24, 3) and ex["grf"].shape == (5, 2, 3) and ex["contacts"].shape == (5, 2)
+    assert torch.isfinite(track.trans).all() and torch.isfinite(track.local_rot).all()
+    assert float(ex["penetration_m"].max()) < 0.01
+    est.reset()
+    online = [est.step_tensors(acc[t], ori[t]) for t in range(5)]
+    assert torch.allclose(torch.stack([f.trans for f in online]), track.trans, atol=1e-4)
+    assert torch.allclose(torch.stack([f.local_rot for f in online]), track.local_rot, atol=1e-4)
+    assert online[-1].extras["grf"].shape == (2, 3)
+
+
+def test_single_pd_option_reaches_the_optimizer(est) -> None:
+    est.dual_pd = False
+    est.set_initial_state()
+    est.estimate_tensors(*_inputs(2))
+    assert est._physics_optimizer().config.dual_pd is False
+    est.dual_pd = True
+    assert est._physics_optimizer().config.dual_pd is True
