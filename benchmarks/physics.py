@@ -109,7 +109,7 @@ def plot_grf(out: dict, ref, mass_kg: float, clip: str, path: Path) -> None:
     for k, (col, name) in enumerate((("tab:blue", "left"), ("tab:red", "right"))):
         ax.fill_between(t, 0, -0.06 * mg * (k + 1), where=lab[:, k], color=col, alpha=0.25, step="mid", lw=0)
         ax.plot(t, fy[:, k], color=col, lw=1.2, label=f"{name} foot")
-    ax.plot(t, fy.sum(1), color="k", lw=0.8, alpha=0.6, label="sum")
+    ax.plot(t, fy.sum(1), color="0.45", lw=0.8, ls="--", zorder=1, label="sum")
     ax.axhline(mg, color="k", ls="--", lw=0.8, label=f"body weight ({mass_kg:.1f} kg)")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("vertical GRF (N)")
