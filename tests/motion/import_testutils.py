@@ -121,7 +121,8 @@ def joint_tree_to_asf_amc(sk: dict, names: dict[str, str] | None = None, length_
 
     Each non-root joint ``j`` becomes the bone ``name(j)`` from ``j`` to its primary child (leaves:
     ``end_len`` times the parent bone further); a joint that is not its parent's primary child hangs
-    from a link bone ``<name>_lnk`` (parent -> joint) carrying the parent's rotation. Every bone
+    from a static link bone ``<name>_lnk`` from the end of the parent's bone (from the root for
+    the root's children), as CMU's clavicles hang from the end of ``thorax``. Every bone
     gets a random ``axis`` (random order letters) and a random permutation of ``rx ry rz``, so the
     reader's ``C M C^-1`` and dof order are exercised. Values are ``file = length_mult * units``.
 
@@ -139,20 +140,19 @@ def joint_tree_to_asf_amc(sk: dict, names: dict[str, str] | None = None, length_
     end_of: dict[int, str] = {}  # joint -> bone ending at it
     prim = {j: _primary_child(par, sk["names"], j) for j in range(J)}
 
-    def bone_ending_at(j: int) -> str:
-        return "root" if par[j] < 0 else end_of[j]
-
     joint_bone: dict[str, str] = {}
     for j in range(J):  # parents precede children
         if par[j] < 0:
             continue
         p = par[j]
         if prim[p] != j:
-            v = X[j] - X[p]
             lnk = f"{nm[sk['names'][j]].replace(' ', '_')}_lnk"
-            pb = bone_ending_at(p)
-            rel = torch.eye(3, dtype=torch.float64).expand(Tn, 3, 3) if par[p] < 0 else G[:, par[p]].transpose(-1, -2) @ G[:, p]
-            bones.append({"name": lnk, "parent": pb, "vec": v, "rel": rel, "animated": par[p] >= 0})
+            eye = torch.eye(3, dtype=torch.float64).expand(Tn, 3, 3)
+            if par[p] < 0:  # from the root
+                bones.append({"name": lnk, "parent": "root", "vec": X[j] - X[p], "rel": eye, "animated": False})
+            else:  # from the end of the parent's bone, rigid with it (CMU: clavicles from the thorax end)
+                pb = nm[sk["names"][p]].replace(" ", "_")
+                bones.append({"name": lnk, "parent": pb, "vec": X[j] - X[prim[p]], "rel": eye, "animated": False})
             end_of[j] = lnk
             parent_bone = lnk
         else:

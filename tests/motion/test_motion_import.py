@@ -12,8 +12,8 @@ from wearpose.body.kinematics import forward_kinematics
 from wearpose.body.skeleton import JOINT_NAMES
 from wearpose.errors import InputFileError, WearposeError
 from wearpose.export import write_smpl_bvh
-from wearpose.motion import MotionSequence, parse_bvh_text, template_rest_joints
-from wearpose.motion.importer import UP_AXES, detect_units, import_motion, import_paths, parse_units
+from wearpose.motion import MotionSequence, read_bvh, template_rest_joints
+from wearpose.motion.importer import UP_AXES, detect_units, detect_up, import_motion, import_paths, parse_units
 from wearpose.motion.mapping import CMU_ASF, MIXAMO, RIGIFY, builtin_match, match_skeleton, split_name
 from import_testutils import BIPED_NAMES, custom_bvh_text, custom_skeleton_motion, joint_tree_to_asf_amc
 from motion_testutils import corpus_dir, synthetic_smpl_motion
@@ -60,7 +60,7 @@ def test_biped_apose_mm_zup_bvh(tmp_path, biped) -> None:
     for smpl, name in BIPED_NAMES.items():
         assert table[smpl] == name, (smpl, table[smpl])
     assert r.units["name"] == "mm" and r.up["axis"] == "z" and r.rest_pose["kind"] == "A-pose"
-    assert 40 < r.rest_pose["swing_deg"]["left_shoulder"] < 50
+    assert 40 < r.rest_pose["bone_deg"]["left_shoulder"] < 50
     assert r.bone_error_deg["mean"] < 10.0 and _source_error_deg(imp, biped) < 10.0
     # The pelvis lands where the source pelvis is (metres, Y up), scaled by the leg ratio 1.
     assert r.translation_scale == pytest.approx(1.0, abs=1e-4)
@@ -217,3 +217,5 @@ def test_corpus_skeletons_bone_directions() -> None:
         r = imp.report
         assert r.skeleton == name and r.units["name"] == "cm" and r.up["axis"] == "y"
         assert r.bone_error_deg["mean"] < 10.0 and math.isfinite(r.bone_error_deg["mean"])
+        # The declared Y-up agrees with what detection finds in the clip.
+        assert detect_up(read_bvh(data / rel), imp.retargeted.smap)["axis"] == "y"

@@ -20,7 +20,8 @@ Pipeline of :func:`import_motion` (each step's outcome goes into :class:`ImportR
 5. **rest pose**: retargeting (:func:`wearpose.motion.retarget_bvh`) rebuilds per joint the
    rotation that takes the source's zero pose to SMPL's T-pose (bone directions, left-right
    vectors, knee/elbow hinge axes), so an A-pose or any bind pose keeps SMPL pose parameters
-   meaningful; the report gives that correction per joint (:func:`rest_pose_correction`).
+   meaningful; the report labels the zero pose (T-pose, A-pose, other) from its bone directions
+   and gives the correction per joint (:func:`rest_pose_correction`).
    The root translation is scaled by SMPL's over the source's pelvis-to-ankle height.
 6. **check**: the angle between every mapped bone of the result and the same bone of the source,
    per frame (:data:`IMPORT_BONE_PAIRS`), mean and worst bone, in degrees.
@@ -86,7 +87,7 @@ class ImportReport:
         skeleton: map name; map_source: how the map was chosen; mapping: rows ``[smpl, joint, how]``;
         map_notes: remarks; units: ``{"name", "m_per_unit", "how", "leg_m"}``;
         up: ``{"axis", "how", "agreement"}`` (agreement: cosine of the measured up with the axis);
-        rest_pose: ``{"kind", "max_deg", "max_joint", "swing_deg", "total_deg"}``; frames; fps;
+        rest_pose: ``{"kind", "max_deg", "max_joint", "bone_deg", "total_deg"}``; frames; fps;
         translation_scale: SMPL/source leg ratio applied to the root trajectory;
         bone_error_deg: ``{"mean", "worst_bone", "worst_bone_mean", "per_bone"}`` (means over
         the clip); hinge_axes: where knee/elbow axes came from; seconds: wall time.
@@ -240,49 +241,57 @@ def to_y_up(motion: BvhMotion, axis: str) -> BvhMotion:
 
 
 # ---------------------------------------------------------------------------- rest pose
-def rest_pose_correction(tpose: TPose, rest_joints: torch.Tensor) -> dict[str, Any]:
-    """How far the source's zero pose is from SMPL's T-pose, per mapped joint: the SMPL local
-    rotation the zero pose retargets to (``T_parent @ T_j^T``), split into the **swing** of the
-    joint's bone (degrees; what makes an A-pose an A-pose) and the total angle (with twist).
+def rest_pose_correction(tpose: TPose, rest_joints: torch.Tensor, motion: BvhMotion, smap: SkeletonMap) -> dict[str, Any]:
+    """How far the source's zero pose is from SMPL's T-pose.
 
-    ``kind`` (from the swings): ``"T-pose"`` (all < 20 deg), ``"A-pose"`` (shoulders lowered by
-    25-70 deg, the rest < 25 deg), else ``"other bind pose"``.
+    ``bone_deg``: per mapped joint with a mapped next joint, the angle (degrees) between its bone
+    in the source's zero pose and the same bone in SMPL's T-pose, both seen from the pelvis (so
+    the facing of the zero pose does not count): 45 at the shoulders of an A-pose, a few degrees
+    where only proportions differ. ``total_deg``: the angle of the SMPL local rotation the zero
+    pose retargets to (``T_parent @ T_j^T``: swing and twist, i.e. the per-joint correction).
+    ``kind`` (from the upper arms' ``bone_deg``): ``"T-pose"`` (both < 20 deg), ``"A-pose"`` (both
+    lowered by 25-70 deg), else ``"other bind pose"``. Proportions alone (a source collar or
+    spine steeper than SMPL's) give 5-30 deg on other bones; that is not a bind-pose change.
     """
     from wearpose.motion.retarget import _NEXT  # noqa: PLC0415 - the primary-bone table
 
     T = tpose.rotations
     rest = rest_joints.to(torch.float64)
-    swing: dict[str, float] = {}
+    skel = motion.skeleton
+    offs = _rest_offsets(motion)
+    # Zero-pose positions: every local rotation is the identity, so offsets add up in the world.
+    pos = torch.zeros(skel.num_joints, 3, dtype=torch.float64)
+    for j, p in enumerate(skel.parents):
+        pos[j] = offs[j] if p < 0 else pos[p] + offs[j]
+    bone: dict[str, float] = {}
     total: dict[str, float] = {}
     eye = torch.eye(3, dtype=torch.float64)
+    T0 = T.get(0, eye)
     for j, Tj in T.items():
-        if j == 0:
-            continue
+        name = JOINT_NAMES[j]
         p = PARENTS[j]
         while p >= 0 and p not in T:
             p = PARENTS[p]
-        if p < 0:
-            continue
-        L = T[p] @ Tj.T  # source zero pose: G_j = R_up T_j^T
-        name = JOINT_NAMES[j]
-        total[name] = round(math.degrees(float(geodesic_angle(L, eye))), 2)
+        if p >= 0:
+            total[name] = round(math.degrees(float(geodesic_angle(T[p] @ Tj.T, eye))), 2)
         nxt = _NEXT.get(name)
-        if nxt is not None:
+        if nxt is not None and nxt in smap.joints:
+            d = pos[skel.index(smap.joints[nxt])] - pos[skel.index(smap.joints[name])]
             b = rest[JOINT_INDEX[nxt]] - rest[j]
-            b = b / b.norm()
-            swing[name] = round(math.degrees(math.acos(max(-1.0, min(1.0, float(b @ (L @ b)))))), 2)
-    if not swing:
-        return {"kind": "unknown", "max_deg": 0.0, "max_joint": "", "swing_deg": {}, "total_deg": total}
-    mj = max(swing, key=swing.get)  # type: ignore[arg-type]
-    shoulders = [swing.get(s) for s in ("left_shoulder", "right_shoulder")]
-    others = [v for k, v in swing.items() if k not in ("left_shoulder", "right_shoulder")]
-    if swing[mj] < 20:
+            if d.norm() > 0 and b.norm() > 0:
+                c = float((T0 @ d) @ b / (d.norm() * b.norm()))
+                bone[name] = round(math.degrees(math.acos(max(-1.0, min(1.0, c)))), 2)
+    if not bone:
+        return {"kind": "unknown", "max_deg": 0.0, "max_joint": "", "bone_deg": {}, "total_deg": total}
+    mj = max(bone, key=bone.get)  # type: ignore[arg-type]
+    arms = [bone.get(s) for s in ("left_shoulder", "right_shoulder")]
+    if all(a is not None and a < 20 for a in arms):
         kind = "T-pose"
-    elif all(s is not None and 25 <= s <= 70 for s in shoulders) and max(others, default=0) < 25:
+    elif all(a is not None and 25 <= a <= 70 for a in arms):
         kind = "A-pose"
     else:
         kind = "other bind pose"
-    return {"kind": kind, "max_deg": swing[mj], "max_joint": mj, "swing_deg": swing, "total_deg": total}
+    return {"kind": kind, "max_deg": bone[mj], "max_joint": mj, "bone_deg": bone, "total_deg": total}
 
 
 # ---------------------------------------------------------------------------- import
@@ -338,7 +347,7 @@ def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
         report.mapping = [[n, n, "exact"] for n in JOINT_NAMES]
         report.units = {"name": "cm", "m_per_unit": CM_TO_M, "how": "format (wearpose export)", "leg_m": float("nan")}
         report.up = {"axis": "y", "how": "format (wearpose export)", "agreement": 1.0}
-        report.rest_pose = {"kind": "T-pose", "max_deg": 0.0, "max_joint": "", "swing_deg": {}, "total_deg": {}}
+        report.rest_pose = {"kind": "T-pose", "max_deg": 0.0, "max_joint": "", "bone_deg": {}, "total_deg": {}}
         report.frames, report.fps = seq.num_frames, seq.fps
         report.bone_error_deg = {"mean": 0.0, "worst_bone": "", "worst_bone_mean": 0.0, "per_bone": {}}
         report.seconds = time.perf_counter() - t0
@@ -373,6 +382,8 @@ def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
         up_res = {"axis": str(up).lower(), "how": "given", "agreement": float("nan")}
         if up_res["axis"] not in UP_AXES:
             raise WearposeError(f"up axis {up!r}; expected one of {', '.join(UP_AXES)}")
+    elif smap.name in _CORPUS_MAPS:
+        up_res = {"axis": "y", "how": "declared (corpus skeleton)", "agreement": float("nan")}
     else:
         up_res = detect_up(motion, smap)
     motion_y = to_y_up(motion, up_res["axis"])
@@ -387,7 +398,7 @@ def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
     report.map_notes = match.notes
     report.units = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in ures.items()}
     report.up = up_res
-    report.rest_pose = rest_pose_correction(res.tpose, rest)
+    report.rest_pose = rest_pose_correction(res.tpose, rest, motion, smap)
     report.frames, report.fps = res.sequence.num_frames, res.sequence.fps
     report.translation_scale = round(res.tpose.scale, 5)
     report.hinge_axes = dict(res.tpose.hinge_source)

@@ -9,11 +9,9 @@ import torch
 
 from wearpose.errors import InputFileError
 from wearpose.motion.amass import read_amass
-from wearpose.motion.bvh import read_bvh
+from wearpose.motion.importer import MOTION_SUFFIXES, import_motion
 from wearpose.motion.paths import cache_dir, data_dir
-from wearpose.motion.retarget import retarget_bvh
 from wearpose.motion.sequence import FORMAT_NAME, MotionSequence
-from wearpose.motion.smpl_bvh import is_smpl_bvh, read_smpl_bvh
 from wearpose.motion.template import default_rest_joints
 
 
@@ -22,7 +20,8 @@ def load_motion(spec: str | Path, cache: str | Path | None = None, rest_joints: 
     """Load a motion from a file or a clip id.
 
     Args:
-        spec: a ``.bvh``/``.bvh.gz`` file (retargeted to SMPL-24), a ``.npz`` in our
+        spec: a ``.bvh``/``.bvh.gz``/``.amc`` file (imported onto SMPL-24 by
+            :func:`wearpose.motion.import_motion`), a ``.npz`` in our
             MotionSequence format or in AMASS format, a clip id of the prepared store
             (e.g. ``cmu_daz/05/05_01``), or a clip path relative to the corpus folder.
         cache: prepared store (default :func:`wearpose.motion.cache_dir`).
@@ -36,11 +35,9 @@ def load_motion(spec: str | Path, cache: str | Path | None = None, rest_joints: 
     if rest_joints is None:
         rest_joints, _ = default_rest_joints()
     if path.is_file():
-        if path.name.endswith((".bvh", ".bvh.gz")):
-            motion = read_bvh(path)
-            if is_smpl_bvh(motion):  # our own export: rotations are SMPL's already
-                return read_smpl_bvh(motion, rest_joints)
-            return retarget_bvh(motion, rest_joints, meta={"source_file": str(path)}).sequence
+        if path.name.lower().endswith(MOTION_SUFFIXES):
+            # Any BVH or AMC skeleton (our own SMPL export is read exactly): wearpose.motion.importer.
+            return import_motion(path, rest_joints, meta={"source_file": str(path)}).sequence
         if path.suffix == ".npz":
             try:
                 with np.load(path, allow_pickle=False) as data:
@@ -48,7 +45,7 @@ def load_motion(spec: str | Path, cache: str | Path | None = None, rest_joints: 
             except Exception as exc:
                 raise InputFileError(path, f"cannot be read as npz ({exc})", "a MotionSequence or AMASS .npz") from exc
             return MotionSequence.load(path) if ours else read_amass(path, rest_joints=rest_joints)
-        raise InputFileError(path, f"unsupported extension {path.suffix!r}", ".bvh, .bvh.gz or .npz")
+        raise InputFileError(path, f"unsupported extension {path.suffix!r}", ".bvh, .bvh.gz, .amc (with its .asf), .npz")
     tried = [f"file {path}"]
     store_dir = cache_dir(cache)
     if (store_dir / "index.json").is_file():

@@ -42,7 +42,7 @@ CONVERTER_VERSION = "motion-2"
 #: as ``floor_suspect`` in :meth:`CorpusStore.summary` (source data placed off the floor).
 FLOOR_TOLERANCE_M = 0.15
 SPLITS = ("train", "val", "test")
-_SUFFIXES = (".bvh", ".bvh.gz", ".npz")
+_SUFFIXES = (".bvh", ".bvh.gz", ".amc", ".amc.gz", ".npz")
 
 
 def _hash_split(subject: str) -> str:
@@ -53,7 +53,7 @@ def _hash_split(subject: str) -> str:
 
 def _clip_name(p: Path) -> str:
     n = p.name
-    for s in (".bvh.gz", ".bvh", ".npz"):
+    for s in (".bvh.gz", ".bvh", ".amc.gz", ".amc", ".npz"):
         if n.endswith(s):
             return n[: -len(s)]
     return p.stem
@@ -95,7 +95,8 @@ def _scan_folders(folders: Sequence[Path]) -> list[dict[str, Any]]:
             rel = p.relative_to(root)
             source = rel.parts[0] if len(rel.parts) > 2 else root.name
             out.append({"file": p, "source": source, "subject": subject, "clip": _clip_name(p),
-                        "split": _hash_split(subject), "licence": "unknown", "description": "", "skip_first": False})
+                        "split": _hash_split(subject), "licence": "unknown", "description": "", "skip_first": False,
+                        "user_files": True})
     return out
 
 
@@ -116,6 +117,11 @@ def _convert_one(job: dict[str, Any]) -> dict[str, Any]:
         if src.name.endswith(".npz"):
             seq = read_amass(src, rest)
             seq.meta.update(meta)
+        elif job.get("user_files"):
+            # Folders without a manifest: any skeleton, units and up axis (wearpose.motion.importer).
+            from wearpose.motion.importer import import_motion  # noqa: PLC0415 - heavier, only for user folders
+
+            seq = import_motion(src, rest, joint_map=job.get("joint_map"), meta=meta).sequence
         else:
             seq = retarget_bvh(read_bvh(src), rest, meta=meta).sequence
         if job["skip_first"] and seq.num_frames > 1:
@@ -139,13 +145,17 @@ def _write_json(path: Path, obj: Any) -> None:
 
 def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, cache_dir: str | Path | None = None,
                    fps: float | None = None, progress: bool = True, workers: int | None = None,
-                   rest_joints: torch.Tensor | None = None, limit: int | None = None) -> dict[str, Any]:
+                   rest_joints: torch.Tensor | None = None, limit: int | None = None,
+                   joint_map: str | Path | None = None) -> dict[str, Any]:
     """Convert every corpus clip to a MotionSequence file in ``cache_dir`` and write the index.
 
     Args:
         data_dir: corpus folder with ``manifest.csv`` (default :func:`wearpose.motion.paths.data_dir`);
-            or folder(s) without a manifest, in which case every ``.bvh``/``.bvh.gz``/``.npz``
-            below them is converted, subject = parent folder name, split = hash of the subject.
+            or folder(s) without a manifest, in which case every ``.bvh``/``.bvh.gz``/``.amc``
+            (with its ``.asf``)/``.npz`` below them is converted, subject = parent folder name,
+            split = hash of the subject; their BVH/AMC go through
+            :func:`wearpose.motion.import_motion` (any skeleton; units, up axis and rest pose
+            detected; the report is in each clip's ``meta["import"]``).
         cache_dir: output (default :func:`wearpose.motion.paths.cache_dir`).
         fps: resample every clip to this rate; ``None`` keeps each clip's own rate.
         progress: show a ``rich`` progress bar.
@@ -153,6 +163,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
         rest_joints: ``(24, 3)`` SMPL rest joints, metres (default: the body model at betas = 0,
             else the SMPL-like template).
         limit: convert only the first ``limit`` clips (for quick checks).
+        joint_map: YAML joint map for the BVH/AMC of manifest-less folders (see
+            :func:`wearpose.motion.mapping.load_joint_map`).
 
     Returns:
         ``{"converted", "skipped", "failed", "seconds", "failures": {clip_id: error}, "index": path}``.
@@ -169,6 +181,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
             if not d.is_dir():
                 raise ConfigError(f"data folder {d} does not exist")
         jobs_src = _scan_folders(folders)
+    if joint_map is not None and not Path(joint_map).is_file():
+        raise ConfigError(f"joint map {joint_map} does not exist")
     if limit is not None:
         jobs_src = jobs_src[:limit]
     cache = default_cache_dir(cache_dir)
@@ -205,6 +219,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
             failures[cid] = str(InputFileError(r["file"], "file not found", "the clip listed in manifest.csv"))
             continue
         stamp = _stamp(Path(r["file"]), fps, rest_key)
+        if joint_map is not None and r.get("user_files"):
+            stamp += f"|map:{_stamp(Path(joint_map), None, '')}"
         entry["stamp"] = stamp
         prev = old.get(cid)
         if prev and prev.get("stamp") == stamp and (cache / rel_out).is_file():
@@ -212,7 +228,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
             continue
         clips[cid] = entry
         todo.append({**r, "file": str(r["file"]), "id": cid, "out": str(cache / rel_out), "fps": fps,
-                     "rest_joints": rest_list, "rest_source": rest_source})
+                     "rest_joints": rest_list, "rest_source": rest_source,
+                     "joint_map": str(joint_map) if joint_map is not None else None})
     skipped = len(clips) - len(todo)
 
     def finish(res: dict[str, Any]) -> None:
