@@ -302,3 +302,46 @@ def test_demo_runs_with_given_weights(trained, tmp_path: Path, monkeypatch) -> N
     assert {"mpjae_all_deg", "within_1sigma_pct", "magnetic_mpjae_3param_deg"} <= set(res["metrics"])
     assert all(math.isfinite(v) for v in res["metrics"].values())
     assert json.loads((tmp_path / "demo" / "metrics.json").read_text())["clip"] == str(clip)
+
+
+# --------------------------------------------------------------------------- CLI
+def _has_store() -> bool:
+    try:
+        from wearpose.motion import CorpusStore
+
+        return len(CorpusStore().clips(split="train")) > 0 and len(CorpusStore().clips(split="val")) > 0
+    except Exception:
+        return False
+
+
+def test_train_birae_help_and_bad_representation(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from wearpose.cli import app
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["train", "birae", "--help"])
+    assert res.exit_code == 0 and "Example: wearpose train birae" in res.output
+    res = runner.invoke(app, ["train", "birae", "--rep", "9param", "--out", str(tmp_path / "r")])
+    assert res.exit_code != 0 and "9param" in res.output
+
+
+@pytest.mark.corpus
+@pytest.mark.skipif(not _has_store(), reason="no prepared corpus store (wearpose data prepare)")
+def test_tiny_cli_run_on_the_corpus(tmp_path: Path) -> None:
+    import json
+
+    from typer.testing import CliRunner
+
+    from wearpose.cli import app
+
+    n = torch.get_num_threads()
+    try:
+        res = CliRunner().invoke(app, ["train", "birae", "--rep", "3param", "--config", "tiny", "--threads", "1",
+                                       "--out", str(tmp_path / "run"), "--json"])
+    finally:
+        torch.set_num_threads(n)
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output[res.output.index("{"):])
+    assert out["method"] == "birae" and out["rep"] == "3param" and (tmp_path / "run" / "best.pt").is_file()
+    assert BiraeEstimator.load(tmp_path / "run" / "best.pt").config.rep == "3param"
