@@ -102,7 +102,7 @@ class BodyLayer:
         if self.sites:
             sp = body.sites(None, b, None, self.sites).positions.cpu().numpy().astype(np.float32)
             self.sensors = server.scene.add_point_cloud(f"/{name}/sensors", sp, colors=sensor_colours(np.ones(len(sp), bool)),
-                                                        point_size=0.06, point_shape="circle", position=tuple(self.offset))
+                                                        point_size=0.045, point_shape="circle", position=tuple(self.offset))
         self.label = server.scene.add_label(f"/{name}/label", name, position=tuple(self.offset + np.array([0, 1.0, 0], np.float32)))
 
     @staticmethod
@@ -142,12 +142,18 @@ def _new_server(host: str, port: int) -> Any:
     server.scene.set_up_direction("+y")
     server.scene.configure_default_lights(True, cast_shadow=False)
     server.scene.configure_environment_map(None)  # the default HDRI washes the colours out
-    server.scene.add_grid("/ground", width=8.0, height=8.0, plane="xz", position=(0.0, -1.15, 0.0))
     server.gui.configure_theme(control_width="small", show_share_button=False)
-    # Bodies stand at x = 0, 1, 2 ... m, facing +Z: look at them from the front.
-    server.initial_camera.position = (0.5, 0.3, 4.0)
-    server.initial_camera.look_at = (0.5, -0.3, 0.0)
+    _frame_scene(server, np.zeros(3, np.float32), -1.15)
     return server
+
+
+def _frame_scene(server: Any, centre: np.ndarray, ground_y: float, distance: float = 6.0) -> None:
+    """Ground grid at ``ground_y`` m; camera ``distance`` m in front (+Z) of ``centre`` (bodies
+    sit at ``centre + (0, 1, 2 ...) m`` along X, facing +Z)."""
+    c = np.asarray(centre, np.float32)
+    server.scene.add_grid("/ground", width=8.0, height=8.0, plane="xz", position=(float(c[0]), float(ground_y), float(c[2])))
+    server.initial_camera.position = (float(c[0]) + 0.5, float(c[1]) + 0.6, float(c[2]) + distance)
+    server.initial_camera.look_at = (float(c[0]) + 0.5, float(c[1]) - 0.3, float(c[2]))
 
 
 def _kit_sites(kit: str | None, sensor_names: Sequence[str], body: BodyModel) -> tuple[str, ...]:
@@ -192,11 +198,12 @@ class RecordingViewer:
         sensor_names: the track's sensors (default: the recording's), for the sensor dots.
         body: body model (default: the embedded asset).
         autoplay: start playing.
+        camera_distance: m, initial camera distance in front of the first frame's root.
     """
 
     def __init__(self, recording: Any = None, track: Any = None, *, sensor_names: Sequence[str] | None = None,
                  body: BodyModel | None = None, host: str = "127.0.0.1", port: int = 8080, title: str = "wearpose",
-                 autoplay: bool = True) -> None:
+                 autoplay: bool = True, camera_distance: float = 6.0) -> None:
         from wearpose.errors import ShapeError
 
         gt = getattr(recording, "ground_truth", None)
@@ -224,6 +231,18 @@ class RecordingViewer:
                                                     sites=() if track is not None else sites)
         unc = getattr(track, "uncertainty", None) if track is not None else None
         self.unc_scale = float(torch.nan_to_num(unc).max()) if unc is not None else None
+        first = track if track is not None and track.trans is not None else None
+        with torch.no_grad():
+            if first is not None:
+                _, J0 = forward_kinematics(first.local_rot[0].to(self.body.dtype), self.body.rest_joints(first.betas.to(self.body.dtype)))
+                J0 = J0 + first.trans[0].to(self.body.dtype)
+            elif gt is not None:
+                _, J0 = forward_kinematics(gt.pose[0].to(self.body.dtype), self.body.rest_joints(gt.betas.to(self.body.dtype)))
+                J0 = J0 + gt.trans[0].to(self.body.dtype)
+            else:
+                _, J0 = forward_kinematics(track.local_rot[0].to(self.body.dtype), self.body.rest_joints(track.betas.to(self.body.dtype)))
+        J0 = J0.cpu().numpy()
+        _frame_scene(self.server, J0[0], float(J0[:, 1].min()) - 0.08, camera_distance)
         self.timeline = _Timeline(self.server, self.num_frames, self.fps, title)
         self.timeline.playing.value = autoplay
         self.timeline.slider.on_update(self._on_slider)
@@ -399,6 +418,23 @@ def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subj
         v.close()
 
 
+def _em_track_in_world(est: Any, track: Any, rec: Any) -> Any:
+    """An EM-source-relative estimate placed in the world with the recording's EM source pose
+    (``meta["em_source"]``, stored by simulation) when there is one; else unchanged."""
+    from wearpose.geometry import quat_to_matrix
+
+    src = ((rec.meta or {}).get("em_source") or {}).get("rates", {}).get(f"{float(track.fps):g}")
+    if track.extras.get("frame") != "em_source" or src is None or not hasattr(est, "to_world"):
+        return track
+    R = quat_to_matrix(torch.as_tensor(np.asarray(src["orientation_wxyz"], np.float32)))
+    p = torch.as_tensor(np.asarray(src["position_m"], np.float32))
+    if R.shape[0] != track.num_frames:
+        return track
+    out = est.to_world(track, R, p)
+    out.extras["placement"] = "world, via the recorded EM source pose"
+    return out
+
+
 def run_recording_viewer(path: str | Path, *, model: str | None = None, host: str = "127.0.0.1", port: int = 8080,
                          body: str | None = None) -> None:
     """Blocking: the offline viewer of a recording file (and an estimate by ``model``) until Ctrl-C."""
@@ -413,6 +449,7 @@ def run_recording_viewer(path: str | Path, *, model: str | None = None, host: st
         est = estimator_factory(model)()
         track, names = est.estimate(rec), est.sensor_names
         bm = getattr(est, "body", bm)
+        track = _em_track_in_world(est, track, rec)
     v = RecordingViewer(rec, track, sensor_names=names, body=bm, host=host, port=port, title=f"wearpose: {Path(path).name}")
     print(f"viewer on {v.url}; Ctrl-C to stop", flush=True)
     try:
