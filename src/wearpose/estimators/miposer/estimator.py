@@ -233,7 +233,7 @@ class MiposerEstimator(Estimator):
         kit_streams(recording, self.kit_name)
 
     def estimate(self, recording: Any, calibration: Any = None,
-                 calibration_window: tuple[float, float] | None = None) -> PoseTrack:
+                 calibration_window: tuple[float, float] | None = None, imu: dict[str, Any] | None = None) -> PoseTrack:
         """Offline estimate of a MI-Poser recording (module doc).
 
         Args:
@@ -241,13 +241,16 @@ class MiposerEstimator(Estimator):
             calibration: a ``miposer-tpose`` :class:`~wearpose.calibration.CalibrationResult`,
                 ``None`` (use the recording's stored one or ``calibration_window``) or ``"none"``.
             calibration_window: ``(t0, t1)`` s of the T-pose, to calibrate here.
+            imu: MIM's IMU inputs per wrist EM sensor, ``{name: (gyro (T, 3), acc (T, 3))}`` at the
+                EM samples, relative to the source (default: derived from the recording,
+                :func:`~wearpose.estimators.miposer.mim.relative_imu`).
         """
         self._check(recording)
         extras: dict[str, Any] = {"frame": "calibrated", "method": self.name, "mim": self.mim}
         if self.mim:
             from wearpose.estimators.miposer.mim import mitigate_recording
 
-            recording, extras["interference"] = mitigate_recording(recording, self.kit_name, self.mim_config)
+            recording, extras["interference"] = mitigate_recording(recording, self.kit_name, self.mim_config, imu)
         res = resolve_calibration(recording, calibration, calibration_window, self.body)
         raw = raw_inputs(recording, self.kit_name, self.fps)
         if res is None:

@@ -1,0 +1,156 @@
+"""MI-Poser's metal-interference mitigation in the estimator: the glue between a MI-Poser
+recording and :class:`wearpose.interference.MIM`.
+
+MIM works per wrist EM sensor at the EM rate (120 Hz) on the EM pose relative to the head-worn
+source and the co-located IMU expressed the same way: angular velocity of the sensor relative to
+the source in the sensor frame, acceleration relative to the source in the source frame
+(:class:`wearpose.interference.SensorStreams` convention). Those come either
+
+- from the caller (``imu={em_sensor: (gyro (T, 3), acc (T, 3))}``, e.g. the interference
+  simulator's IMU streams), or
+- from the recording (:func:`relative_imu`): the wrist IMU's gyro rotated into the EM sensor
+  frame (the subject offsets' sensor -> site rotation when present) minus the headset's angular
+  velocity (finite differences of the 60 Hz VIO orientation, held to the EM instants); the wrist
+  IMU's free world acceleration rotated into the source (head) frame. The head's own linear
+  acceleration and the rotating-frame terms are *not* removed (the glasses' IMU is not part of
+  the kit): an approximation that only the position correction feels.
+
+:func:`mitigate_recording` returns a copy of the recording with corrected wrist EM streams and the
+per-frame interference state; :func:`step_mim` is the online twin used by
+:meth:`MiposerEstimator.step` (one MIM per wrist, at the frame rate it is fed).
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any, Sequence
+
+import numpy as np
+import torch
+
+from wearpose.errors import ConfigError
+
+
+def make_mim(mim_config: Any = None) -> Any:
+    """A :class:`wearpose.interference.MIM`; when the configured N-BEATS forecaster is not shipped
+    (``ConfigError``), falls back to IMU odometry for the position and says so in ``.fallback``."""
+    try:
+        from wearpose.interference import MIM, MIMConfig
+    except ImportError as exc:  # pragma: no cover - the module is part of the package
+        raise ConfigError(f"MI-Poser MIM needs wearpose.interference ({exc})") from exc
+    from dataclasses import replace
+
+    cfg = mim_config or MIMConfig()
+    try:
+        m = MIM(cfg)
+        m.fallback = None
+    except ConfigError as exc:
+        m = MIM(replace(cfg, position="odometry"))
+        m.fallback = f"position '{cfg.position}' unavailable ({exc}); using 'odometry'"
+    return m
+
+
+def _em_imu_pairs(recording: Any, kit: str) -> list[tuple[str, str | None]]:
+    from wearpose.sensors import get_kit
+
+    k = get_kit(kit)
+    imus = {s.site: s.name for s in k.sensors if s.kind == "imu"}
+    return [(s.name, imus.get(s.site)) for s in k.sensors if s.kind == "em6dof"]
+
+
+def _rot_log(R: np.ndarray) -> np.ndarray:
+    from wearpose.geometry import matrix_to_axis_angle
+
+    return matrix_to_axis_angle(torch.from_numpy(np.ascontiguousarray(R))).numpy()
+
+
+def relative_imu(recording: Any, kit: str, em_name: str, imu_name: str | None) -> tuple[np.ndarray, np.ndarray]:
+    """MIM's IMU inputs for one wrist EM sensor from a recording (module doc), at the EM samples.
+
+    Returns:
+        ``(gyro (T, 3) rad/s, acc (T, 3) m/s^2)``; zeros where the kit has no co-located IMU.
+    """
+    from wearpose.estimators.miposer.data import _pick, kit_streams
+
+    em = recording.sensor(em_name)
+    ts = np.asarray(em.timestamps, dtype=np.float64)
+    T = len(ts)
+    if imu_name is None or imu_name not in recording.names:
+        return np.zeros((T, 3)), np.zeros((T, 3))
+    vio, _ = kit_streams(recording, kit)
+    h = recording.sensor(vio)
+    u = recording.to_canonical().sensor(imu_name)
+    i, _ = _pick(np.asarray(u.timestamps, dtype=np.float64), ts)
+    w_site = np.nan_to_num(np.asarray(u.angular_velocity, dtype=np.float64)[i])
+    a_world = np.nan_to_num(np.asarray(u.acceleration, dtype=np.float64)[i])
+    R_off = np.eye(3)
+    off = (recording.subject or {}).get("offsets")
+    if off and em_name in list(off.get("sensors", [])):
+        R_off = np.asarray(off["rotation"], dtype=np.float64)[list(off["sensors"]).index(em_name)]
+    w_s = w_site @ R_off  # R_off^T w (row vectors)
+    hR = np.asarray(h.orientation, dtype=np.float64)
+    hts = np.asarray(h.timestamps, dtype=np.float64)
+    w_head = np.zeros((len(hts), 3))
+    if len(hts) > 1:
+        w_head[1:] = _rot_log(hR[1:] @ np.swapaxes(hR[:-1], -1, -2)) / np.diff(hts)[:, None]  # world frame
+        w_head[0] = w_head[1]
+    j, _ = _pick(hts, ts)
+    R_head = hR[j]
+    R_em = np.nan_to_num(np.asarray(em.orientation, dtype=np.float64))
+    R_ws = R_head @ R_em
+    gyro = w_s - np.einsum("tji,tj->ti", R_ws, w_head[j])
+    acc = np.einsum("tji,tj->ti", R_head, a_world)
+    return gyro, acc
+
+
+def mitigate_recording(recording: Any, kit: str, mim_config: Any = None,
+                       imu: dict[str, tuple[np.ndarray, np.ndarray]] | None = None) -> tuple[Any, dict[str, Any]]:
+    """Run MIM on every wrist EM stream of ``recording`` (module doc).
+
+    Returns:
+        ``(recording', info)``: a copy whose wrist EM ``position``/``orientation`` are MIM's output;
+        ``info[em_sensor]`` = ``{"timestamps", "interfered", "corrected", "degraded", "level",
+        "discrepancy"}`` arrays at the EM rate, plus ``info["fallback"]`` when the position method
+        fell back to odometry.
+    """
+    rec = copy.deepcopy(recording)
+    info: dict[str, Any] = {}
+    for em_name, imu_name in _em_imu_pairs(recording, kit):
+        s = rec.sensor(em_name)
+        gyro, acc = imu[em_name] if imu and em_name in imu else relative_imu(recording, kit, em_name, imu_name)
+        R = np.asarray(s.orientation, dtype=np.float64)
+        p = np.asarray(s.position, dtype=np.float64)
+        ok = np.asarray(s.valid) & np.isfinite(p).all(1)
+        R = np.where(ok[:, None, None], np.nan_to_num(R), np.eye(3))
+        p = np.nan_to_num(p)
+        fps = float(s.info.rate)
+        m = make_mim(mim_config)
+        out = m.process(R, p, np.asarray(gyro, dtype=np.float64), np.asarray(acc, dtype=np.float64), fps)
+        s.orientation = np.where(ok[:, None, None], out["R"], s.orientation).astype(s.orientation.dtype)
+        s.position = np.where(ok[:, None], out["p"], s.position).astype(s.position.dtype)
+        info[em_name] = {"timestamps": np.asarray(s.timestamps), **{k: out[k] for k in
+                                                                 ("interfered", "corrected", "degraded", "level", "discrepancy")}}
+        if m.fallback:
+            info["fallback"] = m.fallback
+    return rec, info
+
+
+def step_mim(mims: list[Any], frame: Any, names: Sequence[str], R: torch.Tensor, p: torch.Tensor, dt: float,
+             mim_config: Any = None) -> tuple[torch.Tensor, torch.Tensor, dict[str, Any]]:
+    """Online MIM on one frame: ``names`` = (headset, wrist EM ...) rows of ``R`` ``(S, 3, 3)`` /
+    ``p`` ``(S, 3)``; the frame's ``angular_velocity`` / ``acceleration`` rows of the wrists in
+    MIM's convention (NaN -> 0). ``mims`` holds one MIM per wrist (created on first use)."""
+    R, p = R.clone(), p.clone()
+    fn = list(frame.names)
+    gy = np.asarray(frame.channels.get("angular_velocity", np.full((len(fn), 3), np.nan)), dtype=np.float64)
+    ac = np.asarray(frame.channels.get("acceleration", np.full((len(fn), 3), np.nan)), dtype=np.float64)
+    info: dict[str, Any] = {}
+    for j, n in enumerate(names[1:]):
+        if mims[j] is None:
+            mims[j] = make_mim(mim_config)
+        k = fn.index(n)
+        o = mims[j].step(R[j + 1].double().numpy(), p[j + 1].double().numpy(), np.nan_to_num(gy[k]), np.nan_to_num(ac[k]), dt)
+        R[j + 1] = torch.as_tensor(o["R"], dtype=R.dtype)
+        p[j + 1] = torch.as_tensor(o["p"], dtype=p.dtype)
+        info[n] = {k2: o[k2] for k2 in ("interfered", "corrected", "degraded", "level")}
+    return R, p, info
