@@ -116,3 +116,31 @@ def test_update_net_inference_folds_batch_norm_exactly() -> None:
         net.net[0].weight.mul_(1.1)
         assert torch.allclose(net(x), net.net(x), atol=1e-6)
     assert net(x).requires_grad  # with grad enabled the module stack runs (training through it)
+
+
+def test_traced_online_step_equals_eager_and_follows_weight_changes(body: BodyModel) -> None:
+    """The traced per-frame function gives the eager step's numbers, and is rebuilt when the
+    weights change (a stale trace would keep the old constants)."""
+    from wearpose.estimators.empose import EmposeConfig
+
+    cfg = EmposeConfig.preset("tiny", 12).override(iterations=2)
+    torch.manual_seed(0)
+    traced = EmposeEstimator(cfg, body=body)
+    eager = EmposeEstimator(cfg, body=body)
+    eager.model.load_state_dict(traced.model.state_dict())
+    eager._online_fn = lambda: None  # force the eager path
+    r = simulate_clip(synthetic_motion(6, T=12), cfg, body, seed=2, noise="default")
+    rec = recording_from_clip(r, cfg)
+    frames = list(iter_frames(rec, traced.sensor_names))
+    for e in (traced, eager):
+        e.set_offsets(torch.as_tensor(r["off_R"]), torch.as_tensor(r["off_t"]))
+    for k, frame in enumerate(frames):
+        if k == 6:  # change the weights mid-stream, identically in both
+            for e in (traced, eager):
+                with torch.no_grad():
+                    e.model.head.bias.add_(0.05)
+                    e.model.update.net[0].weight.mul_(1.05)
+        a, b = traced.step(frame), eager.step(frame)
+        assert torch.allclose(a.local_rot, b.local_rot, atol=1e-6), k
+        assert torch.allclose(a.betas, b.betas, atol=1e-6), k
+    assert traced._traced is not None

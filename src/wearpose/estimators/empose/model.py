@@ -70,6 +70,12 @@ def decode_omega(omega: torch.Tensor, rep: str) -> tuple[torch.Tensor, torch.Ten
     return full, omega[..., NUM_PRED * k:]
 
 
+def module_version(module: nn.Module) -> tuple[int, ...]:
+    """Version counters of a module's parameters and buffers: changes whenever any of them is
+    modified in place (optimiser steps, running statistics, ``load_state_dict``)."""
+    return tuple(t._version for t in (*module.parameters(), *module.buffers()))
+
+
 def sensor_features(position: torch.Tensor, orientation: torch.Tensor) -> torch.Tensor:
     """``(..., S, 3)`` m and ``(..., S, 3, 3)`` -> network input ``x_t`` ``(..., S * 12)``."""
     return torch.cat([position, orientation.flatten(-2)], dim=-1).flatten(-2)
@@ -145,7 +151,7 @@ class UpdateNet(nn.Module):
         """Eval-mode layers with each batch norm folded into the dense layer before it:
         ``[(W, b, prelu_weight or None), ...]``; rebuilt whenever a parameter or running
         statistic changed (tensor version counters)."""
-        key = tuple(t._version for t in (*self.parameters(), *self.buffers()))
+        key = module_version(self)
         if self._fused is None or self._fused[0] != key:
             mods = list(self.net)
             layers, i = [], 0
