@@ -98,7 +98,7 @@ def run_scenario(name: str, rec: Any, model: str, args: argparse.Namespace, stri
 
     try:
         res = asyncio.run(replay(rec, url, subject=0, fmt=args.format, realtime=True, duration=args.duration,
-                                 faults=faults, progress=progress))
+                                 faults=faults, progress=progress, drain_timeout=args.drain))
         wall = time.perf_counter() - t0
         c1s, c1c = sp.cpu_times(), me.cpu_times()
     finally:
@@ -141,6 +141,8 @@ def main() -> None:
     ap.add_argument("--malformed", type=float, default=0.01)
     ap.add_argument("--dropout", type=float, default=0.001, help="per sensor and frame: start of a 1-30 frame dropout")
     ap.add_argument("--reorder", type=float, default=0.005)
+    ap.add_argument("--drain", type=float, default=120.0,
+                    help="seconds to wait after the last frame for the remaining poses (estimator backlog)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)

@@ -147,3 +147,28 @@ def test_null_estimator_passes_any_stream_through() -> None:
     r = _run(main())
     assert r["frames_lost"] == 0 and r["poses_received"] == 30 and r["ready"]["stride"] == 1
     assert r["invalid_pose_frames"] == 5  # frames 10-14 have a dropped sensor
+
+
+def test_replay_reports_a_backlog_it_stopped_waiting_for() -> None:
+    rec = tiny_recording(40)
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(_Factory(delay_s=0.02), port=0) as srv:
+            return await replay(rec, srv.url, realtime=False, drain_timeout=0.1)
+
+    r = _run(main())
+    assert r["gave_up_waiting"] and r["frames_lost"] > 0
+    assert r["poses_received"] + r["frames_lost"] == 40 and r["frames_queued_at_server_at_end"] > 0
+
+
+def test_auto_stride_counts_skipped_frames_as_decimated_not_lost() -> None:
+    rec = tiny_recording(40, rate=120.0)  # the echo estimator runs at 60 Hz: stride 2
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(_Factory(), port=0, stride="auto") as srv:
+            return await replay(rec, srv.url, realtime=False)
+
+    r = _run(main())
+    assert r["ready"]["stride"] == 2 and "trained" not in r["ready"]["note"]
+    assert r["frames_expected"] == 20 and r["poses_received"] == 20 and r["frames_lost"] == 0
+    assert r["server_stats"]["decimated"] == 20 and r["server_stats"]["lost"] == 0

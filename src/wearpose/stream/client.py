@@ -91,8 +91,12 @@ class StreamClient:
                 self.messages.append(m)
                 kind = m.get("type")
                 key = (("ready" if kind == "error" else kind), m.get("subject"))  # an error answers a hello
-                if key in self._waiters and self._waiters[key]:
-                    self._waiters[key].popleft().set_result(m)
+                waiting = self._waiters.get(key)
+                while waiting:
+                    fut = waiting.popleft()
+                    if not fut.done():  # a request that timed out left a cancelled future
+                        fut.set_result(m)
+                        break
         except ConnectionClosed:
             pass
         finally:

@@ -102,8 +102,8 @@ def _malformed(kind: int, good: bytes, hello: Hello, rng: np.random.Generator) -
 
 async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "binary", realtime: bool = True,
                  speed: float = 1.0, duration: float | None = None, faults: Faults | None = None,
-                 progress: Callable[[int, int], None] | None = None, client: StreamClient | None = None
-                 ) -> dict[str, Any]:
+                 progress: Callable[[int, int], None] | None = None, client: StreamClient | None = None,
+                 drain_timeout: float | None = None) -> dict[str, Any]:
     """Stream ``recording`` as subject ``subject`` and collect its poses.
 
     Args:
@@ -115,10 +115,14 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         faults: injected faults (module doc).
         progress: ``(frames sent, total)`` callback, called about once a second.
         client: an open :class:`StreamClient` to use (several subjects on one connection).
+        drain_timeout: seconds to wait after the last frame for the remaining poses (default
+            max(600, twice the stream's duration)); frames still queued at the server then count
+            in ``frames_lost`` and ``gave_up_waiting`` is True.
 
     Returns:
         dict: ``frames_sent``, ``poses_received``, ``frames_expected`` (sent minus those the
-        server's stride skips), ``frames_lost`` (expected without a pose), latency summaries in
+        server's stride skips), ``frames_lost`` (expected without a pose by the end of the
+        drain), ``drain_s`` (last frame sent -> last pose in), latency summaries in
         ms (``latency_ms`` end to end = send -> pose received; ``server_ms`` frame arrival ->
         pose sent, of which ``compute_ms`` is the estimator's step; ``transport_ms`` = end to end
         minus server), ``send_lag_ms`` (how late the sender was against the schedule), the
@@ -192,7 +196,17 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
             sent[held.seq] = time.perf_counter()
             await c.send_frame(held)
         # The estimator may be behind (frames queue, never dropped): give it time to finish.
-        server_stats = await c.bye(subject, timeout=max(600.0, 2.0 * N / st.rate))
+        t_end = time.perf_counter()
+        try:
+            server_stats = await c.bye(subject, timeout=drain_timeout if drain_timeout is not None
+                                       else max(600.0, 2.0 * N / st.rate))
+            gave_up = False
+        except asyncio.TimeoutError:
+            # Report what arrived; the server still holds (and will estimate) the rest.
+            gave_up = True
+            stats = await c.stats()
+            server_stats = stats.get("subjects", {}).get(str(subject), {})
+        drain_s = time.perf_counter() - t_end
     finally:
         c.on_pose = prev_on_pose
         if own:
@@ -206,7 +220,9 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
     return {
         "subject": subject, "format": fmt, "rate_hz": st.rate, "sensors": len(st.names), "channels": list(st.channels),
         "frames_sent": len(sent), "frames_expected": len(expected), "poses_received": len(recv),
-        "frames_lost": len(expected) - len(got), "invalid_pose_frames": sum(1 for s in got if not recv[s][1].valid),
+        "frames_lost": len(expected) - len(got), "gave_up_waiting": gave_up, "drain_s": round(drain_s, 3),
+        "frames_queued_at_server_at_end": server_stats.get("queue_now") if gave_up else 0,
+        "invalid_pose_frames": sum(1 for s in got if not recv[s][1].valid),
         "latency_ms": _summary_ms(e2e), "server_ms": _summary_ms(srv), "compute_ms": _summary_ms(comp),
         "transport_ms": _summary_ms(np.asarray(e2e) - np.asarray(srv)),
         "queue_ms": _summary_ms(np.asarray(srv) - np.asarray(comp)),

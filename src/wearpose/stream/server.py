@@ -183,6 +183,7 @@ class StreamServer:
         self.started = time.time()
         self._server: Any = None
         self._closing = False
+        self._tasks: set[asyncio.Task] = set()
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> StreamServer:
@@ -292,13 +293,14 @@ class StreamServer:
             except PacketError as exc:
                 self._malformed(exc, ws, subject)
         elif kind == "hello":
-            await self._on_hello(ws, Hello.from_dict(d))
+            # In the background: loading an estimator (or draining one, for bye) must not hold up
+            # the frames of this connection's other subjects.
+            self._spawn(self._on_hello(ws, Hello.from_dict(d)))
         elif kind == "bye":
             subject = d.get("subject")
             if subject not in self.subjects:
                 raise PacketError(f"bye for unknown subject {subject!r}")
-            stats = await self._end_subject(subject)
-            await ws.send(json.dumps({"type": "bye", "subject": subject, "stats": stats}))
+            self._spawn(self._bye(ws, subject))
         elif kind == "subscribe":
             subs = d.get("subjects")
             fmt = d.get("format", "json")
@@ -311,6 +313,21 @@ class StreamServer:
             await ws.send(json.dumps(self.stats()))
         else:
             raise PacketError(f"unknown message type {kind!r}; expected hello, frame, bye, subscribe or stats")
+
+    def _spawn(self, coro: Any) -> None:
+        task = asyncio.create_task(coro)
+        self._tasks.add(task)
+
+        def done(t: asyncio.Task) -> None:
+            self._tasks.discard(t)
+            if not t.cancelled() and t.exception() is not None:
+                log.warning("request failed: %s", t.exception())
+
+        task.add_done_callback(done)
+
+    async def _bye(self, ws: Any, subject: int) -> None:
+        stats = await self._end_subject(subject)
+        await self._safe_send(ws, json.dumps({"type": "bye", "subject": subject, "stats": stats}))
 
     def _on_binary(self, msg: bytes, t_arr: float) -> None:
         subject = peek_subject(msg)
@@ -336,15 +353,24 @@ class StreamServer:
         try:
             s.estimator = await loop.run_in_executor(self.pool, self._make_estimator, hello)
         except Exception as exc:  # noqa: BLE001 - a bad hello must not take the server down
-            self.subjects.pop(hello.subject, None)
+            if self.subjects.get(hello.subject) is s:
+                self.subjects.pop(hello.subject)
+            s.ready.set()
             log.warning("subject %d refused: %s", hello.subject, exc)
-            await ws.send(json.dumps({"type": "error", "subject": hello.subject, "error": str(exc)}))
+            await self._safe_send(ws, json.dumps({"type": "error", "subject": hello.subject, "error": str(exc)}))
             return
         est = s.estimator
         s.stride = max(1, round(hello.rate / est.fps)) if self.stride == "auto" and est.fps > 0 else (
             1 if self.stride == "auto" else int(self.stride))
         s.worker = asyncio.create_task(self._work(hello.subject, s))
         s.ready.set()
+        # Frames that arrived while the estimator loaded were queued before the stride was known.
+        if s.stride > 1:
+            queued = _drain_queue(s.queue)
+            kept = [it for it in queued if it[0].seq % s.stride == 0]
+            s.counts["decimated"] += len(queued) - len(kept)
+            for it in kept:
+                s.queue.put_nowait(it)
         est_rate = hello.rate / s.stride
         note = "" if est.fps <= 0 or abs(est_rate - est.fps) <= 0.05 * est.fps else (
             f"the estimator was trained at {est.fps:g} Hz but receives {est_rate:g} Hz "
@@ -391,7 +417,10 @@ class StreamServer:
     async def _end_subject(self, k: int) -> dict[str, Any]:
         s = self.subjects.get(k)
         if s is None:
-            return {}
+            return self.finished.get(str(k), {})
+        await s.ready.wait()  # its estimator may still be loading
+        if self.subjects.get(k) is not s:
+            return self.finished.get(str(k), {})
         for item in s.reorder.flush():
             self._enqueue(s, item)
         if s.worker is not None and not s.worker.done():
@@ -460,6 +489,13 @@ class _SubjectOnly:
     """The part of a Recording an estimator reads subject calibration from."""
 
     subject: dict[str, Any]
+
+
+def _drain_queue(q: asyncio.Queue) -> list[Any]:
+    out = []
+    while not q.empty():
+        out.append(q.get_nowait())
+    return out
 
 
 def _timed_step(est: Estimator, frame: SensorFrame) -> tuple[Any, float]:
