@@ -1,6 +1,7 @@
 """PIP physics module driven by ground-truth kinematics of held-out walking clips.
 
-Run: ``python benchmarks/physics.py [--plots] [--clips ID ...] [--max-clips N]``.
+Run: ``python benchmarks/physics.py [--plots] [--clips ID ...] [--max-clips N] [--split test|val]
+[--k-res K]``.
 
 For every walking clip of the corpus TEST split (description ``walk``; the turning walks are
 left out) the optimizer tracks the clip's own motion at 60 fps: reference pose = ground truth,
@@ -30,6 +31,7 @@ load average is recorded: timings on a loaded machine are inflated.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -51,9 +53,9 @@ ROOT = Path(__file__).resolve().parent.parent
 WAVE_CLIP = "bandai/bandai-B/dataset-2_wave-right-hand_feminine_001"
 
 
-def walking_clips(store: CorpusStore) -> list[str]:
-    """Test-split clips described as plain walking (no turns), longest first."""
-    ids = [c for c in store.clips(split="test") if str(store.entry(c).get("description", "")).split(" ")[0] == "walk"]
+def walking_clips(store: CorpusStore, split: str = "test") -> list[str]:
+    """Clips of ``split`` described as plain walking (no turns), longest first."""
+    ids = [c for c in store.clips(split=split) if str(store.entry(c).get("description", "")).split(" ")[0] == "walk"]
     return sorted(ids, key=lambda c: -float(store.entry(c)["seconds"]))
 
 
@@ -157,6 +159,8 @@ def plot_wave(out: dict, fps: float, clip: str, path: Path) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--clips", nargs="*", help="clip ids (default: every plain walking clip of the test split)")
+    ap.add_argument("--split", default="test", help="corpus split of the walking clips (test; val for tuning)")
+    ap.add_argument("--k-res", type=float, default=None, help="residual weight for every run (default: the paper's 0.1)")
     ap.add_argument("--max-clips", type=int, default=0, help="only the N longest walking clips (0 = all)")
     ap.add_argument("--plots", action="store_true", help="write docs/img/pip_grf_walk.png and pip_arm_torque_wave.png")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "physics.json")
@@ -164,10 +168,10 @@ def main() -> None:
     torch.set_num_threads(1)
     store = CorpusStore()
     body = BodyModel()
-    clips = args.clips or walking_clips(store)
+    clips = args.clips or walking_clips(store, args.split)
     if args.max_clips:
         clips = clips[:args.max_clips]
-    cfg = PhysicsConfig()
+    cfg = PhysicsConfig() if args.k_res is None else PhysicsConfig(k_res=args.k_res)
     rows = []
     first = None
     for clip in clips:
@@ -179,7 +183,7 @@ def main() -> None:
             first = (res, out, ref)
         print(f"{clip}: GRF/weight {res['grf_over_weight']:.3f}, step median {res['step_ms_median']:.2f} ms", file=sys.stderr)
     longest = rows[0]
-    single, _, _ = run_clip(store, body, longest["clip"], PhysicsConfig(dual_pd=False))
+    single, _, _ = run_clip(store, body, longest["clip"], dataclasses.replace(cfg, dual_pd=False))
     # Sensitivity to the residual weight (paper: k_res = 0.1), longest clip.
     k_res_rows = {str(k): run_clip(store, body, longest["clip"], PhysicsConfig(k_res=k))[0] for k in (0.3, 1.0)}
     keys = ("grf_over_weight", "max_penetration_m", "stance_agreement", "load_switches_per_s", "gt_stance_switches_per_s",
@@ -199,7 +203,7 @@ def main() -> None:
     summary["step_cpu_ms_p99_max"] = float(max(r["step_cpu_ms_p99"] for r in rows))
     result = {
         "command": " ".join(["python", "benchmarks/physics.py", *sys.argv[1:]]),
-        "split": "test", "clips": len(rows), "seconds": float(sum(r["seconds"] for r in rows)),
+        "split": args.split if not args.clips else "given clips", "clips": len(rows), "seconds": float(sum(r["seconds"] for r in rows)),
         "config": {k: getattr(cfg, k) for k in ("fps", "dual_pd", "kp_theta", "kd_theta", "kp_r", "kd_r", "k_lambda",
                                                 "k_res", "k_tau", "mu", "sigma", "square_size", "weights_in_norm",
                                                 "min_contact_weight", "foot_contact_requires_prob", "ground_bound",
@@ -216,7 +220,7 @@ def main() -> None:
             wres, wout, wref = run_clip(store, body, WAVE_CLIP, cfg)
             result["wave"] = {"clip": WAVE_CLIP, "grf_over_weight": wres["grf_over_weight"],
                               "torques": plot_wave(wout, wref.fps, WAVE_CLIP, ROOT / "docs" / "img" / "pip_arm_torque_wave.png")}
-    tab = Table(title=f"PIP physics on ground-truth test-split walking ({len(rows)} clips, {result['seconds']:.0f} s)")
+    tab = Table(title=f"PIP physics on ground-truth {args.split}-split walking ({len(rows)} clips, {result['seconds']:.0f} s)")
     for c in ("", "GRF/weight", "max pen. cm", "stance agree", "trans err mean/final m", "travelled m", "joint err cm",
               "QP ms med/p99", "QP CPU ms med/p99", "step ms med/p99", "step CPU ms med/p99"):
         tab.add_column(c)
