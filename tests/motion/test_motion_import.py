@@ -219,3 +219,70 @@ def test_corpus_skeletons_bone_directions() -> None:
         assert r.bone_error_deg["mean"] < 10.0 and math.isfinite(r.bone_error_deg["mean"])
         # The declared Y-up agrees with what detection finds in the clip.
         assert detect_up(read_bvh(data / rel), imp.retargeted.smap)["axis"] == "y"
+
+
+def _scheme(trunk: tuple[str, ...], left: tuple[str, ...], right: tuple[str, ...]) -> dict[str, str]:
+    """SMPL joint -> name for a rig: trunk = pelvis, spine1, spine2, spine3, neck, head; sides =
+    hip, knee, ankle, foot, collar, shoulder, elbow, wrist."""
+    limbs = ("hip", "knee", "ankle", "foot", "collar", "shoulder", "elbow", "wrist")
+    out = dict(zip(("pelvis", "spine1", "spine2", "spine3", "neck", "head"), trunk))
+    out.update({f"left_{k}": v for k, v in zip(limbs, left)})
+    out.update({f"right_{k}": v for k, v in zip(limbs, right)})
+    return out
+
+
+RIG_SCHEMES = {
+    "unreal": _scheme(("pelvis", "spine_01", "spine_02", "spine_03", "neck_01", "head"),
+                      ("thigh_l", "calf_l", "foot_l", "ball_l", "clavicle_l", "upperarm_l", "lowerarm_l", "hand_l"),
+                      ("thigh_r", "calf_r", "foot_r", "ball_r", "clavicle_r", "upperarm_r", "lowerarm_r", "hand_r")),
+    "optitrack": _scheme(("Hip", "Ab", "Chest2", "Chest", "Neck", "Head"),
+                         ("LThigh", "LShin", "LFoot", "LToe", "LShoulder", "LUArm", "LFArm", "LHand"),
+                         ("RThigh", "RShin", "RFoot", "RToe", "RShoulder", "RUArm", "RFArm", "RHand")),
+    "xsens": _scheme(("Pelvis", "L5", "L3", "T8", "Neck", "Head"),
+                     ("LeftUpperLeg", "LeftLowerLeg", "LeftFoot", "LeftToe", "LeftShoulder", "LeftUpperArm", "LeftForeArm", "LeftHand"),
+                     ("RightUpperLeg", "RightLowerLeg", "RightFoot", "RightToe", "RightShoulder", "RightUpperArm", "RightForeArm", "RightHand")),
+    "rokoko": _scheme(("Hips", "Spine1", "Spine2", "Spine4", "Neck", "Head"),
+                      ("LeftThigh", "LeftShin", "LeftFoot", "LeftToe", "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand"),
+                      ("RightThigh", "RightShin", "RightFoot", "RightToe", "RightShoulder", "RightArm", "RightForeArm", "RightHand")),
+}
+
+
+@pytest.mark.parametrize("scheme", sorted(RIG_SCHEMES))
+def test_common_rig_names_match_automatically(tmp_path, scheme: str) -> None:
+    local, pelvis = synthetic_smpl_motion(REST, T=8, seed=2)
+    sk = custom_skeleton_motion(local, pelvis, REST, scale=100.0, z_up=False, arm_down_deg=0.0)
+    names = RIG_SCHEMES[scheme]
+    (tmp_path / "r.bvh").write_text(custom_bvh_text(sk, names))
+    r = import_motion(tmp_path / "r.bvh", REST).report
+    got = {row[0]: row[1] for row in r.mapping if row[1] != "-"}
+    assert got == names, {k: (got.get(k), v) for k, v in names.items() if got.get(k) != v}
+    assert r.bone_error_deg["mean"] < 1e-3
+
+
+def test_auto_map_skips_helpers_fingers_and_links() -> None:
+    """Twist bones (with length), fingers, an end joint and zero-length links do not fool it."""
+    from wearpose.motion.bvh import BvhSkeleton
+    from wearpose.motion.mapping import auto_map
+
+    tree = [  # name, parent, offset (cm, Y up)
+        ("root", None, (0, 0, 0)), ("pelvis", "root", (0, 95, 0)),
+        ("spine_01", "pelvis", (0, 10, 0)), ("spine_02", "spine_01", (0, 12, 0)), ("spine_03", "spine_02", (0, 12, 0)),
+        ("neck_01", "spine_03", (0, 20, 0)), ("head", "neck_01", (0, 10, 0)), ("HeadTop_End", "head", (0, 18, 0)),
+    ]
+    for s, x in (("l", 1), ("r", -1)):
+        tree += [
+            (f"hip_link_{s}", "pelvis", (0, 0, 0)), (f"thigh_{s}", f"hip_link_{s}", (9 * x, -5, 0)),
+            (f"thigh_twist_01_{s}", f"thigh_{s}", (0, -20, 0)), (f"calf_{s}", f"thigh_{s}", (0, -40, 0)),
+            (f"calf_twist_01_{s}", f"calf_{s}", (0, -20, 0)), (f"foot_{s}", f"calf_{s}", (0, -42, 0)),
+            (f"ball_{s}", f"foot_{s}", (0, -6, 12)),
+            (f"clavicle_{s}", "spine_03", (3 * x, 15, 0)), (f"upperarm_{s}", f"clavicle_{s}", (15 * x, 0, 0)),
+            (f"upperarm_twist_01_{s}", f"upperarm_{s}", (14 * x, 0, 0)), (f"lowerarm_{s}", f"upperarm_{s}", (28 * x, 0, 0)),
+            (f"hand_{s}", f"lowerarm_{s}", (25 * x, 0, 0)),
+            *[(f"{f}_01_{s}", f"hand_{s}", (8 * x, 0, k)) for k, f in enumerate(("thumb", "index", "middle", "ring", "pinky"))],
+        ]
+    names = [t[0] for t in tree]
+    skel = BvhSkeleton(tuple(names), tuple(-1 if p is None else names.index(p) for _, p, _ in tree),
+                       np.array([t[2] for t in tree], dtype=float), tuple(() for _ in tree))
+    joints, how, _ = auto_map(skel, skel.offsets)
+    want = RIG_SCHEMES["unreal"]
+    assert {k: v for k, v in joints.items()} == want, {k: (joints.get(k), v) for k, v in want.items() if joints.get(k) != v}

@@ -121,8 +121,8 @@ ROLE_PATTERNS: dict[str, str] = {
     "ankle": r"foot|ankle|tarsal",
     "foot": r"toe|ball",
     "collar": r"clavicle|collar|clav",
-    "shoulder": r"upperarm|uparm|armupper|humerus|^arm\d*$|shldr|shoulder",
-    "elbow": r"forearm|lowerarm|lowarm|armlower|elbow|radius|ulna",
+    "shoulder": r"upperarm|uparm|armupper|humerus|^u?arm\d*$|shldr|shoulder",
+    "elbow": r"forearm|lowerarm|lowarm|armlower|elbow|radius|ulna|^farm$",
     "wrist": r"^hand\d*$|wrist",
     "neck": r"neck",
     "head": r"head",
@@ -133,6 +133,7 @@ def split_name(name: str) -> tuple[str | None, str]:
     """``(side, base)`` of a joint name: side ``"left"``/``"right"``/``None``, base = the other
     words, lower case, joined (``"Bip01 L Calf"`` -> ``("left", "calf")``)."""
     n = strip_namespace(name)
+    n = re.sub(r"^([LR])(?=[A-Z]{1,2}[a-z])", r"\1 ", n)  # OptiTrack style LUArm, RThigh (not ROOT)
     n = re.sub(r"([a-z0-9])([A-Z])", r"\1 \2", n)
     n = re.sub(r"([A-Z])([A-Z][a-z])", r"\1 \2", n)
     words = [w.lower() for w in re.split(r"[^A-Za-z0-9]+", n) if w]
@@ -305,7 +306,7 @@ def auto_map(skel: BvhSkeleton, offsets: np.ndarray) -> tuple[dict[str, str], di
                     break
                 prev = found[f"{side}_{role}"]
         # Arms: collars are clavicle/collar names, or a "shoulder" with an upper arm below it.
-        ua_pat = re.compile(r"upperarm|uparm|armupper|humerus|^arm\d*$|shldr")
+        ua_pat = re.compile(r"upperarm|uparm|armupper|humerus|^u?arm\d*$|shldr")
         arms = t.matches("shoulder", side)
         collar_like = [j for j in arms if "shoulder" in t.split[j][1]
                        and any(ua_pat.search(t.split[k][1]) and t.split[k][0] == side for k in t.subtree(j)[1:])]
