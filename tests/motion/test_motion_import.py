@@ -14,7 +14,8 @@ from wearpose.errors import InputFileError, WearposeError
 from wearpose.export import write_smpl_bvh
 from wearpose.motion import MotionSequence, read_bvh, template_rest_joints
 from wearpose.motion.importer import UP_AXES, detect_units, detect_up, import_motion, import_paths, parse_units
-from wearpose.motion.mapping import CMU_ASF, MIXAMO, RIGIFY, builtin_match, match_skeleton, split_name
+from wearpose.motion.mapping import CMU_ASF, MIXAMO, RIGIFY, auto_map, builtin_match, split_name
+from wearpose.motion.retarget import BUILTIN_MAPS
 from import_testutils import BIPED_NAMES, custom_bvh_text, custom_skeleton_motion, joint_tree_to_asf_amc
 from motion_testutils import corpus_dir, synthetic_smpl_motion
 
@@ -217,8 +218,12 @@ def test_corpus_skeletons_bone_directions() -> None:
         r = imp.report
         assert r.skeleton == name and r.units["name"] == "cm" and r.up["axis"] == "y"
         assert r.bone_error_deg["mean"] < 10.0 and math.isfinite(r.bone_error_deg["mean"])
-        # The declared Y-up agrees with what detection finds in the clip.
-        assert detect_up(read_bvh(data / rel), imp.retargeted.smap)["axis"] == "y"
+        # The declared Y-up agrees with what detection finds in the clip, and the automatic
+        # match alone finds the same joints as the built-in map.
+        motion = read_bvh(data / rel)
+        assert detect_up(motion, imp.retargeted.smap)["axis"] == "y"
+        joints, _, _ = auto_map(motion.skeleton, motion.translations[0].numpy())
+        assert joints == dict(BUILTIN_MAPS[name].joints)
 
 
 def _scheme(trunk: tuple[str, ...], left: tuple[str, ...], right: tuple[str, ...]) -> dict[str, str]:
