@@ -224,6 +224,9 @@ def test_corpus_skeletons_bone_directions() -> None:
         assert detect_up(motion, imp.retargeted.smap)["axis"] == "y"
         joints, _, _ = auto_map(motion.skeleton, motion.translations[0].numpy())
         assert joints == dict(BUILTIN_MAPS[name].joints)
+        # A partial joint map keeps the built-in map's measured constants for untouched joints.
+        part = import_motion(data / rel, REST, joint_map={"joints": {"left_foot": None}}).report
+        assert part.map_source == f"built-in {name} + joint map" and set(part.hinge_axes.values()) == {"map"}
 
 
 def _scheme(trunk: tuple[str, ...], left: tuple[str, ...], right: tuple[str, ...]) -> dict[str, str]:

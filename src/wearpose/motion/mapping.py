@@ -478,9 +478,13 @@ def match_skeleton(skel: BvhSkeleton, offsets: np.ndarray, joint_map: str | Path
             else:
                 joints[k] = v
                 how[k] = "joint map"
-        source = f"{source} + {map_src}" if builtin is not None or len(user["joints"]) < len(REQUIRED_JOINTS) else map_src
+        source = f"{source} + {map_src}"
         if builtin is not None:
-            base = replace(base, hinge_axes={}, mean_twist=())  # constants belong to the built-in joints
+            # Measured constants hold only for the built-in joints they were measured on.
+            changed = {k for k, v in user["joints"].items() if builtin.joints.get(k) != v}
+            seg = {"left_knee": "left_hip", "right_knee": "right_hip", "left_elbow": "left_shoulder", "right_elbow": "right_shoulder"}
+            base = replace(base, hinge_axes={h: a for h, a in base.hinge_axes.items() if h not in changed and seg[h] not in changed},
+                           mean_twist=tuple(j for j in base.mean_twist if j not in changed))
     missing = [n for n in REQUIRED_JOINTS if n not in joints]
     if missing:
         raise InputFileError(path, f"no joint found for SMPL {', '.join(missing)} (skeleton root {skel.names[0]!r}, {skel.num_joints} joints)",
