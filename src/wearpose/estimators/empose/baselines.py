@@ -45,7 +45,7 @@ from torch import nn
 from wearpose.errors import ConfigError, WearposeError
 from wearpose.estimators.base import PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.empose.config import EmposeConfig
-from wearpose.estimators.empose.data import EmposeData, frame_measurements, hold_invalid
+from wearpose.estimators.empose.data import EmposeData, frame_measurements
 from wearpose.estimators.empose.estimator import EmposeEstimator
 from wearpose.body.skeleton import NUM_JOINTS
 from wearpose.estimators.empose.model import (
@@ -222,11 +222,7 @@ class BaselineEstimator(EmposeEstimator):
 
     def _inputs(self, recording: Any) -> tuple[torch.Tensor, torch.Tensor]:
         """Features ``(T, S * 12)`` of a recording (dropped samples held) and ``valid`` ``(T,)``."""
-        grid = self._check_recording(recording)
-        valid = torch.as_tensor(grid.valid)
-        p = torch.as_tensor(grid.channels["position"], dtype=torch.float32)
-        R = torch.as_tensor(grid.channels["orientation"], dtype=torch.float32)
-        p, R = hold_invalid(p, R, valid)
+        p, R, valid = self._measurements(recording)
         return sensor_features(p, R), valid.all(1)
 
     def _omega(self, x: torch.Tensor) -> torch.Tensor:

@@ -185,6 +185,18 @@ class EmposeEstimator(Estimator):
                                  f"(resample the recording first)")
         return recording.on_common_grid(self.sensor_names)
 
+    def _measurements(self, recording: Any, hold: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Kit sensors of a checked recording on a common grid: positions ``(T, S, 3)`` m,
+        orientations ``(T, S, 3, 3)`` (dropped samples held at the last valid value when ``hold``,
+        NaN otherwise) and ``valid`` ``(T, S)``."""
+        grid = self._check_recording(recording)
+        valid = torch.as_tensor(grid.valid)
+        p = torch.as_tensor(grid.channels["position"], dtype=torch.float32)
+        R = torch.as_tensor(grid.channels["orientation"], dtype=torch.float32)
+        if hold:
+            p, R = hold_invalid(p, R, valid)
+        return p, R, valid
+
     # ------------------------------------------------------------------ offline
     @torch.no_grad()
     def estimate(self, recording: Any, chunk: int = 2048) -> PoseTrack:
@@ -193,11 +205,7 @@ class EmposeEstimator(Estimator):
         Returns a :class:`PoseTrack` with ``trans=None`` and ``extras["frame"] = "em_source"``;
         ``extras["rec_loss"]`` ``(T,)`` is L_r of the final estimate.
         """
-        grid = self._check_recording(recording)
-        valid = torch.as_tensor(grid.valid)
-        p = torch.as_tensor(grid.channels["position"], dtype=torch.float32)
-        R = torch.as_tensor(grid.channels["orientation"], dtype=torch.float32)
-        p, R = hold_invalid(p, R, valid)
+        p, R, valid = self._measurements(recording)
         offR, offt = self._offsets_from(recording)
         self.model.eval()
         dev = self.device

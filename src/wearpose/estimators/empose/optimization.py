@@ -28,7 +28,6 @@ from torch import nn
 
 from wearpose.estimators.base import PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.empose.config import EmposeConfig
-from wearpose.estimators.empose.data import hold_invalid
 from wearpose.estimators.empose.estimator import EmposeEstimator
 from wearpose.estimators.empose.model import PRED_JOINTS, decode_omega, reconstruction_loss
 from wearpose.estimators.registry import register_estimator
@@ -165,11 +164,7 @@ class LbfgsEstimator(EmposeEstimator):
     def estimate(self, recording: Any, every: int = 1) -> PoseTrack:
         """Offline = the online tracker over the recording (``every``-th frame solved, the others
         repeat the last solution; 1 = all)."""
-        grid = self._check_recording(recording)
-        valid = torch.as_tensor(grid.valid)
-        p = torch.as_tensor(grid.channels["position"], dtype=torch.float32)
-        R = torch.as_tensor(grid.channels["orientation"], dtype=torch.float32)
-        p, R = hold_invalid(p, R, valid)
+        p, R, valid = self._measurements(recording)
         offR, offt = self._offsets_from(recording)
         self.model.eval()
         T = p.shape[0]

@@ -255,10 +255,7 @@ class TwoStageEstimator(EmposeEstimator):
         ``extras``: ``frame="em_source"``, ``method``, ``sensors_valid`` ``(T, S)``,
         ``mapper_joints`` ``(T, 20, 3)``, ``rec_loss`` ``(T,)`` (stage-2 L_r).
         """
-        grid = self._check_recording(recording)
-        valid = torch.as_tensor(grid.valid)
-        p = torch.as_tensor(grid.channels["position"], dtype=torch.float32)
-        R = torch.as_tensor(grid.channels["orientation"], dtype=torch.float32)
+        p, R, valid = self._measurements(recording, hold=False)
         offR, offt = self._offsets_from(recording)
         dev = self.device
         self.model.eval()
