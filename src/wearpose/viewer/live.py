@@ -17,8 +17,10 @@ green -> orange -> red by an interference level in [0, 1] when the pose carries
 ``extras["interference"]`` (one value per sensor).
 
 World: wearpose's Y-up frame (the viewer's up direction is set to +Y), metres. EM estimates
-whose root is relative to the EM source (``extras["frame"] == "em_source"``) are shown as
-estimated: their root orientation is the source-relative one.
+whose root is relative to the EM source (``extras["frame"] == "em_source"``) are placed in the
+world with the recording's EM source pose offline when the recording has one
+(:func:`run_recording_viewer`), and live as if the source were oriented as at rest
+(:func:`source_rest_rotation`).
 """
 
 from __future__ import annotations
@@ -156,8 +158,9 @@ def _frame_scene(server: Any, centre: np.ndarray, ground_y: float, distance: flo
     server.initial_camera.look_at = (float(c[0]) + 0.5, float(c[1]) - 0.3, float(c[2]))
 
 
-def _kit_sites(kit: str | None, sensor_names: Sequence[str], body: BodyModel) -> tuple[str, ...]:
-    """Body sites of ``sensor_names`` of ``kit`` on ``body`` (``()`` if the kit is unknown)."""
+def _kit_sites(kit: str | None, sensor_names: Sequence[str], body: BodyModel) -> tuple[tuple[str, ...], str | None]:
+    """Body sites of ``sensor_names`` of ``kit`` on ``body`` and the kit's EM source site
+    (``((), None)`` if the kit is unknown)."""
     import warnings
 
     from wearpose.sensors import get_kit, resolve_sites
@@ -165,13 +168,24 @@ def _kit_sites(kit: str | None, sensor_names: Sequence[str], body: BodyModel) ->
     try:
         k = get_kit(kit) if kit else None
         if k is None:
-            return ()
+            return (), None
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sites, _ = resolve_sites(k, body.site_names, body.asset_id)
-        return tuple(sites[n] for n in sensor_names)
+        return tuple(sites[n] for n in sensor_names), sites.get("<em_source>")
     except Exception:  # noqa: BLE001 - an unknown kit or site just means no sensor dots
-        return ()
+        return (), None
+
+
+def source_rest_rotation(body: BodyModel, betas: torch.Tensor, source_site: str) -> torch.Tensor:
+    """``(3, 3)`` world orientation of the EM source site in the rest pose.
+
+    Live EM estimates give the root relative to the EM source; the live viewer shows them as if
+    the source were oriented as at rest (``R_root_world = R_site_rest @ R_root_source``), so an
+    upright subject stands upright; the source's real heading and position are unknown live.
+    """
+    with torch.no_grad():
+        return body.sites(None, torch.as_tensor(betas, dtype=body.dtype), None, [source_site]).rotations[0]
 
 
 class _Timeline:
@@ -326,6 +340,7 @@ class LiveViewer:
         self.history: dict[int, deque] = {}
         self.meta: dict[int, dict[str, Any]] = {}
         self.layers: dict[int, BodyLayer] = {}
+        self.source_rest: dict[int, torch.Tensor] = {}
         self.received = 0
         self.shown = 0
         self.timeline = _Timeline(self.server, 2, 30.0, f"live: {url}", live=True)
@@ -348,7 +363,9 @@ class LiveViewer:
         if k not in self.layers:
             m = self.meta.get(k, {})
             names = m.get("estimator_sensors") or []
-            sites = _kit_sites(m.get("kit"), names, self.body)
+            sites, src = _kit_sites(m.get("kit"), names, self.body)
+            if src is not None:
+                self.source_rest[k] = source_rest_rotation(self.body, torch.as_tensor(p.betas), src)
             self.layers[k] = BodyLayer(self.server, self.body, f"subject {k}", torch.as_tensor(p.betas), ESTIMATE_COLOUR,
                                        offset=(1.2 * len(self.layers), 0, 0), sites=sites)
         return self.layers[k]
@@ -371,7 +388,10 @@ class LiveViewer:
             layer = self._layer(k, p)
             inter = p.extras.get("interference")
             valid = p.extras.get("sensor_valid")
-            layer.show(torch.as_tensor(p.local_rot), None if p.trans is None else torch.as_tensor(p.trans),
+            rot = torch.as_tensor(p.local_rot, dtype=self.body.dtype).clone()
+            if p.extras.get("frame") == "em_source" and k in self.source_rest:
+                rot[0] = self.source_rest[k] @ rot[0]  # see source_rest_rotation
+            layer.show(rot, None if p.trans is None else torch.as_tensor(p.trans),
                        None if valid is None or len(valid) != len(layer.sites) else np.asarray(valid, bool),
                        None if inter is None or len(inter) != len(layer.sites) else np.asarray(inter, np.float32),
                        p.uncertainty)
