@@ -355,13 +355,22 @@ def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
         seq.meta["import"] = report.to_dict()
         return Imported(seq, report)
 
+    if motion.num_frames == 0:
+        raise InputFileError(path, "no frames", "at least one frame of motion", field="MOTION")
     offs = _rest_offsets(motion).numpy()
     match: SkeletonMatch = match_skeleton(motion.skeleton, offs, joint_map, path)
     smap = match.smap
     opts = match.joint_map_options
     # Units.
     units = units if units is not None else opts.get("units")
-    leg_fu = leg_length(motion, smap)
+    try:
+        leg_fu = leg_length(motion, smap)
+    except RetargetError as exc:
+        raise InputFileError(path, f"cannot measure the legs: {exc}", "hip, knee and ankle joints in one chain per leg",
+                             field=f"joint {smap.joints['left_hip']}") from exc
+    if not leg_fu > 0:
+        raise InputFileError(path, "the legs have zero length", "hip, knee and ankle joints at distinct places",
+                             field=f"joint {smap.joints['left_hip']}")
     if units is not None:
         uname, m_per = parse_units(units)
         ures = {"name": uname, "m_per_unit": m_per, "how": "given", "leg_m": leg_fu * m_per}
