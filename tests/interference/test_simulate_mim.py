@@ -163,3 +163,27 @@ def test_metrics():
     assert binary_metrics(~y, y)["mcc"] == pytest.approx(-1.0)
     m = binary_metrics(np.array([1, 0, 1, 0, 0, 0], bool), y)
     assert m["precision"] == pytest.approx(0.5) and m["recall"] == pytest.approx(0.5) and m["f1"] == pytest.approx(0.5)
+
+
+def test_shipped_forecaster_beats_holding_on_a_swing():
+    from wearpose.interference.mim import load_numpy_forecaster
+
+    f = load_numpy_forecaster("nbeats_cpu")
+    t = np.arange(180) / FPS
+    errs_nb, errs_hold = [], []
+    for ph in np.linspace(0, 2 * np.pi, 6, endpoint=False):
+        x = np.stack([0.25 * np.sin(2 * np.pi * 0.5 * t + ph), -0.4 + 0.1 * np.cos(2 * np.pi * 0.5 * t + ph), np.full_like(t, 0.3)], 1)
+        pred = f(x[:120])
+        errs_nb.append(np.abs(pred - x[120:]).mean())
+        errs_hold.append(np.abs(x[119] - x[120:]).mean())
+    assert np.mean(errs_nb) < 0.8 * np.mean(errs_hold)
+
+
+@pytest.mark.corpus
+def test_nbeats_training_pipeline_tiny(tmp_path):
+    from wearpose.interference.nbeats import NBeatsConfig, load_forecaster, train
+
+    res = train(NBeatsConfig.preset("tiny"), tmp_path, max_train_clips=3, log=lambda s: None)
+    assert (tmp_path / "best.pt").exists() and np.isfinite(res["best_val_mae_cm"])
+    model, ck = load_forecaster(tmp_path / "best.pt")
+    assert ck["config"]["width"] == 32

@@ -93,8 +93,9 @@ class ConditionPreset:
 
 CONDITIONS: dict[str, ConditionPreset] = {
     "open-space": ConditionPreset("open-space"),
-    "standard": ConditionPreset("standard", encounters_per_min=15.0, closest=(0.0, 0.2)),
-    "extreme": ConditionPreset("extreme", encounters_per_min=20.0, closest=(0.0, 0.08), carry_fraction=0.35),
+    "standard": ConditionPreset("standard", encounters_per_min=20.0, closest=(0.0, 0.15), eta=(0.7, 1.0)),
+    "extreme": ConditionPreset("extreme", encounters_per_min=30.0, closest=(0.0, 0.05), eta=(0.8, 1.0), carry_fraction=0.4,
+                               carry_offset=(0.01, 0.04), carry_catalogue=("can", "phone", "tablet", "laptop")),
 }
 
 
@@ -118,7 +119,7 @@ def make_object(kind: str, anchor: np.ndarray, direction: np.ndarray, gap: float
     (0.5 x 0.3 m back plate, upright), ``door`` (0.9 x 2.0 m sheet, upright), ``desk_leg``
     (vertical tube, radius 2 cm, 0.72 m), ``desk_frame`` (horizontal tube, 1.2 m), ``hammer``
     (steel head, ~2.5 cm sphere), ``can`` (beverage can, ~3.3 cm sphere), ``phone``
-    (0.15 x 0.07 m plate).
+    (0.15 x 0.07 m plate), ``tablet`` (0.25 x 0.17 m plate).
     """
     d = _unit(direction)
     up = np.array([0.0, 1.0, 0.0])
@@ -143,6 +144,8 @@ def make_object(kind: str, anchor: np.ndarray, direction: np.ndarray, gap: float
         return MetalObject.sphere(kind, anchor + d * (gap + 0.025), 0.025, eta, carrier=carrier)
     if kind == "can":
         return MetalObject.sphere(kind, anchor + d * (gap + 0.033), 0.033, eta, carrier=carrier)
+    if kind == "tablet":
+        return MetalObject.plate(kind, anchor + d * (gap + 0.004), d, (0.25, 0.17), eta, cell=0.05, carrier=carrier)
     if kind == "phone":
         return MetalObject.plate(kind, anchor + d * (gap + 0.004), d, (0.15, 0.07), eta, cell=0.04, carrier=carrier)
     raise ConfigError(f"make_object: unknown kind {kind!r}")
@@ -181,7 +184,7 @@ def draw_scene(preset: ConditionPreset, traj: SiteTrajectories, rng: np.random.G
             tries = 0
             while active.sum() < target and tries < 50:
                 tries += 1
-                L = int(rng.uniform(*preset.carry_bout_s) * fps)
+                L = min(int(rng.uniform(*preset.carry_bout_s) * fps), int(1.2 * target) + 1)
                 t0 = int(rng.integers(min(int(preset.clean_start_s * fps), T - 1), max(int(preset.clean_start_s * fps) + 1, T - L // 2)))
                 active[t0:t0 + L] = True
             if active.any():
