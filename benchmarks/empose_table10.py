@@ -36,6 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "empose_table10"))
     ap.add_argument("--note", default=None, help="a paragraph appended to the markdown")
+    ap.add_argument("--span", type=int, nargs=2, default=None, metavar=("MIN", "MAX"),
+                    help="frames per removal span (default 15 45, i.e. 0.5-1.5 s at 30 Hz)")
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
     from wearpose.estimators.empose.evaluate import PAPER_TABLE10_12, evaluate_dropped, table10_markdown
@@ -52,7 +54,8 @@ def main(argv: list[str] | None = None) -> int:
         if d % 20 == 0 or d == t:
             print(f"  {d}/{t} clips ({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
 
-    res = evaluate_dropped(ckpts, a.split, a.limit, noise=a.noise, seed=a.seed, progress=prog)
+    kw = {"span": tuple(a.span)} if a.span else {}
+    res = evaluate_dropped(ckpts, a.split, a.limit, noise=a.noise, seed=a.seed, progress=prog, **kw)
     res["command"] = "python " + shlex.join([sys.argv[0], *(argv if argv is not None else sys.argv[1:])])
     res["wall_seconds"] = time.time() - t0
     res["time_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())

@@ -189,10 +189,11 @@ DROP_GAP = (15, 60)
 DROP_COUNTS = (1, 2)
 
 
-def drop_sensors(recording: Any, sensor_names: list[str], g: torch.Generator) -> tuple[Any, torch.Tensor]:
+def drop_sensors(recording: Any, sensor_names: list[str], g: torch.Generator,
+                 span: tuple[int, int] = DROP_SPAN) -> tuple[Any, torch.Tensor]:
     """A copy of ``recording`` with EM sensors removed over random spans (Table 10 protocol).
 
-    Spans of ``DROP_SPAN`` frames separated by ``DROP_GAP`` frames (uniform), each removing 1 or
+    Spans of ``span`` (default ``DROP_SPAN``) frames separated by ``DROP_GAP`` frames (uniform), each removing 1 or
     2 (``DROP_COUNTS``, equally likely) random sensors of ``sensor_names``: their samples become
     invalid (NaN), the way a recording marks dropped EM frames.
 
@@ -209,7 +210,7 @@ def drop_sensors(recording: Any, sensor_names: list[str], g: torch.Generator) ->
     removed = torch.zeros(T, S, dtype=torch.bool)
     t = int(torch.randint(0, min(DROP_GAP[1], T // 4) + 1, (), generator=g))  # first span starts early enough
     while t < T:
-        L = int(torch.randint(DROP_SPAN[0], DROP_SPAN[1] + 1, (), generator=g))
+        L = int(torch.randint(span[0], span[1] + 1, (), generator=g))
         k = DROP_COUNTS[int(torch.randint(0, len(DROP_COUNTS), (), generator=g))]
         removed[t:t + L, torch.randperm(S, generator=g)[:k]] = True
         t += L + int(torch.randint(DROP_GAP[0], DROP_GAP[1] + 1, (), generator=g))
@@ -227,11 +228,12 @@ def drop_sensors(recording: Any, sensor_names: list[str], g: torch.Generator) ->
 
 
 def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit: int | None = None, *,
-                     noise: str = "default", seed: int = 0, store: Any = None, progress: Any = None) -> dict[str, Any]:
+                     noise: str = "default", seed: int = 0, store: Any = None, progress: Any = None,
+                     span: tuple[int, int] = DROP_SPAN) -> dict[str, Any]:
     """EM-POSE Table 10 on our data: models on recordings with dropped sensors.
 
     Each clip is simulated as in :func:`evaluate_models` (same subjects and noise), then
-    :func:`drop_sensors` removes 1-2 sensors over random spans (generator seeded per clip in the
+    :func:`drop_sensors` removes 1-2 sensors over random spans of ``span`` frames (generator seeded per clip in the
     ``"table10"`` namespace). Every model estimates the whole recording and *every* frame is scored
     (a model's own ``valid`` flag is ignored: the LGD-RNN holds a dropped sensor at its last value,
     the two-stage model fills it in). Frame sets: ``all``; ``avail`` (every sensor valid);
@@ -265,7 +267,7 @@ def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit:
         r = simulate_clip(store.load(cid), first.config, first.body, clip_seed(cid, seed, "eval"), noise=noise,
                           offsets="random")
         g = torch.Generator().manual_seed(clip_seed(cid, seed, "table10"))
-        rec, _ = drop_sensors(recording_from_clip(r, first.config), names, g)
+        rec, _ = drop_sensors(recording_from_clip(r, first.config), names, g, span)
         grid = rec.on_common_grid(names)
         nmiss.append((~torch.as_tensor(grid.valid)).sum(1))
         for name, est in ests.items():
@@ -298,7 +300,7 @@ def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit:
     return {"split": split, "clips": len(ids), "noise": noise, "seed": seed, "kit": first.kit_name, "rate_hz": first.fps,
             "body_asset": first.body_asset_id, "joints": "15 major (DIP/EM-POSE)",
             "frame_counts": {k: int(v.sum()) for k, v in sets.items()},
-            "drops": {"span_frames": DROP_SPAN, "gap_frames": DROP_GAP, "sensors_per_span": DROP_COUNTS},
+            "drops": {"span_frames": tuple(span), "gap_frames": DROP_GAP, "sensors_per_span": DROP_COUNTS},
             "subjects": "random synthetic offsets per clip, evaluation seed namespace (never drawn for training)",
             "models": models}
 

@@ -127,6 +127,7 @@ class LbfgsEstimator(EmposeEstimator):
         super().__init__(config, body=body, device=device)
         self.model = PosePriorVAE().to(self.device)
         self.max_iter = max_iter
+        self.every = 1
         self._warm: tuple[torch.Tensor, ...] | None = None
 
     def _solve(self, p: torch.Tensor, R: torch.Tensor, offR: torch.Tensor, offt: torch.Tensor,
@@ -161,9 +162,12 @@ class LbfgsEstimator(EmposeEstimator):
         return Rl[0], beta[0], (z.detach(), r.detach(), b.detach()), rec
 
     @torch.no_grad()
-    def estimate(self, recording: Any, every: int = 1) -> PoseTrack:
-        """Offline = the online tracker over the recording (``every``-th frame solved, the others
-        repeat the last solution; 1 = all)."""
+    def estimate(self, recording: Any, every: int | None = None) -> PoseTrack:
+        """Offline = the online tracker over the recording. ``every`` (default ``self.every``, 1):
+        solve only every ``every``-th frame (warm-started from the previous solved one); the
+        frames in between repeat the last solution and are marked ``valid = False`` so that
+        evaluations score solved frames only."""
+        every = every or self.every
         p, R, valid = self._measurements(recording)
         offR, offt = self._offsets_from(recording)
         self.model.eval()
@@ -180,6 +184,8 @@ class LbfgsEstimator(EmposeEstimator):
             recs.append(last[2])
         b_all = torch.stack(betas)
         ok = valid.all(1)
+        if every > 1:
+            ok = ok & (torch.arange(T) % every == 0)
         return PoseTrack(torch.stack(rots), (b_all[ok] if bool(ok.any()) else b_all).mean(0), None, ok, self.fps,
                          extras={"frame": "em_source", "method": self.name, "rec_loss": torch.tensor(recs),
                                  "betas_per_frame": b_all})
