@@ -80,7 +80,7 @@ def start_server(model: str, stride: str, workers: int, threads: int) -> tuple[s
     if " on ws://" not in line:
         proc.kill()
         raise RuntimeError(f"server did not start: {line!r}")
-    return proc, line.strip().split(" on ")[-1]
+    return proc, line.strip().split(" on ")[1].split(" and ")[0]
 
 
 def run_scenario(name: str, rec: Any, model: str, args: argparse.Namespace, stride: str) -> dict[str, Any]:

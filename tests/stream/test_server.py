@@ -172,3 +172,40 @@ def test_auto_stride_counts_skipped_frames_as_decimated_not_lost() -> None:
     assert r["ready"]["stride"] == 2 and "trained" not in r["ready"]["note"]
     assert r["frames_expected"] == 20 and r["poses_received"] == 20 and r["frames_lost"] == 0
     assert r["server_stats"]["decimated"] == 20 and r["server_stats"]["lost"] == 0
+
+
+def test_udp_frames_and_poses() -> None:
+    from wearpose.stream.packets import decode_pose, encode_frame_binary
+
+    rec = tiny_recording(30)
+    st = stack_recording(rec)
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(_Factory(), port=0, udp_port=0) as srv:
+            loop = asyncio.get_running_loop()
+            inbox: asyncio.Queue = asyncio.Queue()
+
+            class P(asyncio.DatagramProtocol):
+                def datagram_received(self, data: bytes, addr) -> None:  # noqa: ANN001
+                    inbox.put_nowait(data)
+
+            tr, _ = await loop.create_datagram_endpoint(P, remote_addr=("127.0.0.1", srv.udp_port))
+            tr.sendto(Hello(4, st.names, st.channels, st.rate, "binary").to_json().encode())
+            ready = json.loads(await asyncio.wait_for(inbox.get(), 30))
+            for k in [0, 2, 1] + list(range(3, 30)):  # one swapped pair
+                tr.sendto(encode_frame_binary(FramePacket(4, k, float(st.timestamps[k]), st.valid[k], st.data[k])))
+            tr.sendto(b"\xff\xfe not a packet")
+            tr.sendto(json.dumps({"type": "bye", "subject": 4}).encode())
+            msgs = []
+            while True:
+                data = await asyncio.wait_for(inbox.get(), 30)
+                m = decode_pose(data if data[:2] == b"WP" else data.decode())  # UDP text arrives as bytes
+                if isinstance(m, dict) and m.get("type") == "bye":
+                    break
+                msgs.append(m)
+            tr.close()
+            return ready, msgs, m, srv.malformed
+
+    ready, poses, bye, malformed = _run(main())
+    assert ready["type"] == "ready" and [p.seq for p in poses] == list(range(30))
+    assert bye["stats"]["estimated"] == 30 and malformed == 1

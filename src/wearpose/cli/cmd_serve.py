@@ -44,6 +44,7 @@ def serve(
                                                "sequence numbers newer has arrived."),
     stride: str = typer.Option("1", help="Estimate every N-th frame: 1 (every frame), N, or auto (stream rate / "
                                          "the estimator's trained rate)."),
+    udp_port: Optional[int] = typer.Option(None, help="Also accept the same packets over UDP on this port."),
     workers: int = typer.Option(2, help="Threads running estimator steps (subjects run in parallel up to this)."),
     threads: int = typer.Option(1, help="torch CPU threads per step."),
     log_level: str = typer.Option("INFO", help="Python logging level."),
@@ -63,10 +64,11 @@ def serve(
 
     def started(server: Any) -> None:
         # One line a script can wait for (benchmarks/stream.py does).
-        print(f"serving {model} on {server.url}", flush=True)
+        udp = f" and udp://{server.host}:{server.udp_port}" if server.udp_port is not None else ""
+        print(f"serving {model} on {server.url}{udp}", flush=True)
 
     final = run_server(factory, host, port, on_start=started, reorder_window=reorder_window, stride=_stride(stride),
-                       workers=workers)
+                       workers=workers, udp_port=udp_port)
     _emit(final, as_json, lambda r: console.print(f"stopped; subjects served: {len(r['finished'])}, "
                                                   f"malformed messages: {r['malformed_total']}"))
 

@@ -18,6 +18,8 @@ What the server does with imperfect input (all counted in ``stats``):
   with NaN values (masked, not invented); ``masked_sensor_samples`` counts them.
 - **Malformed messages**: logged (rate-limited), counted (``malformed``), skipped; the
   connection and the stream keep running.
+- **UDP** (optional ``udp_port``): the same messages as datagrams; a lost datagram is a lost
+  frame (counted like any gap), replies go back to the sender's address.
 - **Estimator slower than the sensor rate**: frames queue (never dropped); ``queue_max`` and the
   ``server_ms`` of every pose show it.
 
@@ -164,14 +166,19 @@ class StreamServer:
             (counted ``decimated``): ``"auto"`` = round(stream rate / estimator rate), for a
             network trained at a lower rate than the sensors stream. Default 1: every frame.
         workers: threads running estimator steps (subjects estimate in parallel up to this).
+        udp_port: also accept the same messages as UDP datagrams on this port (0: any free one,
+            see :attr:`udp_port`; None: no UDP). Replies and poses go back to the sender's address.
     """
 
     def __init__(self, estimator_factory: Callable[[], Estimator], host: str = "127.0.0.1", port: int = 8765, *,
-                 reorder_window: int = REORDER_WINDOW, stride: int | str = 1, workers: int = 2) -> None:
+                 reorder_window: int = REORDER_WINDOW, stride: int | str = 1, workers: int = 2,
+                 udp_port: int | None = None) -> None:
         if stride != "auto" and (not isinstance(stride, int) or stride < 1):
             raise ValueError(f"stride: expected a positive integer or 'auto', got {stride!r}")
         self.factory = estimator_factory
         self.host, self.port = host, port
+        self.udp_port = udp_port
+        self._udp: Any = None
         self.reorder_window = reorder_window
         self.stride = stride
         self.pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers, thread_name_prefix="wearpose-est")
@@ -194,6 +201,11 @@ class StreamServer:
                                    process_request=self._http, ping_interval=None)
         self.port = self._server.sockets[0].getsockname()[1]
         log.info("wearpose stream server on ws://%s:%d", self.host, self.port)
+        if self.udp_port is not None:
+            self._udp, _ = await asyncio.get_running_loop().create_datagram_endpoint(
+                lambda: _UdpProtocol(self), local_addr=(self.host, self.udp_port))
+            self.udp_port = self._udp.get_extra_info("sockname")[1]
+            log.info("wearpose stream server on udp://%s:%d", self.host, self.udp_port)
         return self
 
     async def stop(self, drain_timeout: float = 10.0) -> None:
@@ -217,6 +229,8 @@ class StreamServer:
                 self.subjects.clear()
         for ws in list(self.connections):
             await ws.close(1001, "server shutting down")
+        if self._udp is not None:
+            self._udp.close()
         if self._server is not None:
             await self._server.wait_closed()
         self.pool.shutdown(wait=True, cancel_futures=True)
@@ -267,6 +281,28 @@ class StreamServer:
             owned = [k for k, s in self.subjects.items() if s.owner is ws]
             for k in owned:  # the device went away: estimate what arrived, then forget the subject
                 await self._end_subject(k)
+
+    def _on_datagram(self, peer: Any, data: bytes, t_arr: float) -> None:
+        """One UDP datagram: a binary frame (handled now) or a JSON message (in a task)."""
+        try:
+            if data[:2] == b"WP":
+                self._on_binary(data, t_arr)
+                return
+            text = data.decode("utf-8")
+        except PacketError as exc:
+            self._malformed(exc, peer)
+            return
+        except UnicodeDecodeError:
+            self._malformed(PacketError("datagram is neither a binary packet nor UTF-8 JSON"), peer)
+            return
+
+        async def handle() -> None:
+            try:
+                await self._on_text(peer, text, t_arr)
+            except PacketError as exc:
+                self._malformed(exc, peer)
+
+        self._spawn(handle())
 
     def _malformed(self, exc: Exception, ws: Any, subject: int | None = None) -> None:
         self.malformed += 1
@@ -482,6 +518,33 @@ class StreamServer:
             return True
         except ConnectionClosed:
             return False
+
+
+class _UdpPeer:
+    """A UDP sender, answered like a WebSocket connection (one datagram per message)."""
+
+    def __init__(self, transport: Any, addr: Any) -> None:
+        self.transport, self.remote_address = transport, addr
+
+    async def send(self, msg: str | bytes) -> None:
+        self.transport.sendto(msg.encode("utf-8") if isinstance(msg, str) else msg, self.remote_address)
+
+
+class _UdpProtocol(asyncio.DatagramProtocol):
+    def __init__(self, server: StreamServer) -> None:
+        self.server = server
+        self.peers: dict[Any, _UdpPeer] = {}
+        self.transport: Any = None
+
+    def connection_made(self, transport: Any) -> None:
+        self.transport = transport
+
+    def datagram_received(self, data: bytes, addr: Any) -> None:
+        t_arr = time.perf_counter()
+        peer = self.peers.get(addr)
+        if peer is None:
+            peer = self.peers[addr] = _UdpPeer(self.transport, addr)
+        self.server._on_datagram(peer, data, t_arr)
 
 
 @dataclass
