@@ -61,6 +61,8 @@ log = logging.getLogger("wearpose.stream")
 
 #: Default lateness bound, frames (see module doc).
 REORDER_WINDOW = 4
+#: A subscriber with more than this unsent is skipped for a pose (counted ``subscriber_skipped``).
+SUBSCRIBER_BACKLOG_BYTES = 1 << 20
 #: Latency samples kept per subject for the stats percentiles.
 STATS_SAMPLES = 20000
 
@@ -186,6 +188,7 @@ class StreamServer:
         self.subscribers: dict[Any, tuple[str, set[int] | None]] = {}
         self.connections: set[Any] = set()
         self.malformed = 0
+        self.subscriber_skipped = 0
         self.finished: dict[str, dict[str, Any]] = {}  # stats of subjects whose stream ended
         self.started = time.time()
         self._server: Any = None
@@ -249,6 +252,7 @@ class StreamServer:
         """Counters and latency summaries (what ``{"type": "stats"}`` and ``GET /stats`` return)."""
         return {"type": "stats", "uptime_s": round(time.time() - self.started, 3), "connections": len(self.connections),
                 "subscribers": len(self.subscribers), "malformed_total": self.malformed,
+                "subscriber_skipped": self.subscriber_skipped,
                 "subjects": {str(k): s.stats() for k, s in self.subjects.items()}, "finished": dict(self.finished)}
 
     def _http(self, connection: Any, request: Any) -> Any:
@@ -411,9 +415,9 @@ class StreamServer:
         note = "" if est.fps <= 0 or abs(est_rate - est.fps) <= 0.05 * est.fps else (
             f"the estimator was trained at {est.fps:g} Hz but receives {est_rate:g} Hz "
             f"(stream {hello.rate:g} Hz, stride {s.stride}); its output may be degraded")
-        await ws.send(json.dumps({"type": "ready", "subject": hello.subject, "estimator": est.name,
+        await self._safe_send(ws, json.dumps({"type": "ready", "subject": hello.subject, "estimator": est.name,
                                   "sensors": list(est.sensor_names), "estimator_fps": est.fps, "stride": s.stride,
-                                  "reorder_window": s.reorder.window, "note": note}))
+                                              "reorder_window": s.reorder.window, "note": note}))
         for sub in list(self.subscribers):
             await self._safe_send(sub, self._subject_message(hello.subject, s))
 
@@ -504,6 +508,11 @@ class StreamServer:
         sent = await self._safe_send(s.owner, msg(s.hello.format))
         for ws, (fmt, subs) in list(self.subscribers.items()):
             if subs is None or pose.subject in subs:
+                tr = getattr(ws, "transport", None)
+                if tr is not None and tr.get_write_buffer_size() > SUBSCRIBER_BACKLOG_BYTES:
+                    # A viewer that cannot keep up must not stall the estimation: skip it, count it.
+                    self.subscriber_skipped += 1
+                    continue
                 await self._safe_send(ws, msg(fmt))
         s.server_ms.append(pose.server_ms)
         s.compute_ms.append(pose.compute_ms)
