@@ -179,6 +179,8 @@ def main() -> None:
     ap.add_argument("--clips", nargs="*", help="clip ids (default: every plain walking clip of the test split)")
     ap.add_argument("--split", default="test", help="corpus split of the walking clips (test; val for tuning)")
     ap.add_argument("--k-res", type=float, default=None, help="residual weight for every run (default: the paper's 0.1)")
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=JSON",
+                    help="PhysicsConfig override for every run, e.g. --set weights_in_norm=false (repeatable)")
     ap.add_argument("--max-clips", type=int, default=0, help="only the N longest walking clips (0 = all)")
     ap.add_argument("--plots", action="store_true", help="write docs/img/pip_grf_walk.png and pip_arm_torque_wave.png")
     ap.add_argument("--departures", action="store_true",
@@ -191,7 +193,10 @@ def main() -> None:
     clips = args.clips or walking_clips(store, args.split)
     if args.max_clips:
         clips = clips[:args.max_clips]
-    cfg = PhysicsConfig() if args.k_res is None else PhysicsConfig(k_res=args.k_res)
+    overrides = {k: json.loads(v) for k, v in (item.split("=", 1) for item in args.set)}
+    if args.k_res is not None:
+        overrides["k_res"] = args.k_res
+    cfg = PhysicsConfig(**overrides)
     rows = []
     first = None
     for clip in clips:
@@ -205,7 +210,7 @@ def main() -> None:
     longest = rows[0]
     single, _, _ = run_clip(store, body, longest["clip"], dataclasses.replace(cfg, dual_pd=False))
     # Sensitivity to the residual weight (paper: k_res = 0.1), longest clip.
-    k_res_rows = {str(k): run_clip(store, body, longest["clip"], PhysicsConfig(k_res=k))[0] for k in (0.3, 1.0)}
+    k_res_rows = {str(k): run_clip(store, body, longest["clip"], dataclasses.replace(cfg, k_res=k))[0] for k in (0.3, 1.0)}
     keys = ("grf_over_weight", "max_penetration_m", "stance_agreement", "load_switches_per_s", "gt_stance_switches_per_s",
             "trans_err_mean_m", "trans_err_final_m", "travelled_m", "joint_err_cm", "residual_force_mean_n",
             "frames_without_foot_contact")
@@ -224,6 +229,7 @@ def main() -> None:
     result = {
         "command": " ".join(["python", "benchmarks/physics.py", *sys.argv[1:]]),
         "split": args.split if not args.clips else "given clips", "clips": len(rows), "seconds": float(sum(r["seconds"] for r in rows)),
+        "overrides": overrides,
         "config": {k: getattr(cfg, k) for k in ("fps", "dual_pd", "kp_theta", "kd_theta", "kp_r", "kd_r", "k_lambda",
                                                 "k_res", "k_tau", "mu", "sigma", "square_size", "weights_in_norm",
                                                 "min_contact_weight", "foot_contact_requires_prob", "ground_bound",

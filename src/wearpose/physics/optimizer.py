@@ -81,38 +81,36 @@ class PhysicsConfig:
             ``contact_prob_threshold`` is in contact, m (PIP: 3 cm, 0.5).
         min_contact_weight: floor on the point height ``d_c`` in the Signorini term, m: with
             ``d_c = 0`` a point at (or below) the ground would have no force regulariser at
-            all. 1 mm: the original PIP code uses 5 mm, which on our character moves ~3 % of
-            a standing body weight from the feet to the residual root force (measured: 96.8 %
-            of m g on the feet at 5 mm, 99.8 % at 1 mm).
+            all. 1 mm; PIP's released code uses 5 mm, which puts less weight on the feet
+            (standing T-pose 96.8 % vs 99.8 % of m g; val walking clip 93.0 % vs 94.9 %).
         ground_bound: lower bound of a contact joint's vertical velocity (Eq. 11). True:
             ``(ground_y - y) / dt``, i.e. the joint may not be below the ground after the step
             (it may settle onto the ground from up to ``foot_contact_height`` above, and is pushed
             back out if below), as PIP's released code does for the feet. False: the paper's
-            literal ``>= 0``, under which a foot that enters contact 2 cm above the ground can
-            never come down, so its Signorini weight ``d_c`` stays high and the residual root
-            force carries the body (measured on a walking clip: ~70 % of body weight on the feet).
+            literal ``>= 0``, under which a foot that enters contact above the ground can never
+            come down, its Signorini weight ``d_c`` stays high and the residual root force
+            carries the body (val walking clip: 77.6 % of body weight on the feet vs 94.9 %).
         foot_contact_requires_prob: a foot joint is in contact only by the probability rule
             (within ``foot_contact_height`` and probability above the threshold); the paper
             also takes a foot below ``contact_height`` (0.5 cm) regardless of its probability.
             Why: under that rule a foot still on the ground when the reference lifts it
             (c -> 0) stays held by the no-sliding constraint (1 cm/s), can only leave
-            vertically, and the gait falls out of step with the reference: on a test-split
-            walking clip driven by ground truth, 8 % of frames ended with no support, the feet
-            carried 73 % of body weight and root-relative joints were 9.6 cm off (1.5 cm and
-            98 % without it). PIP's released code likewise frees a foot whose contact
-            probability is low. False = the paper's literal rule.
+            vertically, and the gait falls out of step with the reference (val walking clip
+            driven by ground truth: 78 % of body weight on the feet, root-relative joints
+            6.9 cm off, translation 0.76 m off on average; 95 %, 1.0 cm, 0.17 m with this
+            rule). PIP's released code likewise frees a foot whose probability is low.
         guard_all_candidates: add, for every contact candidate *not* in contact, the row
             ``y + J_y (v + qdd dt) dt >= ground_y`` (no penetration after the step, no force)
             so that joints outside contact (e.g. a foot whose probability is low) do not sink
-            into the ground. Not in the paper; False = off.
+            into the ground (val walking clip: 2.5 cm deepest penetration without, 0 with).
+            Not in the paper; False = off.
         foot_square_shift: the square of a foot joint is centred this fraction of the way from
             the foot joint to its ankle (horizontally). PIP centres every square on its joint
             (0.0); SMPL's foot joint is the ball of the foot, so a square centred there covers
-            toes to mid-foot, leaves the heel out, and the standing centre of mass of our
-            character (5.6 cm in front of the pelvis, 11 cm behind the foot joints) falls
-            outside the support polygon: standing then needs a large residual root force and
-            the body tips backwards. 0.5 centres the square on the sole (heel to toe tips
-            span -3..23 cm in Z on the embedded asset, the ankle-foot midpoint is at 10 cm).
+            toes to mid-foot and leaves the heel out (heel to toe tips span -3..23 cm in Z on
+            the embedded asset; the ankle-foot midpoint is at 10 cm, the foot joint at 17 cm).
+            0.5 centres it on the sole. Small effect, measured: standing T-pose residual force
+            3.0 vs 7.5 N and drift 0.3 vs 0.7 cm in 2 s; walking about the same.
         ground_y: ground height in world Y, m; None = lowest contact candidate at reset.
         foot_joints: SMPL joints whose contact uses ``contact_prob`` (left, right).
         contact_candidates: SMPL joints tested for ground contact.
@@ -123,10 +121,12 @@ class PhysicsConfig:
             PIP's released implementation multiplies each residual by its weight inside the norm,
             ``|k r|^2`` (so ``k_res = 0.1`` acts as 0.01, ``k_tau = 0.01`` as 1e-4 and the
             Signorini term as ``(k_lambda d_c)^2 |lambda_c|^2``). True (default) follows the
-            implementation: with the literal reading on our character the torque and force
-            regularisers outweigh the PD terms, so a standing T-pose carries only ~93 % of its
-            weight on the feet (the rest on the residual root force) and slides ~16 cm in 2 s
-            (measured); the implementation's reading holds it (tests).
+            implementation. Measured on the val split with ground-truth kinematics
+            (``benchmarks/results/physics_val_*.json``): the literal reading penalises joint
+            torques so much that the body does not hold still -- a standing T-pose slides
+            8.7 cm in 2 s (0.3 cm in-norm), waving/arm-raising clips drift 0.10-0.12 m
+            (0.01-0.03 m) and their root-relative joints are 1.4-3.2 cm off (0.3 cm) -- while on
+            walking it gives a lower translation error (0.08 vs 0.15 m mean, 4 clips).
         eps_abs: proxsuite absolute accuracy.
         blas_threads: threads of numpy's OpenBLAS, set process-wide when the optimizer is built
             (1: the step's matrices are small and multi-threaded BLAS costs 10-50 ms per step on
