@@ -206,6 +206,22 @@ def test_loss_decreases_on_a_fixed_batch(tmp_path: Path) -> None:
     assert float(loss.detach()) < first - 0.2 and "aux_mse" in parts
 
 
+def test_decoupled_loss_trains_the_mean_by_squared_error() -> None:
+    """``loss="decoupled"``: the mean's gradient is the squared error's, the log-variance's Eq. 6's."""
+    from wearpose.estimators.birae.train import batch_loss
+
+    est = BiraeEstimator(tiny(loss="decoupled"))
+    b = {"x": torch.randn(2, 9, 30), "y": torch.randn(2, 9, 45), "rate": torch.zeros(2, 9, 15),
+         "mask": torch.ones(2, 9, dtype=torch.bool), "lengths": torch.tensor([9, 9])}
+    loss, parts, out = batch_loss(est, b, torch.device("cpu"))
+    assert {"mse", "nll"} <= set(parts)
+    assert math.isclose(float(loss.detach()), parts["mse"] + parts["nll"], rel_tol=1e-5)
+    g_mu = torch.autograd.grad(loss, out["mu"], retain_graph=True)[0]
+    assert torch.allclose(g_mu, 2 * (out["mu"] - b["y"]).detach() / g_mu.numel(), atol=1e-7)
+    with pytest.raises(ConfigError):
+        tiny(loss="l1")
+
+
 def test_train_resume_save_load_estimate(trained, tmp_path: Path) -> None:
     est, tmp, store = trained
     # resume of a finished run is a no-op that keeps the checkpoints

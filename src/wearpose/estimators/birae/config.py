@@ -11,7 +11,7 @@ Presets (:meth:`BiraeConfig.preset`):
   heavily shared 2-core machine: width and hidden 128 (256 measured ~3x slower per step, too
   slow at the ~10 % of a core each run got), 240-frame subsequences, batch 16, lr 1e-3 with a
   cosine decay per phase, 3 clean + 2 augmented epochs over all training clips, 60 validation
-  clips, 10 MC-dropout samples. Everything else as ``paper``.
+  clips, 10 MC-dropout samples, the ``decoupled`` loss (see ``loss``). Everything else as ``paper``.
 - ``tiny``: a seconds-long smoke-test model (tests).
 
 Input representations (``rep``; :mod:`.representations`): ``"6param"`` (Appendix A),
@@ -62,6 +62,7 @@ class BiraeConfig:
     logvar_min: float = -14.0
     logvar_max: float = 4.0
     aux_weight: float = 1.0
+    loss: str = "nll"
     rate_scale: float = 0.1
     rate: float = 60.0
     seq_len: int = 300
@@ -88,6 +89,8 @@ class BiraeConfig:
     def __post_init__(self) -> None:
         if self.rep not in REPS:
             raise ConfigError(f"BiraeConfig.rep: expected one of {REPS}, got {self.rep!r}")
+        if self.loss not in ("nll", "decoupled"):
+            raise ConfigError(f"BiraeConfig.loss: expected nll or decoupled, got {self.loss!r}")
         if self.lr_schedule not in ("exp", "cosine", "constant"):
             raise ConfigError(f"BiraeConfig.lr_schedule: expected exp, cosine or constant, got {self.lr_schedule!r}")
         if min(self.width, self.hidden, self.layers, self.seq_len, self.batch_size, self.mc_samples) < 1:
@@ -137,7 +140,7 @@ class BiraeConfig:
         if name == "paper":
             return paper
         if name == "cpu":
-            return replace(paper, width=128, hidden=128, seq_len=240, min_len=60, lr_schedule="cosine",
+            return replace(paper, width=128, hidden=128, seq_len=240, min_len=60, lr_schedule="cosine", loss="decoupled",
                            epochs_clean=3, epochs_aug=2, val_clips=60, mc_samples=10)
         if name == "tiny":
             return replace(paper, width=16, hidden=16, seq_len=32, min_len=8, batch_size=4, lr=3e-3,

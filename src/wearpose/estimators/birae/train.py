@@ -10,7 +10,8 @@ best error on validation set was saved", ``last.pt`` for ``--resume``) twice:
 
 ``<out>/best.pt`` is the augmented phase's best checkpoint (the shipped model). Loss: Eq. 6 on
 the 45 exp-map components of every real frame, plus ``aux_weight`` x the MSE of the angular-rate
-reconstruction for ``3param_rate``.
+reconstruction for ``3param_rate``; with ``config.loss == "decoupled"`` the mean is trained by the
+squared error and Eq. 6 trains the log-variance on the detached mean.
 
 :func:`finetune` continues training a model on a few target-domain motions (Sec. V-H: "fine-tuning
 on a small synthetic training set of target domain").
@@ -39,9 +40,15 @@ def batch_loss(est: Any, b: dict[str, torch.Tensor], device: torch.device, model
     model = model if model is not None else est.model
     b = {k: v.to(device) for k, v in b.items()}
     out = model(b["x"], b["lengths"])
-    nll = nll_loss(out["mu"], out["logvar"], b["y"], b["mask"])
-    parts = {"nll": float(nll.detach())}
-    loss = nll
+    if est.config.loss == "decoupled":
+        mse = masked_mse(out["mu"], b["y"], b["mask"])
+        nll = nll_loss(out["mu"].detach(), out["logvar"], b["y"], b["mask"])
+        loss = mse + nll
+        parts = {"nll": float(nll.detach()), "mse": float(mse.detach())}
+    else:
+        nll = nll_loss(out["mu"], out["logvar"], b["y"], b["mask"])
+        parts = {"nll": float(nll.detach())}
+        loss = nll
     if "aux" in out:
         aux = masked_mse(out["aux"], b["rate"], b["mask"])
         parts["aux_mse"] = float(aux.detach())
