@@ -14,7 +14,11 @@ Skeletons:
 Per skeleton: ``bone_err_deg`` = mean over clips of the clip-mean angle between every mapped bone
 of the result and the same bone of the source file (``ImportReport.bone_error_deg``), its worst
 clip and worst bone; for the synthetic ones also ``truth_err_deg`` = the same bones against the
-known SMPL motion the file was written from (independent of the importer's own check). The result plays
+known SMPL motion the file was written from (independent of the importer's own check). The corpus
+maps declare cm and Y up; ``detected_without_declaration`` counts the clips where the unit and
+up-axis detectors, run without that declaration, find them. The corpus
+maps declare cm and Y up; ``detected_without_declaration`` counts the clips where the unit and
+up-axis detectors, run without that declaration, find them. The result plays
 on the default body model (its proportions differ from every source).
 """
 
@@ -45,7 +49,8 @@ from motion_testutils import corpus_dir, synthetic_smpl_motion  # noqa: E402
 from wearpose.body.kinematics import forward_kinematics  # noqa: E402
 from wearpose.body.skeleton import JOINT_NAMES  # noqa: E402
 from wearpose.motion import MIXAMO, RIGIFY, default_rest_joints, import_motion, template_rest_joints  # noqa: E402
-from wearpose.motion.importer import IMPORT_BONE_PAIRS, UP_AXES  # noqa: E402
+from wearpose.motion import read_bvh  # noqa: E402
+from wearpose.motion.importer import IMPORT_BONE_PAIRS, UP_AXES, detect_units, detect_up, leg_length  # noqa: E402
 
 CMU_ASF_NAMES = {
     "pelvis": "root", "spine1": "upperback", "spine2": "midback", "spine3": "thorax", "neck": "lowerneck", "head": "head",
@@ -102,12 +107,20 @@ def main() -> None:
         for source in ("cmu_daz", "bandai"):
             rs = [r for r in manifest if r["source"] == source]
             rng.shuffle(rs)
-            reps, t0, frames = [], time.perf_counter(), 0
+            reps, t0, frames, det = [], time.perf_counter(), 0, []
             for r in rs[: args.per_source]:
-                imp = import_motion(data / r["path"].removeprefix("data/"), rest)
+                path = data / r["path"].removeprefix("data/")
+                imp = import_motion(path, rest)
                 reps.append(imp.report)
                 frames += imp.report.frames
-            rows.append(row_from(f"corpus {source}", reps, None, time.perf_counter() - t0, frames))
+                # The corpus maps declare cm and Y up; run the detectors anyway to measure them.
+                motion, smap = read_bvh(path), imp.retargeted.smap
+                det.append((detect_up(motion, smap)["axis"], detect_units(leg_length(motion, smap))["name"]))
+            row = row_from(f"corpus {source}", reps, None, time.perf_counter() - t0, frames)
+            row["detected_without_declaration"] = {
+                "up_y": sum(d[0] == "y" for d in det), "units_cm": sum(d[1] == "cm" for d in det), "clips": len(det),
+                "other": sorted({f"{a}/{u}" for a, u in det if (a, u) != ("y", "cm")})}
+            rows.append(row)
     local, pelvis = synthetic_smpl_motion(template_rest_joints(), T=args.frames, seed=0)
     tmpl = template_rest_joints()
     with tempfile.TemporaryDirectory() as tmp:
@@ -145,6 +158,11 @@ def main() -> None:
                   "-" if r["truth_err_deg"] is None else f"{r['truth_err_deg']:.3g}",
                   f"{r['frames_per_s']:.0f}" if r["frames_per_s"] else "-")
     Console(width=200).print(t)
+    for r in rows:
+        if "detected_without_declaration" in r:
+            d = r["detected_without_declaration"]
+            print(f"{r['skeleton']}: detectors without the map's declaration: up y in {d['up_y']}/{d['clips']}, "
+                  f"units cm in {d['units_cm']}/{d['clips']} clips; other: {d['other'] or 'none'}")
     out = {"command": "python benchmarks/motion_import.py " + " ".join(sys.argv[1:]), "body_asset": asset,
            "machine": platform.platform(), "threads": 1, "per_source": args.per_source, "rows": rows}
     args.out.parent.mkdir(parents=True, exist_ok=True)
