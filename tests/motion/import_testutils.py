@@ -53,7 +53,8 @@ def custom_skeleton_motion(local: torch.Tensor, pelvis: torch.Tensor, rest: torc
 
     Returns a dict: ``names`` (SMPL names), ``parents``, ``rest_pos`` ``(J, 3)``, ``G`` ``(T, J, 3, 3)``
     world rotations of the custom joints, ``pos`` ``(T, J, 3)`` world positions (file units),
-    ``smpl_pos`` ``(T, J, 3)`` the same positions in metres, Y up (the source truth).
+    ``smpl_pos`` ``(T, J, 3)`` the same positions in metres, Y up (the source truth), ``ends``:
+    joint -> End Site vector (the wrists', towards SMPL's hand joints).
     """
     G_s, P_s = smpl_world(local, pelvis, rest)
     GA, XA = apose_globals(rest, arm_down_deg)
@@ -69,7 +70,11 @@ def custom_skeleton_motion(local: torch.Tensor, pelvis: torch.Tensor, rest: torc
     G_c = W @ G_c @ W.T
     rest_pos = (XA[idx] - XA[0]) @ W.T * scale
     pos = P_s[:, idx] @ W.T * scale
-    return {"names": TREE_JOINTS, "parents": parents, "rest_pos": rest_pos, "G": G_c, "pos": pos, "smpl_pos": P_s[:, idx]}
+    # The wrists' End Sites point to SMPL's hand joints (the hand's direction, as in real rigs).
+    ends = {TREE_JOINTS.index(w): (XA[JOINT_INDEX[h]] - XA[JOINT_INDEX[w]]) @ W.T * scale
+            for w, h in (("left_wrist", "left_hand"), ("right_wrist", "right_hand"))}
+    return {"names": TREE_JOINTS, "parents": parents, "rest_pos": rest_pos, "G": G_c, "pos": pos, "smpl_pos": P_s[:, idx],
+            "ends": ends}
 
 
 def custom_bvh_text(sk: dict, names: dict[str, str] = BIPED_NAMES, fps: float = 30.0) -> str:
@@ -97,7 +102,8 @@ def custom_bvh_text(sk: dict, names: dict[str, str] = BIPED_NAMES, fps: float = 
             vals.append(torch.rad2deg(matrix_to_euler(L, "ZXY")))
     chans = [("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")] * 2 + \
         [("Zrotation", "Xrotation", "Yrotation")] * (J - 1)
-    leaves = {i + 1: list(0.3 * offsets[i + 1]) for i in range(J) if i not in sk["parents"]}
+    ends = sk.get("ends", {})
+    leaves = {i + 1: (ends[i].tolist() if i in ends else list(0.3 * offsets[i + 1])) for i in range(J) if i not in sk["parents"]}
     return bvh_text(out_names, parents, offsets, chans, torch.cat(vals, -1).numpy(), 1 / fps, leaves)
 
 
@@ -158,7 +164,7 @@ def joint_tree_to_asf_amc(sk: dict, names: dict[str, str] | None = None, length_
         else:
             parent_bone = end_of[j]  # the parent's bone ends where this joint is
         c = prim[j]
-        v = X[c] - X[j] if c is not None else end_len * (X[j] - X[p])
+        v = X[c] - X[j] if c is not None else (sk["ends"][j].to(torch.float64) if j in sk.get("ends", {}) else end_len * (X[j] - X[p]))
         bname = nm[sk["names"][j]].replace(" ", "_")
         joint_bone[sk["names"][j]] = bname
         bones.append({"name": bname, "parent": parent_bone, "vec": v, "rel": G[:, p].transpose(-1, -2) @ G[:, j], "animated": True})

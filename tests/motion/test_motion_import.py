@@ -12,6 +12,7 @@ from wearpose.body.kinematics import forward_kinematics
 from wearpose.body.skeleton import JOINT_NAMES
 from wearpose.errors import InputFileError, WearposeError
 from wearpose.export import write_smpl_bvh
+from wearpose.geometry import geodesic_angle
 from wearpose.motion import MotionSequence, read_bvh, template_rest_joints
 from wearpose.motion.importer import UP_AXES, detect_units, detect_up, import_motion, import_paths, parse_units
 from wearpose.motion.mapping import CMU_ASF, MIXAMO, RIGIFY, auto_map, builtin_match, split_name
@@ -67,6 +68,25 @@ def test_biped_apose_mm_zup_bvh(tmp_path, biped) -> None:
     assert r.translation_scale == pytest.approx(1.0, abs=1e-4)
     pelvis = imp.sequence.trans.double() + REST[0]
     assert torch.allclose(pelvis, biped["smpl_pos"][:, 0], atol=2e-3)
+
+
+@pytest.mark.parametrize("fmt", ["bvh", "asf"])
+def test_apose_rig_gives_back_the_smpl_pose_parameters(tmp_path, smpl_motion, biped, fmt: str) -> None:
+    """Rest-pose correction keeps SMPL pose parameters meaningful: the A-pose, Z-up, mm rig
+    written from known SMPL motion imports (on the same rest skeleton) to the same local
+    rotations, joint by joint (hands excepted: the rig has none)."""
+    if fmt == "bvh":
+        (tmp_path / "a.bvh").write_text(custom_bvh_text(biped))
+        imp = import_motion(tmp_path / "a.bvh", REST)
+    else:
+        asf, amc, _ = joint_tree_to_asf_amc(biped, BIPED_NAMES, seed=7)
+        (tmp_path / "a.asf").write_text(asf)
+        (tmp_path / "a_01.amc").write_text(amc)
+        imp = import_motion(tmp_path / "a_01.amc", REST)
+    local, _ = smpl_motion
+    err = torch.rad2deg(geodesic_angle(imp.sequence.pose.double(), local)).amax(0)
+    worst = {n: round(float(e), 4) for n, e in zip(JOINT_NAMES, err) if e > 0.01 and "hand" not in n}
+    assert not worst, worst
 
 
 def test_biped_apose_mm_zup_asf_amc(tmp_path, biped) -> None:
