@@ -46,6 +46,8 @@ def test_motion_import_cli(tmp_path, user_folder) -> None:
     human = runner.invoke(app, ["motion", "import", str(user_folder / "actor1"), "--out", str(tmp_path / "o2")])
     assert human.exit_code == 0 and "joint map of walk.bvh" in human.stdout and "Bip01" in human.stdout
     assert runner.invoke(app, ["motion", "import", "--help"]).exit_code == 0
+    (tmp_path / "empty").mkdir()
+    assert runner.invoke(app, ["motion", "import", str(tmp_path / "empty")]).exit_code == 1
 
 
 def test_prepare_user_folder(tmp_path, user_folder) -> None:

@@ -76,8 +76,11 @@ def motion_import(
     from wearpose.body import BodyModel
     from wearpose.motion import collect_motion_files, import_paths
 
-    rest = BodyModel(body).rest_joints().detach().double()
     n = len(collect_motion_files(paths))
+    if n == 0:
+        err_console.print(f"[red]error:[/] no motion files (.bvh, .bvh.gz, .amc, .amc.gz) in {', '.join(map(str, paths))}")
+        raise typer.Exit(code=1)
+    rest = BodyModel(body).rest_joints().detach().double()
     columns = (TextColumn("[bold]importing motion"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TextColumn("{task.description}"))
     with Progress(*columns, console=err_console, disable=as_json or n == 0, transient=True) as bar:
