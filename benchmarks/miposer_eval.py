@@ -50,6 +50,8 @@ def _mim_md(r: dict) -> str:
         a, h = v["all"], v["interfered_frames"]
         f = lambda s: f"{s['mpjpe_upper_cm']:.2f}" if s.get("frames") else "-"  # noqa: E731
         rows.append(f"| {name} | {f(a)} | {a.get('frames', 0)} | {f(h)} | {h.get('frames', 0)} |")
+    rows += ["", "MIM settings: " + "; ".join(f"{k}: position={v.get('position')}, rotation={v.get('rotation')}, "
+                                             f"threshold {v.get('threshold_deg')} deg" for k, v in r["mim_variants"].items())]
     d = r["detection_any_wrist"]
     prec = d["detected_and_true"] / d["detected"] if d["detected"] else float("nan")
     rec = d["detected_and_true"] / d["interfered_true"] if d["interfered_true"] else float("nan")
@@ -116,8 +118,14 @@ def main(argv: list[str] | None = None) -> int:
         con.print(md)
     if not args.skip_e2e:
         con.print(f"end-to-end with/without MIM: every {args.e2e_clip_stride}th {args.split} clip")
+        from wearpose.interference import MIMConfig
+
+        # MIM's default (N-BEATS + accelerometer fusion for the position, gyro for the rotation), then
+        # the other position methods of Sec. 3.3 and the rotation-only correction.
+        variants = {"MIM": MIMConfig(), "MIM odometry": MIMConfig(position="odometry"),
+                    "MIM rotation-only": MIMConfig(position="none")}
         r = evaluate_end_to_end(est, args.split, args.limit, clip_stride=args.e2e_clip_stride, seed=args.seed,
-                                frame_stride=args.e2e_frame_stride, progress=prog)
+                                frame_stride=args.e2e_frame_stride, progress=prog, mim_variants=variants)
         r.update(command=command, weights=wpath, machine=machine)
         md = ("# MI-Poser end-to-end upper-body error under metal interference, with and without MIM\n\n"
               f"`{command}`\n\n{r['clips']} test clips (every {args.e2e_clip_stride}th), every {args.e2e_frame_stride}th "

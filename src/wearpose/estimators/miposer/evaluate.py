@@ -21,6 +21,7 @@ IMUs, no T-pose needed: segment-calibrated orientations).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -182,7 +183,7 @@ def interference_recording(motion: Any, est: Any, cs: Any, which: str, seed: int
 def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None, *, clip_stride: int = 1,
                         condition: str = "standard", seed: int = 0, frame_stride: int = 1, mim_config: Any = None,
                         store: Any = None, progress: Callable[[int, int], None] | None = None,
-                        references: bool = True) -> dict[str, Any]:
+                        references: bool = True, mim_variants: dict[str, Any] | None = None) -> dict[str, Any]:
     """End-to-end upper-body error under simulated metal interference, with and without MIM.
 
     Per clip (every ``clip_stride``-th of ``split``): the T-pose + clip motion at 60 Hz, the wrist
@@ -193,7 +194,10 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
     calibrates on its own T-pose (the first second of every scene is metal-free). Errors as
     :func:`evaluate_miposer` (cm, upper body, root-aligned, clip frames), over all evaluated
     frames and over the frames where a wrist's *true* EM error exceeds 2 cm or 5 deg
-    ("interfered frames"). ``references=False`` skips the two interference-free runs.
+    ("interfered frames"). ``references=False`` skips the two interference-free runs;
+    ``mim_variants`` (name -> ``MIMConfig``, default ``{"MIM": mim_config}``) adds one interfered
+    run per MIM setting (``"<condition>+<name>"``); the interference-free reference with MIM and
+    the detection counts use the first.
     """
     from wearpose.calibration import calibrate
     from wearpose.estimators.miposer.data import calibrated_inputs, raw_inputs, tpose_then
@@ -203,8 +207,11 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
 
     store = store or CorpusStore()
     ids = store.clips(split=split)[:: max(1, clip_stride)][: limit or None]
-    runs = {"true": ("true", False), "true+MIM": ("true", True)} if references else {}
-    runs.update({f"{condition}": ("measured", False), f"{condition}+MIM": ("measured", True)})
+    variants = dict(mim_variants or {"MIM": mim_config})
+    first = next(iter(variants))
+    runs = {"true": ("true", None), f"true+{first}": ("true", first)} if references else {}
+    runs[condition] = ("measured", None)
+    runs.update({f"{condition}+{v}": ("measured", v) for v in variants})
     tables = {k: ErrorTable() for k in runs}
     hit = {k: ErrorTable() for k in runs}
     sites = [s.site for s in get_kit(est.kit_name).of_kind("em6dof")]
@@ -229,10 +236,10 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
             for run, (which, use_mim) in runs.items():
                 rec = interference_recording(mm, est, cs, which, s)
                 info = None
-                if use_mim:
+                if use_mim is not None:
                     from wearpose.estimators.miposer.mim import mitigate_recording
 
-                    rec, info = mitigate_recording(rec, est.kit_name, mim_config, imu)
+                    rec, info = mitigate_recording(rec, est.kit_name, variants[use_mim], imu)
                     fallback = info.get("fallback", fallback)
                 res = calibrate(rec, "miposer-tpose", window=window, body=est.body)
                 raw = raw_inputs(rec, est.kit_name, est.fps)
@@ -247,7 +254,7 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
                 sel = b60[f] if len(b60) == raw["valid"].shape[0] else torch.zeros(len(f), dtype=torch.bool)
                 if bool(sel.any()):
                     hit[run].add(mtype, err[sel])
-                if run == f"{condition}+MIM" and info is not None:
+                if run == f"{condition}+{first}" and info is not None:
                     flag = np.zeros_like(bad120)
                     for n in names:
                         flag[: len(info[n]["interfered"])] |= info[n]["interfered"][: len(flag)]
@@ -261,6 +268,7 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
         est.mim = mim_was
     return {"split": split, "clips": len(ids), "clip_stride": clip_stride, "condition": condition, "seed": seed,
             "frame_stride": frame_stride, "mim_position_fallback": fallback,
+            "mim_variants": {k: (dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v) for k, v in variants.items()},
             "runs": {r: {"all": tables[r].summary(), "interfered_frames": hit[r].summary()} for r in runs},
             "detection_any_wrist": det, "seconds": time.time() - t0}
 
