@@ -134,6 +134,7 @@ class MIM:
         self._p_out: np.ndarray | None = None
         self._v: np.ndarray | None = None
         self._forecast: np.ndarray | None = None
+        self._k = 0
         self._degraded = False
         self._R_long: np.ndarray | None = None
         self._t_degraded = 0.0
@@ -148,8 +149,10 @@ class MIM:
             return p_em
         if m == "hold":
             return last
+        if onset:
+            self._forecast = None
         if m == "odometry":
-            if onset:
+            if onset or self._v is None:
                 tr = list(self._trusted)
                 k = len(tr) - 1
                 self._v = (tr[-1] - tr[0]) / (k * dt) if k >= 1 else np.zeros(3)
@@ -160,7 +163,7 @@ class MIM:
         if len(self._hist) < self.input_len:  # not enough history for the forecaster yet
             return last
         if m == "nbeats":
-            if onset:
+            if onset or self._forecast is None:
                 self._forecast = self._forecaster(np.asarray(self._hist))
                 self._k = 0
             self._k += 1

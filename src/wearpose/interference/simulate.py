@@ -93,7 +93,7 @@ class ConditionPreset:
 
 CONDITIONS: dict[str, ConditionPreset] = {
     "open-space": ConditionPreset("open-space"),
-    "standard": ConditionPreset("standard", encounters_per_min=20.0, closest=(0.0, 0.15), eta=(0.7, 1.0)),
+    "standard": ConditionPreset("standard", encounters_per_min=20.0, closest=(0.02, 0.2), eta=(0.7, 1.0)),
     "extreme": ConditionPreset("extreme", encounters_per_min=30.0, closest=(0.0, 0.05), eta=(0.8, 1.0), carry_fraction=0.4,
                                carry_offset=(0.01, 0.04), carry_catalogue=("can", "phone", "tablet", "laptop")),
 }

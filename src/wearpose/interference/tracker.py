@@ -13,9 +13,9 @@ top eigenvector the direction ``u`` up to sign; then ``R = (V D^{-1})^T`` projec
 
 **Hemisphere ambiguity**: ``D(-p) = D(p)``, so ``(R, p)`` and ``(R, -p)`` give identical voltages.
 Like commercial trackers (a configured operating hemisphere, then continuity) the tracker picks
-the sign with ``p . hemisphere >= 0`` at acquisition and afterwards the sign on the previous
-position's side (``p . p_prev >= 0``, "hemisphere tracking"), since both signs fit the voltages
-equally. Severe distortion can still pull the solver to a distant local minimum: that failure
+the sign with ``p . hemisphere >= 0`` at acquisition and afterwards the sign on the side of the
+last position solved from an undistorted field (relative residual below ``good_residual``;
+"hemisphere tracking"), since both signs fit the voltages equally. Severe distortion can still pull the solver to a distant local minimum: that failure
 mode is part of what metal does to real trackers.
 """
 
@@ -83,6 +83,8 @@ class TrackerConfig:
         reacquire_rel_residual: relative residual ``|V - V_model| / |V|`` above which the tracker
             also tries the closed-form solution and keeps the better fit.
         max_nfev: LM iterations (evaluations) per frame.
+        good_residual: relative residual below which a solution counts as undistorted and
+            becomes the hemisphere reference.
         solver: ``"scipy"`` (``scipy.optimize.least_squares``, method ``"lm"``) or ``"numpy"``
             (the same problem by an in-house Levenberg-Marquardt loop; identical solutions to
             ~1e-9, several times faster, used for bulk simulation).
@@ -92,6 +94,7 @@ class TrackerConfig:
     reacquire_rel_residual: float = 0.05
     max_nfev: int = 50
     solver: str = "scipy"
+    good_residual: float = 5e-3
 
 
 class EMTracker:
@@ -104,6 +107,7 @@ class EMTracker:
     def reset(self) -> None:
         self._R: np.ndarray | None = None
         self._p: np.ndarray | None = None
+        self._p_good: np.ndarray | None = None
 
     @staticmethod
     def _residual(x: np.ndarray, R0: np.ndarray, V: np.ndarray) -> np.ndarray:
@@ -174,14 +178,18 @@ class EMTracker:
         else:
             R, p, c = self._fit(V, self._R, self._p)
             if c / vn > self.config.reacquire_rel_residual:
-                R0, p0 = closed_form_pose(V, hemi, near=self._p)
+                R0, p0 = closed_form_pose(V, hemi, near=self._p_good if self._p_good is not None else self._p)
                 R2, p2, c2 = self._fit(V, R0, p0)
                 if c2 < c:
                     R, p, c = R2, p2, c2
-        if self._p is not None and float(p @ self._p) < 0:
-            p = -p  # hemisphere tracking: (R, p) and (R, -p) fit equally; keep the side we were on
-        elif self._p is None and float(p @ hemi) < 0:
+        # hemisphere tracking: (R, p) and (R, -p) fit equally; keep the side of the last position
+        # solved from an undistorted field (small residual), so a solver dragged around the
+        # source by heavy distortion comes back on the right side once the field is clean again
+        ref = self._p_good if self._p_good is not None else hemi
+        if float(p @ ref) < 0:
             p = -p
+        if c / vn < self.config.good_residual:
+            self._p_good = p.copy()
         self._R, self._p = R, p
         return R, p, c / vn
 
