@@ -6,11 +6,11 @@ pose-prior VAE on the corpus train split (:class:`PosePriorVAE`: the 6D rotation
 estimated body joints, MLP encoder/decoder 256 wide, 32-D latent, Gaussian prior; KL weight
 :data:`KL_WEIGHT`). As with VPoser, the pose is optimised in the latent space:
 
-    min_{z, r, beta}  L_r(decode(z), r, beta) + lambda_z ||z||^2 + lambda_beta ||beta||^2
+    min_{z, beta}  L_r(decode(z), beta) + lambda_z ||z||^2 + lambda_beta ||beta||^2
 
-with ``r`` the root orientation (6D) relative to the EM source, initialised at the identity
-(the source rides on the lower back) and every frame warm-started from the previous one
-(tracking). ``torch.optim.LBFGS(line_search_fn="strong_wolfe")``, ``max_iter`` iterations per
+L_r does not depend on the root orientation (the measurements are relative to the EM source,
+which rides on the body), so the root is set after the fit so that the body's source site
+coincides with the source frame. Every frame is warm-started from the previous one (tracking). ``torch.optim.LBFGS(line_search_fn="strong_wolfe")``, ``max_iter`` iterations per
 frame. Slow by nature (an optimisation per frame): evaluate on a subset.
 
 Train the prior: ``python -m wearpose.estimators.empose.optimization --out runs/poseprior_cpu``
@@ -138,7 +138,8 @@ class LbfgsEstimator(EmposeEstimator):
             warm = (torch.zeros(1, LATENT, device=dev), matrix_to_rot6d(torch.eye(3, device=dev))[None],
                     torch.zeros(1, 10, device=dev))
         z, r, b = (w.detach().clone().requires_grad_(True) for w in warm)
-        opt = torch.optim.LBFGS([z, r, b], lr=1.0, max_iter=self.max_iter, line_search_fn="strong_wolfe")
+        r.requires_grad_(False)  # L_r does not see the root (below)
+        opt = torch.optim.LBFGS([z, b], lr=1.0, max_iter=self.max_iter, line_search_fn="strong_wolfe")
 
         def omega() -> torch.Tensor:
             return torch.cat([r, self.model.decode(z), b], -1)  # root first: PRED_JOINTS order
@@ -157,6 +158,12 @@ class LbfgsEstimator(EmposeEstimator):
         with torch.no_grad():
             om = omega()
             Rl, beta = decode_omega(om, "rot6d")
+            # Measurements are relative to the source, which rides on the body: L_r is invariant
+            # to the root orientation. The root is the one that puts the body's own source site
+            # at the identity of the source frame (what the measurements are expressed in).
+            src = self.sites["<em_source>"]
+            R_site = self.body.sites(Rl, beta, None, [src]).rotations[:, 0]
+            Rl[:, 0] = R_site.transpose(-1, -2) @ Rl[:, 0]
             ph, Rh, _ = self.sensors(Rl, beta, offR[None], offt[None])
             rec = float(reconstruction_loss(ph, Rh, p[None], R[None])[0])
         return Rl[0], beta[0], (z.detach(), r.detach(), b.detach()), rec
