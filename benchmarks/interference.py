@@ -4,7 +4,8 @@ Run::
 
     python benchmarks/interference.py --stage simulate --split val     # cache (slow: ~2-3 ms/frame)
     python benchmarks/interference.py --stage simulate --split test
-    python benchmarks/interference.py --stage report                   # tables -> results/interference_*
+    python benchmarks/interference.py --stage report --conditions standard   # per condition (parallel ok)
+    python benchmarks/interference.py --stage tables                   # merge -> results/interference_*
 
 Sessions: consecutive clips (sorted ids) of a corpus split grouped until >= ``--session-s``
 seconds (MI-Poser sessions last ~1 min); each clip is simulated separately (the tracker restarts
@@ -55,7 +56,8 @@ PAPER_TABLE3 = {
 }
 PAPER_ROT_WINDOW = {"open-space": (6.92, 2.01), "standard": (8.88, 3.81)}
 E_P_SWEEP_CM = (0.5, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0)
-THRESHOLDS_DEG = (0.4, 0.5, 0.6, 0.8, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0)
+THRESHOLDS_DEG = (0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
+CORRECTION_THRESHOLDS_DEG = (0.75, 1.0, 1.5, 2.0, 3.0)
 METHODS = ("none", "odometry", "nbeats", "fusion")
 
 
@@ -178,73 +180,39 @@ def _per_session(clips, values) -> list[np.ndarray]:
     return [values[sess == s] for s in sorted(set(sess.tolist()))]
 
 
-def report(forecaster: str, window_cm: float, table_e_p_cm: float) -> None:
+def part_path(cond: str) -> Path:
+    return Path("runs/interference_cache") / f"report_{cond}.json"
+
+
+def report(forecaster: str, window_cm: float, table_e_p_cm: float, conds: list[str]) -> None:
+    """Evaluate conditions (each written to its own part file, so conditions can run in parallel)."""
+    for cond in conds:
+        res: dict = {"command": "python " + " ".join(sys.argv), "forecaster": forecaster, "window_e_p_cm": window_cm,
+                     "machine": {"platform": platform.platform(), "load_average_1m": os.getloadavg()[0]}}
+        cond_rows, det_rows, sweep_rows, corr_rows = {}, {}, {}, {}
+        _report_condition(cond, forecaster, window_cm, table_e_p_cm, res, cond_rows, det_rows, sweep_rows, corr_rows)
+        res.update(conditions=cond_rows, detection_table=det_rows, detection_sweep=sweep_rows, correction=corr_rows)
+        part_path(cond).write_text(json.dumps(res, indent=1, default=float))
+
+
+def tables(table_e_p_cm: float) -> None:
+    """Merge the per-condition parts into ``benchmarks/results/interference_*.{md,json}``."""
     con = Console()
-    res: dict = {"command": "python " + " ".join(sys.argv), "forecaster": forecaster, "window_e_p_cm": window_cm,
-                 "machine": {"platform": platform.platform(), "load_average_1m": os.getloadavg()[0]}}
-    cond_rows, det_rows, sweep_rows, corr_rows = {}, {}, {}, {}
+    res: dict = {}
     for cond in CONDITIONS:
-        if not cache_path("test", cond).exists():
+        if not part_path(cond).exists():
             continue
-        test = load_cache("test", cond)
-        val = load_cache("val", cond) if cache_path("val", cond).exists() else None
-        cond_rows[cond] = condition_stats(test)
-        err_t = np.concatenate([c["pos_error"] for c in test])
-        flags_t = detection_flags(test)
-        flags_v = detection_flags(val) if val else None
-        err_v = np.concatenate([c["pos_error"] for c in val]) if val else None
-        sweep = []
-        for e in E_P_SWEEP_CM:
-            y_t = err_t > e / 100
-            oracle = max(((th, binary_metrics(f, y_t)) for th, f in flags_t.items()), key=lambda x: x[1]["mcc"])
-            row = {"e_p_cm": e, "oracle_threshold_deg": oracle[0], "oracle": oracle[1]}
-            if val:
-                y_v = err_v > e / 100
-                th_v = max(flags_v, key=lambda th: binary_metrics(flags_v[th], y_v)["mcc"])
-                row["val_threshold_deg"] = th_v
-                row["test"] = binary_metrics(flags_t[th_v], y_t)
-            sweep.append(row)
-        sweep_rows[cond] = sweep
-        det_rows[cond] = next(r for r in sweep if abs(r["e_p_cm"] - table_e_p_cm) < 1e-9)
-        # correction: threshold chosen on val to minimise the in-window rotation error
-        w_t = err_t > window_cm / 100
-        rot_raw = np.concatenate([c["rot_error"] for c in test])
-        best_th = 1.0
-        if val:
-            w_v = err_v > window_cm / 100
-            if w_v.any():
-                rv_raw = np.concatenate([c["rot_error"] for c in val])
-                scores = {}
-                for th in (0.5, 0.75, 1.0, 1.5, 2.0, 3.0):
-                    r = run_mim(val, MIMConfig(threshold_deg=th, position="none"))
-                    scores[th] = float(r["rot_error"][w_v].mean())
-                best_th = min(scores, key=scores.get)
-        methods = {}
-        for m in METHODS:
-            r = run_mim(test, MIMConfig(threshold_deg=best_th, position=m, forecaster=forecaster), timing=(cond == "standard"))
-            ps = _per_session(test, r["pos_error"])
-            rs = _per_session(test, r["rot_error"])
-            methods[m] = {
-                "mean_pos_cm": _ms(np.array([100 * x.mean() for x in ps])), "max_pos_cm": _ms(np.array([100 * x.max() for x in ps])),
-                "mean_rot_deg": _ms(np.array([np.degrees(x.mean()) for x in rs])), "max_rot_deg": _ms(np.array([np.degrees(x.max()) for x in rs])),
-                "window_pos_cm": float(100 * r["pos_error"][w_t].mean()) if w_t.any() else None,
-                "window_rot_deg": float(np.degrees(r["rot_error"][w_t].mean())) if w_t.any() else None,
-                "corrected_fraction": float(r["corrected"].mean()), "degraded_fraction": float(r["degraded"].mean()),
-            }
-            if "times" in r:
-                res.setdefault("latency_ms", {})[m] = {
-                    "all_frames_mean": float(1e3 * np.concatenate([r["times"], r["corr_times"]]).mean()),
-                    "uncorrected_mean": float(1e3 * r["times"].mean()), "uncorrected_p99": float(1e3 * np.percentile(r["times"], 99)),
-                    "corrected_mean": float(1e3 * r["corr_times"].mean()) if len(r["corr_times"]) else None,
-                    "corrected_p99": float(1e3 * np.percentile(r["corr_times"], 99)) if len(r["corr_times"]) else None,
-                    "corrected_frames": int(len(r["corr_times"]))}
-        raw_w_rot = float(np.degrees(rot_raw[w_t].mean())) if w_t.any() else None
-        corr_rows[cond] = {"threshold_deg": best_th, "window_frames": int(w_t.sum()), "window_raw_rot_deg": raw_w_rot,
-                           "window_raw_pos_cm": float(100 * err_t[w_t].mean()) if w_t.any() else None,
-                           "rotation_reduction": (1 - methods["none"]["window_rot_deg"] / raw_w_rot) if raw_w_rot else None,
-                           "methods": methods}
-    res.update(conditions=cond_rows, detection_table=det_rows, detection_sweep=sweep_rows, correction=corr_rows,
-               paper={"table1": PAPER_TABLE1, "table3": PAPER_TABLE3, "rotation_window_deg": PAPER_ROT_WINDOW})
+        part = json.loads(part_path(cond).read_text())
+        for k in ("conditions", "detection_table", "detection_sweep", "correction"):
+            res.setdefault(k, {}).update(part[k])
+        if "latency_ms" in part:
+            res["latency_ms"] = part["latency_ms"]
+        res.setdefault("commands", {})[cond] = part["command"]
+        res["forecaster"], res["window_e_p_cm"] = part["forecaster"], part["window_e_p_cm"]
+        res.setdefault("machine", {})[cond] = part["machine"]
+    res["command"] = "; ".join(dict.fromkeys(res["commands"].values())) + "; python " + " ".join(sys.argv)
+    res["paper"] = {"table1": PAPER_TABLE1, "table3": PAPER_TABLE3, "rotation_window_deg": PAPER_ROT_WINDOW}
+    res["machine"]["load_average_1m"] = max(m["load_average_1m"] for m in res["machine"].values() if isinstance(m, dict))
     RESULTS.mkdir(exist_ok=True)
     for name in ("conditions", "detection", "correction"):
         (RESULTS / f"interference_{name}.json").write_text(json.dumps(res, indent=1, default=float))
@@ -252,6 +220,66 @@ def report(forecaster: str, window_cm: float, table_e_p_cm: float) -> None:
     con.print((RESULTS / "interference_conditions.md").read_text())
     con.print((RESULTS / "interference_detection.md").read_text())
     con.print((RESULTS / "interference_correction.md").read_text())
+
+
+def _report_condition(cond, forecaster, window_cm, table_e_p_cm, res, cond_rows, det_rows, sweep_rows, corr_rows) -> None:
+    """One condition: statistics, detection (val-chosen threshold on test) and correction per method."""
+    test = load_cache("test", cond)
+    val = load_cache("val", cond) if cache_path("val", cond).exists() else None
+    cond_rows[cond] = condition_stats(test)
+    err_t = np.concatenate([c["pos_error"] for c in test])
+    flags_t = detection_flags(test)
+    flags_v = detection_flags(val) if val else None
+    err_v = np.concatenate([c["pos_error"] for c in val]) if val else None
+    sweep = []
+    for e in E_P_SWEEP_CM:
+        y_t = err_t > e / 100
+        oracle = max(((th, binary_metrics(f, y_t)) for th, f in flags_t.items()), key=lambda x: x[1]["mcc"])
+        row = {"e_p_cm": e, "oracle_threshold_deg": oracle[0], "oracle": oracle[1]}
+        if val:
+            y_v = err_v > e / 100
+            th_v = max(flags_v, key=lambda th: binary_metrics(flags_v[th], y_v)["mcc"])
+            row["val_threshold_deg"] = th_v
+            row["test"] = binary_metrics(flags_t[th_v], y_t)
+        sweep.append(row)
+    sweep_rows[cond] = sweep
+    det_rows[cond] = next(r for r in sweep if abs(r["e_p_cm"] - table_e_p_cm) < 1e-9)
+    # correction: threshold chosen on val to minimise the in-window rotation error
+    w_t = err_t > window_cm / 100
+    rot_raw = np.concatenate([c["rot_error"] for c in test])
+    best_th = 1.0
+    if val:
+        w_v = err_v > window_cm / 100
+        if w_v.any():
+            scores = {}
+            for th in CORRECTION_THRESHOLDS_DEG:
+                r = run_mim(val, MIMConfig(threshold_deg=th, position="none"))
+                scores[th] = float(r["rot_error"][w_v].mean())
+            best_th = min(scores, key=scores.get)
+    methods = {}
+    for m in METHODS:
+        r = run_mim(test, MIMConfig(threshold_deg=best_th, position=m, forecaster=forecaster), timing=(cond == "standard"))
+        ps = _per_session(test, r["pos_error"])
+        rs = _per_session(test, r["rot_error"])
+        methods[m] = {
+            "mean_pos_cm": _ms(np.array([100 * x.mean() for x in ps])), "max_pos_cm": _ms(np.array([100 * x.max() for x in ps])),
+            "mean_rot_deg": _ms(np.array([np.degrees(x.mean()) for x in rs])), "max_rot_deg": _ms(np.array([np.degrees(x.max()) for x in rs])),
+            "window_pos_cm": float(100 * r["pos_error"][w_t].mean()) if w_t.any() else None,
+            "window_rot_deg": float(np.degrees(r["rot_error"][w_t].mean())) if w_t.any() else None,
+            "corrected_fraction": float(r["corrected"].mean()), "degraded_fraction": float(r["degraded"].mean()),
+        }
+        if "times" in r:
+            res.setdefault("latency_ms", {})[m] = {
+                "all_frames_mean": float(1e3 * np.concatenate([r["times"], r["corr_times"]]).mean()),
+                "uncorrected_mean": float(1e3 * r["times"].mean()), "uncorrected_p99": float(1e3 * np.percentile(r["times"], 99)),
+                "corrected_mean": float(1e3 * r["corr_times"].mean()) if len(r["corr_times"]) else None,
+                "corrected_p99": float(1e3 * np.percentile(r["corr_times"], 99)) if len(r["corr_times"]) else None,
+                "corrected_frames": int(len(r["corr_times"]))}
+    raw_w_rot = float(np.degrees(rot_raw[w_t].mean())) if w_t.any() else None
+    corr_rows[cond] = {"threshold_deg": best_th, "window_frames": int(w_t.sum()), "window_raw_rot_deg": raw_w_rot,
+                       "window_raw_pos_cm": float(100 * err_t[w_t].mean()) if w_t.any() else None,
+                       "rotation_reduction": (1 - methods["none"]["window_rot_deg"] / raw_w_rot) if raw_w_rot else None,
+                       "methods": methods}
 
 
 def _pm(x) -> str:
@@ -321,7 +349,7 @@ def write_markdown(res: dict, e_p: float) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--stage", choices=("simulate", "report"), required=True)
+    ap.add_argument("--stage", choices=("simulate", "report", "tables"), required=True)
     ap.add_argument("--split", default="test")
     ap.add_argument("--conditions", default=",".join(CONDITIONS))
     ap.add_argument("--session-s", type=float, default=60.0)
@@ -333,8 +361,10 @@ def main() -> None:
     torch.set_num_threads(1)
     if a.stage == "simulate":
         simulate_split(a.split, a.session_s, a.sessions, a.conditions.split(","))
+    elif a.stage == "report":
+        report(a.forecaster, a.window_cm, a.table_cm, a.conditions.split(","))
     else:
-        report(a.forecaster, a.window_cm, a.table_cm)
+        tables(a.table_cm)
 
 
 if __name__ == "__main__":

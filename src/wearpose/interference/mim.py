@@ -68,6 +68,7 @@ class MIMConfig:
         velocity_frames: frames of trusted EM positions the odometry's initial velocity is
             differenced over.
         level_tau_s: time constant of the interference level's low-pass, s.
+        max_speed: corrected positions move at most this fast, m/s (hand speeds stay below).
         release_deg: a degraded stretch ends when EM is back within this angle of the gyro chain.
         reanchor_s: longest gyro chain kept while degraded, s (bounds its drift).
     """
@@ -81,6 +82,7 @@ class MIMConfig:
     velocity_frames: int = 3
     level_tau_s: float = 0.1
     release_deg: float = 2.0
+    max_speed: float = 6.0
     reanchor_s: float = 10.0
 
     def __post_init__(self) -> None:
@@ -241,6 +243,12 @@ class MIM:
                     corrected = True
                     R_out = R_pred if cfg.rotation else R_em
                     p_out = self._position(p_em, acc, dt, onset=self._run == 1)
+                    if cfg.position != "none" and self._p_out is not None:
+                        # a hand moves at most max_speed: bounds a forecaster fed a distorted history
+                        step = p_out - self._p_out
+                        n = float(np.linalg.norm(step))
+                        if n > cfg.max_speed * dt:
+                            p_out = self._p_out + step * (cfg.max_speed * dt / n)
                 else:  # too long for a correction: notify instead, watch for its end
                     self._degraded = True
                     self._R_long = R_pred

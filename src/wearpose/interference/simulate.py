@@ -67,8 +67,9 @@ class ConditionPreset:
         carry_bout_s: ``(min, max)`` duration of one carrying bout, s.
         carry_offset: ``(min, max)`` distance of the carried object from the sensor, m.
         eta: ``(min, max)`` eddy-current efficiency drawn per object.
-        clean_start_s, clean_radius: no object within ``clean_radius`` m of the path of the first
-            ``clean_start_s`` s (sessions start clean, as MI-Poser's calibration phase).
+        clean_start_s, clean_tolerance: no static object perturbs the field by more than
+            ``clean_tolerance`` (relative) during the first ``clean_start_s`` s (sessions start
+            clean, as MI-Poser's calibration phase).
         voltage_noise: white voltage noise std (normalised units).
         coil_gain_sigma: per-session std of each sensor coil's gain error (fraction).
         coil_misalign_deg: per-session std of each sensor coil's axis misalignment, degrees.
@@ -85,7 +86,7 @@ class ConditionPreset:
     carry_catalogue: tuple[str, ...] = ("can", "phone")
     eta: tuple[float, float] = (0.5, 1.0)
     clean_start_s: float = 0.5
-    clean_radius: float = 0.15
+    clean_tolerance: float = 0.01
     voltage_noise: float = VOLTAGE_NOISE
     coil_gain_sigma: float = 0.005
     coil_misalign_deg: float = 0.5
@@ -175,8 +176,13 @@ def draw_scene(preset: ConditionPreset, traj: SiteTrajectories, rng: np.random.G
             gap = float(rng.uniform(*preset.closest))
             kind = str(rng.choice(preset.catalogue))
             ob = make_object(kind, P[t, s], d, gap, float(rng.uniform(*preset.eta)), rng)
-            if t_min > 0 and np.linalg.norm(ob.points[:, None] - P[None, :t_min, s], axis=-1).min() < preset.clean_radius:
-                continue  # it would interfere during the clean start
+            if t_min > 0:
+                # it must not disturb the clean start: relative field perturbation there below clean_tolerance
+                sl = slice(0, t_min)
+                prim = Scene().field_matrix(P[sl, s], traj.src_R.numpy()[sl], traj.src_p.numpy()[sl])
+                sec = Scene([ob]).field_matrix(P[sl, s], traj.src_R.numpy()[sl], traj.src_p.numpy()[sl], include_primary=False)
+                if float((np.linalg.norm(sec, axis=(1, 2)) / np.linalg.norm(prim, axis=(1, 2))).max()) > preset.clean_tolerance:
+                    continue
             scene.objects.append(ob)
         if preset.carry_fraction > 0:
             active = np.zeros(T, dtype=bool)
