@@ -70,8 +70,8 @@ def _summary_ms(x: list[float] | np.ndarray) -> dict[str, float | None]:
     a = np.asarray(x, dtype=np.float64)
     a = a[np.isfinite(a)]
     if not len(a):
-        return {"median": None, "p99": None, "max": None, "n": 0}
-    return {"median": round(float(np.median(a)), 3), "p99": round(float(np.percentile(a, 99)), 3),
+        return {"median": None, "mean": None, "p99": None, "max": None, "n": 0}
+    return {"median": round(float(np.median(a)), 3), "mean": round(float(a.mean()), 3), "p99": round(float(np.percentile(a, 99)), 3),
             "max": round(float(a.max()), 3), "n": int(len(a))}
 
 
@@ -122,7 +122,9 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
     Returns:
         dict: ``frames_sent``, ``poses_received``, ``frames_expected`` (sent minus those the
         server's stride skips), ``frames_lost`` (expected without a pose by the end of the
-        drain), ``drain_s`` (last frame sent -> last pose in), latency summaries in
+        drain; ``frames_lost_by_server``: of those, the ones the server gave up or dropped as
+        late, the rest were still queued), ``drain_s`` (last frame sent -> last pose in), latency
+        summaries in
         ms (``latency_ms`` end to end = send -> pose received; ``server_ms`` frame arrival ->
         pose sent, of which ``compute_ms`` is the estimator's step; ``transport_ms`` = end to end
         minus server), ``send_lag_ms`` (how late the sender was against the schedule), the
@@ -220,7 +222,9 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
     return {
         "subject": subject, "format": fmt, "rate_hz": st.rate, "sensors": len(st.names), "channels": list(st.channels),
         "frames_sent": len(sent), "frames_expected": len(expected), "poses_received": len(recv),
-        "frames_lost": len(expected) - len(got), "gave_up_waiting": gave_up, "drain_s": round(drain_s, 3),
+        "frames_lost": len(expected) - len(got),
+        "frames_lost_by_server": int(server_stats.get("lost", 0)) + int(server_stats.get("late", 0)),
+        "gave_up_waiting": gave_up, "drain_s": round(drain_s, 3),
         "frames_queued_at_server_at_end": server_stats.get("queue_now") if gave_up else 0,
         "invalid_pose_frames": sum(1 for s in got if not recv[s][1].valid),
         "latency_ms": _summary_ms(e2e), "server_ms": _summary_ms(srv), "compute_ms": _summary_ms(comp),
