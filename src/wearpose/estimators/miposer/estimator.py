@@ -129,7 +129,8 @@ class MiposerEstimator(Estimator):
         device: torch device.
         mim: run metal-interference mitigation on the wrist EM streams (needs
             :mod:`wearpose.interference`).
-        mim_config: a ``wearpose.interference.MIMConfig`` (default settings if None).
+        mim_config: a ``wearpose.interference.MIMConfig`` (None: detection + gyro rotation
+            correction, EM position kept; :func:`~wearpose.estimators.miposer.mim.default_mim_config`).
     """
 
     name = "miposer"

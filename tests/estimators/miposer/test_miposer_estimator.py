@@ -7,7 +7,7 @@ import warnings
 import pytest
 import torch
 
-from conftest import FakeStore, synthetic_motion
+from miposer_testutils import FakeStore, synthetic_motion
 from wearpose.errors import ConfigError
 from wearpose.estimators import get_estimator
 from wearpose.estimators.checkpoint import CheckpointMismatchError

@@ -1,11 +1,10 @@
-"""Fixtures of the MI-Poser tests: a tiny in-memory corpus of smooth synthetic motions."""
+"""Helpers of the MI-Poser tests: a tiny in-memory corpus of smooth synthetic motions."""
 
 from __future__ import annotations
 
 import math
 import zlib
 
-import pytest
 import torch
 
 from wearpose.geometry import axis_angle_to_matrix
@@ -44,7 +43,3 @@ class FakeStore:
     def entry(self, cid):
         return {"description": f"wave-{cid[-1]} (style: test)", "clip": cid}
 
-
-@pytest.fixture
-def store(tmp_path):
-    return FakeStore(tmp_path)
