@@ -3,6 +3,8 @@ single vs dual PD option passed through. A tiny untrained network drives it for 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 import torch
 
@@ -47,3 +49,27 @@ def test_single_pd_option_reaches_the_optimizer(est) -> None:
     assert est._physics_optimizer().config.dual_pd is False
     est.dual_pd = True
     assert est._physics_optimizer().config.dual_pd is True
+
+
+def _has_corpus() -> bool:
+    try:
+        from wearpose.motion import CorpusStore
+
+        return len(CorpusStore().clips(split="test")) > 0
+    except Exception:
+        return False
+
+
+@pytest.mark.corpus
+@pytest.mark.skipif(not _has_corpus(), reason="no prepared corpus store")
+def test_demo_on_a_test_clip(est, tmp_path) -> None:
+    from wearpose.estimators.pip.demo import run_demo
+    from wearpose.motion import CorpusStore
+
+    ck = est.save(tmp_path / "tiny.pt")
+    clip = next(c for c in CorpusStore().clips(split="test") if "walk" in c)
+    res = run_demo(clip, tmp_path / "demo", weights=str(ck), max_seconds=0.5)
+    assert Path(res["html"]).is_file() and res["frames"] == 22  # 30 frames at 60 Hz minus 4 at each end
+    m = res["metrics"]
+    assert {"sip_error_deg", "mesh_error_cm", "physics_grf_over_weight_pct", "physics_max_penetration_cm"} <= set(m)
+    assert all(k.endswith(("_deg", "_cm", "_km_s3", "_pct", "_nm", "_kg")) for k in m)

@@ -336,19 +336,23 @@ class PipEstimator(Estimator):
             self.model.eval()
             self._states = self._start_states()
             self._trans = init["trans"].clone()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         x = imu_features(acc, ori, self.config.acc_scale).to(self.device)
         out, self._states = self.model(x[None, None], self._states)
         dec = self._decode({k: v[0].cpu() for k, v in out.items()}, ori[5:6])
-        kin_ms = (time.perf_counter() - t0) * 1000
+        # wall and CPU time of this thread (the latter is less inflated on a busy machine)
+        kin_ms, kin_cpu_ms = (time.perf_counter() - t0) * 1000, (time.thread_time() - c0) * 1000
         extras: dict[str, Any] = {"frame": "world", "contacts": dec["contact"][0], "joint_vel": dec["vel"][0],
-                                  "kin_ms": kin_ms}
+                                  "kin_ms": kin_ms, "kin_cpu_ms": kin_cpu_ms}
         if self._use_physics():
             opt = self._physics_optimizer()
             if not self._started_physics:
                 opt.reset(init["pose"], init["trans"])
                 self._started_physics = True
+            t1 = time.perf_counter()
             st = opt.step(dec["pose"][0], dec["vel"][0], dec["contact"][0])
+            extras["physics_ms"] = (time.perf_counter() - t1) * 1000
+            extras["physics_cpu_ms"] = float(getattr(st, "step_cpu_ms", float("nan")))
             pose = torch.as_tensor(st.pose_local, dtype=torch.float32)
             trans = torch.as_tensor(st.trans, dtype=torch.float32)
             extras.update(torques=torch.as_tensor(st.torques), grf=torch.as_tensor(st.grf), contact_flags=st.contacts,
