@@ -183,7 +183,8 @@ class MIM:
             (sensor frame); acc: ``(3,)`` m/s^2 (source frame); dt: s since the previous frame.
 
         Returns:
-            dict: ``R`` (3, 3) and ``p`` (3,) corrected; ``interfered`` bool (detection);
+            dict: ``R`` (3, 3) and ``p`` (3,) corrected; ``interfered`` bool (the frame-level
+            detection of Sec. 3.2; False while ``degraded``, which reports persistent interference);
             ``corrected`` bool (the output was corrected this frame); ``level`` float
             (discrepancy / threshold, low-passed); ``degraded`` bool; ``discrepancy`` rad.
         """
@@ -219,7 +220,7 @@ class MIM:
                 self._run = 0
                 self._refs.clear()
                 self._dRs.clear()
-            interfered = self._degraded
+            interfered = False  # a degraded stretch is reported by ``degraded``, not frame by frame
         else:
             R_pred = self._R_ref @ dR
             # detection over a span of k frames: trusted/chained rotation k frames ago + gyro since
