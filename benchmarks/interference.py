@@ -56,8 +56,8 @@ PAPER_TABLE3 = {
 }
 PAPER_ROT_WINDOW = {"open-space": (6.92, 2.01), "standard": (8.88, 3.81)}
 E_P_SWEEP_CM = (0.5, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0)
-THRESHOLDS_DEG = (0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
-CORRECTION_THRESHOLDS_DEG = (0.75, 1.0, 1.5, 2.0, 3.0)
+THRESHOLDS_DEG = (0.75, 1.0, 1.5, 2.0, 3.0, 5.0)
+CORRECTION_THRESHOLDS_DEG = (1.0, 1.5, 2.0, 3.0)
 METHODS = ("none", "odometry", "nbeats", "fusion")
 
 

@@ -14,8 +14,9 @@ top eigenvector the direction ``u`` up to sign; then ``R = (V D^{-1})^T`` projec
 **Hemisphere ambiguity**: ``D(-p) = D(p)``, so ``(R, p)`` and ``(R, -p)`` give identical voltages.
 Like commercial trackers (a configured operating hemisphere, then continuity) the tracker picks
 the sign with ``p . hemisphere >= 0`` at acquisition and afterwards the sign on the side of the
-last position solved from an undistorted field (relative residual below ``good_residual``;
-"hemisphere tracking"), since both signs fit the voltages equally. Severe distortion can still pull the solver to a distant local minimum: that failure
+last position solved from an undistorted field (relative residual below ``good_residual``, at
+most ``good_memory`` frames ago; otherwise the previous frame's side: "hemisphere tracking"),
+since both signs fit the voltages equally. Severe distortion can still pull the solver to a distant local minimum: that failure
 mode is part of what metal does to real trackers.
 """
 
@@ -85,6 +86,7 @@ class TrackerConfig:
         max_nfev: LM iterations (evaluations) per frame.
         good_residual: relative residual below which a solution counts as undistorted and
             becomes the hemisphere reference.
+        good_memory: frames an undistorted reference stays in use; older, continuity rules.
         solver: ``"scipy"`` (``scipy.optimize.least_squares``, method ``"lm"``) or ``"numpy"``
             (the same problem by an in-house Levenberg-Marquardt loop; identical solutions to
             ~1e-9, several times faster, used for bulk simulation).
@@ -94,7 +96,8 @@ class TrackerConfig:
     reacquire_rel_residual: float = 0.05
     max_nfev: int = 50
     solver: str = "scipy"
-    good_residual: float = 5e-3
+    good_residual: float = 1e-2
+    good_memory: int = 120
 
 
 class EMTracker:
@@ -108,6 +111,7 @@ class EMTracker:
         self._R: np.ndarray | None = None
         self._p: np.ndarray | None = None
         self._p_good: np.ndarray | None = None
+        self._since_good = 0
 
     @staticmethod
     def _residual(x: np.ndarray, R0: np.ndarray, V: np.ndarray) -> np.ndarray:
@@ -185,11 +189,17 @@ class EMTracker:
         # hemisphere tracking: (R, p) and (R, -p) fit equally; keep the side of the last position
         # solved from an undistorted field (small residual), so a solver dragged around the
         # source by heavy distortion comes back on the right side once the field is clean again
-        ref = self._p_good if self._p_good is not None else hemi
+        # (within ``good_memory`` frames; otherwise plain continuity with the previous frame)
+        if self._p_good is not None and self._since_good <= self.config.good_memory:
+            ref = self._p_good
+        else:
+            ref = self._p if self._p is not None else hemi
         if float(p @ ref) < 0:
             p = -p
+        self._since_good += 1
         if c / vn < self.config.good_residual:
             self._p_good = p.copy()
+            self._since_good = 0
         self._R, self._p = R, p
         return R, p, c / vn
 
