@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -41,8 +42,17 @@ def _run(nproc: int, *args: str) -> None:
         cmd = [sys.executable, *args]
     else:
         cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", f"--nproc_per_node={nproc}", *args]
-    res = subprocess.run(cmd, env=_env(), capture_output=True, text=True, timeout=600)
-    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    # Own process group: on a timeout the whole group (torchrun and its workers) is killed, so a
+    # rank waiting in a collective for a dead partner cannot outlive the test.
+    proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=600)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+        raise AssertionError(f"timed out after 600 s: {' '.join(cmd)}\n{err[-3000:]}") from None
+    assert proc.returncode == 0, out[-3000:] + err[-3000:]
 
 
 def _log(out: Path) -> tuple[list[float], list[dict]]:
