@@ -24,16 +24,17 @@ exponential-map output for it).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 from wearpose.errors import ConfigError
+from wearpose.estimators.configio import ConfigIO
 
 REPS: tuple[str, ...] = ("6param", "3param", "3param_rate", "zhou6d")
 
 
 @dataclass(frozen=True)
-class BiraeConfig:
+class BiraeConfig(ConfigIO):
     """Network, data and optimisation settings (see the module doc for the presets).
 
     Network: ``rep`` input representation; ``width`` input FC size; ``hidden`` Bi-LSTM size per
@@ -53,6 +54,8 @@ class BiraeConfig:
     Inference: ``mc_samples`` M of Eq. 7-8; ``window`` (past, future) frames of the online mode
     at ``rate`` (Sec. V-D: [130, 30] at 60 Hz).
     """
+
+    TUPLE_FIELDS = {"window": None}
 
     rep: str = "6param"
     width: int = 512
@@ -112,26 +115,6 @@ class BiraeConfig:
     def uses_rate(self) -> bool:
         """True when the input carries the root-relative angular rate (``3param_rate``)."""
         return self.rep == "3param_rate"
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["window"] = list(self.window)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> BiraeConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(f"BiraeConfig: unknown fields {unknown}; known: {sorted(known)}")
-        d = dict(d)
-        if "window" in d:
-            d["window"] = tuple(d["window"])
-        return cls(**d)
-
-    def override(self, **kw: Any) -> BiraeConfig:
-        """A copy with the non-None keyword values replaced."""
-        return replace(self, **{k: v for k, v in kw.items() if v is not None})
 
     @classmethod
     def preset(cls, name: str, rep: str = "6param") -> BiraeConfig:

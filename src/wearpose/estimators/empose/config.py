@@ -16,14 +16,15 @@ Presets (:meth:`EmposeConfig.preset`):
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 from wearpose.errors import ConfigError
+from wearpose.estimators.configio import ConfigIO
 
 
 @dataclass(frozen=True)
-class EmposeConfig:
+class EmposeConfig(ConfigIO):
     """LGD-RNN and training settings.
 
     Model: ``hidden`` LSTM width (``rnn_layers`` layers), ``width`` / ``mlp_layers`` of the
@@ -94,21 +95,6 @@ class EmposeConfig:
     @property
     def kit(self) -> str:
         return f"em{self.sensors}"
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> EmposeConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(f"EmposeConfig: unknown fields {unknown}; known: {sorted(known)}")
-        return cls(**d)
-
-    def override(self, **kw: Any) -> EmposeConfig:
-        """A copy with the non-None keyword values replaced."""
-        return replace(self, **{k: v for k, v in kw.items() if v is not None})
 
     @classmethod
     def preset(cls, name: str, sensors: int = 12) -> EmposeConfig:

@@ -21,10 +21,11 @@ Presets (:meth:`MiposerConfig.preset`):
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 from wearpose.errors import ConfigError
+from wearpose.estimators.configio import ConfigIO
 
 #: SMPL joints MI-Poser reports (Fig. 5 "upper body"): pelvis (the alignment root), the spine,
 #: neck, collars, head, shoulders, elbows and wrists.
@@ -35,7 +36,7 @@ PREDICTED_JOINTS = 22
 
 
 @dataclass(frozen=True)
-class MiposerConfig:
+class MiposerConfig(ConfigIO):
     """Network, data and optimisation settings (see module doc).
 
     Network (``avatarposer``): ``d_model`` width, ``layers`` encoder layers, ``heads`` attention
@@ -108,21 +109,6 @@ class MiposerConfig:
     def roles(self) -> tuple[str, ...]:
         """Input roles, head first: the calibration's target joints (SMPL 15, 20, 21)."""
         return ("head", "left_wrist", "right_wrist")[: 1 + self.wrists]
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> MiposerConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(f"MiposerConfig: unknown fields {unknown}; known: {sorted(known)}")
-        return cls(**d)
-
-    def override(self, **kw: Any) -> MiposerConfig:
-        """A copy with the non-None keyword values replaced."""
-        return replace(self, **{k: v for k, v in kw.items() if v is not None})
 
     @classmethod
     def preset(cls, name: str, wrists: int = 2, model: str = "avatarposer") -> MiposerConfig:

@@ -17,14 +17,15 @@ Presets (:meth:`PipConfig.preset`):
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass
 from typing import Any
 
 from wearpose.errors import ConfigError
+from wearpose.estimators.configio import ConfigIO
 
 
 @dataclass(frozen=True)
-class PipConfig:
+class PipConfig(ConfigIO):
     """PIP kinematics settings.
 
     Model: ``hidden`` LSTM width (``rnn_layers`` layers) of every RNN, ``dropout`` on each RNN's
@@ -44,6 +45,8 @@ class PipConfig:
     Optimisation: ``lr``, ``lr_schedule``, ``lr_min_factor``, ``batch_size``, ``epochs``,
     ``grad_clip``.
     """
+
+    TUPLE_FIELDS = {"init_widths": int, "vel_windows": int}
 
     hidden: int = 256
     rnn_layers: int = 2
@@ -91,28 +94,6 @@ class PipConfig:
     @property
     def kit(self) -> str:
         return "imu6"
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["init_widths"] = list(self.init_widths)
-        d["vel_windows"] = list(self.vel_windows)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> PipConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(f"PipConfig: unknown fields {unknown}; known: {sorted(known)}")
-        d = dict(d)
-        for k in ("init_widths", "vel_windows"):
-            if k in d:
-                d[k] = tuple(int(v) for v in d[k])
-        return cls(**d)
-
-    def override(self, **kw: Any) -> PipConfig:
-        """A copy with the non-None keyword values replaced."""
-        return replace(self, **{k: v for k, v in kw.items() if v is not None})
 
     @classmethod
     def preset(cls, name: str) -> PipConfig:
