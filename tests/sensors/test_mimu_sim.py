@@ -1,6 +1,7 @@
 """MIMU: yaw drift / magnetic disturbance model and BiRAE / Zhou representations."""
 
 import math
+from dataclasses import replace
 
 import torch
 
@@ -82,6 +83,20 @@ def test_yaw_drift_grows_and_is_seeded():
     assert torch.equal(a["orientation"], b["orientation"])
     drift = a["yaw_error"]
     assert drift[0].abs().max() == 0 and drift[-1].abs().max() > drift[60].abs().max()
+
+
+def test_yaw_drift_elapsed_start_offsets_heading_per_sensor():
+    R, p = _motion(T=120, S=3)
+    base = MimuNoise(mag_rate=0.0, yaw_bias_walk=0.0, orientation_white=0.0, impulse_prob=0.0, yaw_bias=math.radians(1.0))
+    a = simulate_mimu(R, p, 60.0, noise=base, generator=torch.Generator().manual_seed(4))
+    late = simulate_mimu(R, p, 60.0, noise=replace(base, yaw_elapsed=120.0), generator=torch.Generator().manual_seed(4))
+    # same bias draw; the late start adds the drift of t0 seconds to every frame: b * t0 per sensor
+    off = late["yaw_error"] - a["yaw_error"]
+    assert torch.allclose(off, off[:1].expand_as(off), atol=1e-9)
+    rate = (a["yaw_error"][-1] - a["yaw_error"][0]) / (119 / 60.0)
+    t0 = off[0] / rate
+    assert torch.allclose(t0, t0[:1].expand_as(t0), atol=1e-6) and 0.0 < float(t0[0]) <= 120.0
+    assert float(off.abs().max()) > float(a["yaw_error"].abs().max())
 
 
 def test_madgwick_fusion_optional():

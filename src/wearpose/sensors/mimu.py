@@ -10,8 +10,10 @@ over time)"; Sec. V-I adds "simulated yaw drift and strong magnetic interference
 
     R_meas(t) = R_y(psi_drift(t) + psi_mag(t)) R_WS(t) exp([n(t)]x)
 
-- ``psi_drift(t) = b t + integral of a bias random walk``, ``b ~ N(0, yaw_bias^2)`` (an
-  integrated random bias, as in BiRAE);
+- ``psi_drift(t) = b (t0 + t) + integral of a bias random walk``, ``b ~ N(0, yaw_bias^2)`` (an
+  integrated random bias, as in BiRAE); ``t0 ~ U(0, yaw_elapsed)`` is how long the filter has
+  been running before the first frame (0 by default: drift starts at the recording's start;
+  a short clip cut from a long session starts with the heading error accumulated so far);
 - ``psi_mag(t)``: the heading error a magnetometer-aided filter converges to under a
   disturbance field ``d_W(t)``: the filter takes the horizontal measured field as north, so if
   the horizontal field turns by ``delta`` about up, the estimate turns by ``-delta``. Episodes
@@ -65,6 +67,8 @@ class MimuNoise:
         mag_strength: (min, max) peak disturbance field as a fraction of the horizontal earth
             field (1.0 turns the heading by up to 90 deg).
         mag_white: magnetometer white noise per axis, tesla.
+        yaw_elapsed: the drift's start lies up to this many seconds before the first frame
+            (uniform, one draw per recording, common to its sensors); 0 = drift starts at 0.
         imu: gyro/accelerometer errors of the inertial part (:class:`ImuNoise`).
     """
 
@@ -78,6 +82,7 @@ class MimuNoise:
     mag_strength: tuple[float, float] = (0.2, 1.0)
     mag_white: float = 0.5e-6
     imu: ImuNoise = ImuNoise()
+    yaw_elapsed: float = 0.0
 
     @staticmethod
     def none() -> MimuNoise:
@@ -85,8 +90,12 @@ class MimuNoise:
 
 
 def yaw_drift(T: int, num_sensors: int, fps: float, bias: float, walk: float,
-              generator: torch.Generator | None) -> torch.Tensor:
-    """Heading drift ``(T, S)`` rad: integral of (constant random bias + bias random walk)."""
+              generator: torch.Generator | None, elapsed: float = 0.0) -> torch.Tensor:
+    """Heading drift ``(T, S)`` rad: integral of (constant random bias + bias random walk).
+
+    ``elapsed`` > 0: the integration started ``t0 ~ U(0, elapsed)`` seconds before frame 0
+    (one ``t0`` for all sensors), so frame 0 already carries ``b * t0``; drawn after the other
+    terms, so ``elapsed = 0`` leaves every random stream unchanged."""
     dt = 1.0 / fps
     rate = bias * torch.randn(1, num_sensors, generator=generator, dtype=torch.float64).expand(T, num_sensors).clone()
     if walk > 0 and T > 1:
@@ -95,6 +104,9 @@ def yaw_drift(T: int, num_sensors: int, fps: float, bias: float, walk: float,
     psi = torch.zeros(T, num_sensors, dtype=torch.float64)
     if T > 1:
         psi[1:] = torch.cumsum(rate[:-1] * dt, 0)
+    if elapsed > 0 and T > 0:
+        t0 = elapsed * float(torch.rand(1, generator=generator, dtype=torch.float64))
+        psi = psi + rate[:1] * t0
     return psi
 
 
@@ -172,7 +184,7 @@ def simulate_mimu(R: torch.Tensor, p: torch.Tensor, fps: float, *, noise: MimuNo
         R_meas = R64
         mag_noise = 0.0
     else:
-        drift = yaw_drift(T, S, fps, noise.yaw_bias, noise.yaw_bias_walk, generator)
+        drift = yaw_drift(T, S, fps, noise.yaw_bias, noise.yaw_bias_walk, generator, noise.yaw_elapsed)
         d, psi_mag = magnetic_disturbance(T, S, fps, noise, generator, earth)
         psi = drift + psi_mag
         rv = noise.orientation_white * torch.randn(T, S, 3, generator=generator, dtype=torch.float64)
