@@ -36,8 +36,14 @@ class EmposeConfig(ConfigIO):
     Data: ``sensors`` 12 / 6 (kits ``em12`` / ``em6``), ``rate`` Hz, ``seq_len`` frames per
     training window, ``window_stride`` frames between window starts, ``train_noise`` the EM error
     model of the training simulation (``"default"`` / ``"none"``), ``offsets`` subject offsets
-    (``"random"`` synthetic subjects per sequence, or ``"none"`` = identity, the "no [R|t]"
-    ablation), ``seed``.
+    (``"random"`` synthetic subjects per sequence; ``"rot"`` = their rotations only, translations
+    zero in the training data and in L_r, the "no t" ablation of Table 3; ``"none"`` = identity,
+    the "no [R|t]" ablation), ``seed``.
+    Ablations of Table 3 (defaults = the full model): ``inputs`` the measured modalities the
+    network sees and L_r compares (``"both"``; ``"position"`` = "pos only", ``"orientation"`` =
+    "ori only"), ``init`` the start of LGD (``"rnn"`` = Omega^(0) from the RNN; ``"rest"`` = "no
+    RNN": a learned constant Omega^(0) around the zero pose / mean shape, the same for every
+    frame, so LGD runs frame-wise like the original LGD).
     Optimisation: ``lr``, ``lr_schedule`` (``constant`` / ``cosine``), ``lr_min_factor``,
     ``batch_size``, ``epochs``, ``grad_clip`` (max global grad norm, 0 = off), ``val_clips``
     (validation clips used each epoch, 0 = all).
@@ -77,6 +83,8 @@ class EmposeConfig(ConfigIO):
     grad_clip: float = 1.0
     val_clips: int = 0
     model: str = "lgd"
+    inputs: str = "both"
+    init: str = "rnn"
 
     def __post_init__(self) -> None:
         if self.sensors not in (6, 12):
@@ -87,8 +95,13 @@ class EmposeConfig(ConfigIO):
             raise ConfigError("EmposeConfig: iterations >= 0, mlp_layers >= 1 and rnn_layers >= 1 required")
         if self.lr_schedule not in ("constant", "cosine"):
             raise ConfigError(f"EmposeConfig.lr_schedule: expected 'constant' or 'cosine', got {self.lr_schedule!r}")
-        if self.train_noise not in ("default", "none") or self.offsets not in ("random", "none"):
-            raise ConfigError("EmposeConfig: train_noise must be 'default'/'none' and offsets 'random'/'none'")
+        if self.train_noise not in ("default", "none") or self.offsets not in ("random", "rot", "none"):
+            raise ConfigError(f"EmposeConfig: train_noise must be 'default'/'none' and offsets 'random'/'rot'/'none', "
+                              f"got {self.train_noise!r} / {self.offsets!r}")
+        if self.inputs not in ("both", "position", "orientation"):
+            raise ConfigError(f"EmposeConfig.inputs: expected 'both', 'position' or 'orientation', got {self.inputs!r}")
+        if self.init not in ("rnn", "rest"):
+            raise ConfigError(f"EmposeConfig.init: expected 'rnn' or 'rest', got {self.init!r}")
         if self.model not in ("lgd", "resnet", "birnn", "twostage"):
             raise ConfigError(f"EmposeConfig.model: expected 'lgd', 'resnet', 'birnn' or 'twostage', got {self.model!r}")
 
@@ -115,3 +128,21 @@ class EmposeConfig(ConfigIO):
             return replace(paper, hidden=32, width=32, mlp_layers=2, iterations=1, batch_size=4, seq_len=8,
                            window_stride=8, lr=3e-3, epochs=2, dropout_input=0.0, dropout_mlp=0.0, val_clips=2)
         raise ConfigError(f"unknown EM-POSE config preset {name!r}; expected paper, cpu or tiny")
+
+
+#: EM-POSE Table 3 rows: ablation key -> (label, :class:`EmposeConfig` overrides of the full model).
+TABLE3_ABLATIONS: dict[str, tuple[str, dict[str, Any]]] = {
+    "noRt": ("no [R|t]", {"offsets": "none"}),
+    "no_t": ("no t", {"offsets": "rot"}),
+    "ori_only": ("ori only", {"inputs": "orientation"}),
+    "pos_only": ("pos only", {"inputs": "position"}),
+    "no_rnn": ("no RNN", {"init": "rest"}),
+    "full": ("full", {}),
+}
+
+
+def ablation_config(cfg: EmposeConfig, ablation: str) -> EmposeConfig:
+    """``cfg`` with the overrides of the Table 3 row ``ablation`` (a key of :data:`TABLE3_ABLATIONS`)."""
+    if ablation not in TABLE3_ABLATIONS:
+        raise ConfigError(f"unknown EM-POSE ablation {ablation!r}; expected one of {sorted(TABLE3_ABLATIONS)}")
+    return replace(cfg, **TABLE3_ABLATIONS[ablation][1])

@@ -99,9 +99,24 @@ def frame_measurements(frame: Any, sensor_names: Sequence[str],
     return torch.where(v[:, None], p, hold_p), torch.where(v[:, None, None], R, hold_R), v
 
 
+def rotation_only_offsets(num_sensors: int, seed: int) -> Any:
+    """The synthetic subject that ``simulate(..., offsets="random", seed=seed)`` draws, with its
+    translations (and their per-sequence jitter) set to zero: EM-POSE's "no t" training scheme
+    (Table 3). Returns a :class:`~wearpose.sensors.em.EMOffsets`."""
+    from wearpose.sensors.em import EMOffsets, random_subject_offsets
+    from wearpose.sensors.simulate import _generator  # the simulator's own subject stream: same R as "random"
+
+    full = random_subject_offsets(num_sensors, _generator(seed, "subject"))
+    return EMOffsets(full.R, torch.zeros_like(full.t))
+
+
 def simulate_clip(motion: Any, cfg: EmposeConfig, body: Any, seed: int, noise: str | None = None,
-                  offsets: str | None = None) -> dict[str, Any]:
+                  offsets: Any = None) -> dict[str, Any]:
     """Simulate one clip for EM-POSE (module doc, steps 1-3).
+
+    ``offsets`` (default ``cfg.offsets``): ``"random"`` a synthetic subject drawn from ``seed``,
+    ``"rot"`` its rotations only (:func:`rotation_only_offsets`), ``"none"`` identity, or an
+    :class:`~wearpose.sensors.em.EMOffsets` (e.g. a subject from another distribution, Table 4).
 
     Returns:
         dict: ``position`` ``(T, S, 3)`` m and ``orientation`` ``(T, S, 3, 3)`` source frame
@@ -116,10 +131,12 @@ def simulate_clip(motion: Any, cfg: EmposeConfig, body: Any, seed: int, noise: s
     m = motion if abs(motion.fps - cfg.rate) < 1e-9 else resample(motion, cfg.rate)
     noise = noise or cfg.train_noise
     offsets = offsets or cfg.offsets
+    if isinstance(offsets, str):
+        offsets = {"random": "random", "none": None}.get(offsets) if offsets != "rot" else \
+            rotation_only_offsets(cfg.sensors, seed)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the kit's documented site substitutions warn per call
-        sim = simulate(m, cfg.kit, body, seed=seed, noise=noise, offsets="random" if offsets == "random" else None,
-                       rate=cfg.rate)
+        sim = simulate(m, cfg.kit, body, seed=seed, noise=noise, offsets=offsets, rate=cfg.rate)
     names = list(sim.kit.sensor_names)
     pos = torch.stack([sim[n].position for n in names], 1).float()
     rot = torch.stack([sim[n].orientation for n in names], 1).float()

@@ -164,6 +164,8 @@ class EmposeEstimator(Estimator):
         # site frame, translation_mean_m (S, 3) in the site frame.
         R = torch.as_tensor(np.asarray(off["rotation"], dtype=np.float32))[idx]
         t = torch.as_tensor(np.asarray(off["translation_mean_m"], dtype=np.float32))[idx]
+        if self.config.offsets == "rot":
+            t = torch.zeros_like(t)  # "no t" ablation: trained without translation offsets, reconstructs without
         return R, t
 
     def set_offsets(self, R: torch.Tensor, t: torch.Tensor) -> None:

@@ -115,7 +115,7 @@ class LeanSensorGrad:
 
     # ------------------------------------------------------------------ forward
     def forward(self, omega: torch.Tensor, meas_p: torch.Tensor, meas_R: torch.Tensor, off_R: torch.Tensor,
-                off_t: torch.Tensor) -> dict[str, torch.Tensor]:
+                off_t: torch.Tensor, weights: tuple[float, float] = (1.0, 1.0)) -> dict[str, torch.Tensor]:
         """Forward pass.
 
         Args:
@@ -181,7 +181,14 @@ class LeanSensorGrad:
         p_rel = (QT @ dp.unsqueeze(-1)).squeeze(-1)
         R_rel = QT @ Rv
         rp, rR = p_rel - meas_p, R_rel - meas_R
-        rec = (rp ** 2).sum((-1, -2)) + (rR ** 2).sum((-1, -2, -3))
+        if weights != (1.0, 1.0):
+            # "pos/ori only" ablations: weighted terms; carrying the weights in the residuals makes
+            # backward's 2 * residual the weighted gradient (rec = w r^2, dr = 2 w r).
+            wp, wr = weights
+            rec = wp * (rp ** 2).sum((-1, -2)) + wr * (rR ** 2).sum((-1, -2, -3))
+            rp, rR = rp * wp, rR * wr
+        else:
+            rec = (rp ** 2).sum((-1, -2)) + (rR ** 2).sum((-1, -2, -3))
         return {"rec": rec, "local_rot": Lr, "betas": beta, "joints": J, "p_hat": p_rel, "R_hat": R_rel,
                 "_": (x, y, n1, n2, d, a2, Lr, Jr, vs, G, Gpar, J, M, verts, e1, e2, n, nn_, e, s, tan, ne, Rss, dp, Rv, Rsrc,
                       rp, rR, off_R, off_t)}

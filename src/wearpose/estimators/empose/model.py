@@ -81,6 +81,13 @@ def sensor_features(position: torch.Tensor, orientation: torch.Tensor) -> torch.
     return torch.cat([position, orientation.flatten(-2)], dim=-1).flatten(-2)
 
 
+#: Columns of a sensor's 12 features per ``EmposeConfig.inputs`` (the "pos/ori only" ablations),
+#: and the weights (position term, rotation term) of L_r that go with them.
+INPUT_COLUMNS: dict[str, tuple[int, ...]] = {"both": tuple(range(12)), "position": (0, 1, 2),
+                                             "orientation": tuple(range(3, 12))}
+REC_WEIGHTS: dict[str, tuple[float, float]] = {"both": (1.0, 1.0), "position": (1.0, 0.0), "orientation": (0.0, 1.0)}
+
+
 class VirtualSensors:
     """sigma(Omega, o_s): differentiable virtual EM sensors relative to the source (Eq. 3-4).
 
@@ -128,9 +135,14 @@ class VirtualSensors:
         return p, RsrcT @ Rv, so.joints
 
 
-def reconstruction_loss(p_hat: torch.Tensor, R_hat: torch.Tensor, p: torch.Tensor, R: torch.Tensor) -> torch.Tensor:
-    """Eq. 6 per frame: ``sum_s ||p - p^||^2 + ||R - R^||_F^2``; ``(N, S, ...)`` -> ``(N,)``."""
-    return ((p_hat - p) ** 2).sum((-1, -2)) + ((R_hat - R) ** 2).sum((-1, -2, -3))
+def reconstruction_loss(p_hat: torch.Tensor, R_hat: torch.Tensor, p: torch.Tensor, R: torch.Tensor,
+                        weights: tuple[float, float] = (1.0, 1.0)) -> torch.Tensor:
+    """Eq. 6 per frame: ``sum_s ||p - p^||^2 + ||R - R^||_F^2``; ``(N, S, ...)`` -> ``(N,)``.
+
+    ``weights`` scale the position and rotation terms (``(1, 0)`` / ``(0, 1)``: the "pos only" /
+    "ori only" ablations, where the other modality is not measured)."""
+    wp, wr = weights
+    return wp * ((p_hat - p) ** 2).sum((-1, -2)) + wr * ((R_hat - R) ** 2).sum((-1, -2, -3))
 
 
 class UpdateNet(nn.Module):
@@ -197,21 +209,45 @@ class LGDRNN(nn.Module):
         #: :mod:`~wearpose.estimators.empose.fastgrad` instead of autograd (same numbers, several
         #: times faster); False forces the autograd path (tests compare the two).
         self.lean_inference = True
-        F = num_sensors * SENSOR_FEATURES
+        cols = INPUT_COLUMNS[cfg.inputs]
+        self.rec_weights = REC_WEIGHTS[cfg.inputs]
+        # Feature indices into the full (S * 12) x_t; None = all (the full model: no gather).
+        self._cols = None if cfg.inputs == "both" else torch.tensor(
+            [s * SENSOR_FEATURES + c for s in range(num_sensors) for c in cols])
+        F = num_sensors * len(cols)
         D = omega_dim(cfg.rep)
         self.in_dim, self.omega_dim = F, D
         self.input_dropout = nn.Dropout(cfg.dropout_input)
-        self.rnn = nn.LSTM(F, cfg.hidden, cfg.rnn_layers, batch_first=True)
-        self.head = nn.Linear(cfg.hidden, D)
-        self.update = UpdateNet(2 * D + F, cfg.width, cfg.mlp_layers, D, cfg.dropout_mlp)
         # Omega of the zero pose / mean shape: the head predicts around it, so training starts at
         # a plausible body instead of degenerate 6D vectors.
         ident = torch.eye(3).expand(NUM_JOINTS, 3, 3)
         self.register_buffer("omega_rest", torch.cat([encode_pose(ident, cfg.rep), torch.zeros(NUM_BETAS)]))
+        if cfg.init == "rnn":
+            self.rnn = nn.LSTM(F, cfg.hidden, cfg.rnn_layers, batch_first=True)
+            self.head = nn.Linear(cfg.hidden, D)
+        else:  # "no RNN" ablation: one learned start for every frame (no temporal model at all)
+            self.omega_init = nn.Parameter(torch.zeros(D))
+        self.update = UpdateNet(2 * D + F, cfg.width, cfg.mlp_layers, D, cfg.dropout_mlp)
+
+    def select_inputs(self, x: torch.Tensor) -> torch.Tensor:
+        """The measured features this model uses (``cfg.inputs``) from the full ``(..., S * 12)``
+        x_t (:func:`sensor_features`); idempotent (an already selected x passes through)."""
+        if self._cols is None or x.shape[-1] == self.in_dim:
+            return x
+        return x.index_select(-1, self._cols.to(x.device))
 
     def initial(self, x: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor] | None = None
                 ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
-        """RNN estimate ``Omega^(0)`` ``(B, T, D)`` from ``x`` ``(B, T, S * 12)`` (and the LSTM state)."""
+        """RNN estimate ``Omega^(0)`` ``(B, T, D)`` from ``x`` ``(B, T, S * 12)`` (and the LSTM state).
+
+        With ``cfg.init == "rest"`` ("no RNN") the learned constant start for every frame; the
+        ``state`` passes through unchanged (zeros when None, so the online trace keeps its form)."""
+        x = self.select_inputs(x)
+        if self.cfg.init == "rest":
+            if state is None:
+                z = x.new_zeros(self.cfg.rnn_layers, x.shape[0], self.cfg.hidden)
+                state = (z, z)
+            return (self.omega_init + self.omega_rest).expand(*x.shape[:-1], self.omega_dim), state
         h, state = self.rnn(self.input_dropout(x), state)
         return self.head(h) + self.omega_rest, state
 
@@ -232,6 +268,7 @@ class LGDRNN(nn.Module):
         """
         if not train and self.lean_inference and self.rep == "rot6d":
             return self._refine_lean(omega0, x, meas_p, meas_R, off_R, off_t, sensors)
+        x = self.select_inputs(x)
         out = []
         omega = omega0
         for n in range(self.cfg.iterations + 1):
@@ -240,7 +277,7 @@ class LGDRNN(nn.Module):
                     omega = omega.detach().requires_grad_(True)
                 R, b = decode_omega(omega, self.rep)
                 p_hat, R_hat, joints = sensors(R, b, off_R, off_t)
-                rec = reconstruction_loss(p_hat, R_hat, meas_p, meas_R)
+                rec = reconstruction_loss(p_hat, R_hat, meas_p, meas_R, self.rec_weights)
                 out.append({"omega": omega, "local_rot": R, "betas": b, "joints": joints, "rec": rec})
                 if n == self.cfg.iterations:
                     break
@@ -256,9 +293,10 @@ class LGDRNN(nn.Module):
                      off_R: torch.Tensor, off_t: torch.Tensor, sensors: VirtualSensors) -> list[dict[str, torch.Tensor]]:
         """:meth:`refine` for inference with the closed-form dL_r/dOmega (no graph)."""
         kernel = sensors.lean()
+        x = self.select_inputs(x)
         out = []
         for n in range(self.cfg.iterations + 1):
-            ctx = kernel.forward(omega, meas_p, meas_R, off_R, off_t)
+            ctx = kernel.forward(omega, meas_p, meas_R, off_R, off_t, self.rec_weights)
             out.append({"omega": omega, "local_rot": ctx["local_rot"], "betas": ctx["betas"], "joints": ctx["joints"],
                         "rec": ctx["rec"]})
             if n == self.cfg.iterations:
