@@ -29,7 +29,7 @@ import math
 import platform
 import time
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import torch
 
@@ -43,13 +43,74 @@ PAPER_TABLE2_12 = {
 }
 
 
+#: Paper's Table 3 (ablations, 12 sensors, real test set), same layout.
+PAPER_TABLE3_12 = {
+    "no [R|t]": {"mpjpe_mm": (167.6, 212.7), "pa_mpjpe_mm": (134.3, 113.3), "mpjae_deg": (37.5, 34.7)},
+    "no t": {"mpjpe_mm": (35.6, 25.8), "pa_mpjpe_mm": (29.0, 19.4), "mpjae_deg": (14.4, 10.0)},
+    "ori only": {"mpjpe_mm": (50.8, 30.0), "pa_mpjpe_mm": (31.2, 20.4), "mpjae_deg": (14.3, 9.8)},
+    "pos only": {"mpjpe_mm": (33.6, 28.3), "pa_mpjpe_mm": (27.5, 20.8), "mpjae_deg": (16.2, 11.3)},
+    "no RNN": {"mpjpe_mm": (36.9, 25.4), "pa_mpjpe_mm": (26.5, 19.9), "mpjae_deg": (14.3, 10.3)},
+    "full": {"mpjpe_mm": (31.8, 21.0), "pa_mpjpe_mm": (24.8, 16.4), "mpjae_deg": (13.3, 9.2)},
+}
+#: Paper's Table 4 (cross-subject: trained on subjects 1-4, tested on subject 5), same layout.
+PAPER_TABLE4 = {
+    "BiRNN 6": {"mpjpe_mm": (37.2, 26.7), "pa_mpjpe_mm": (33.8, 19.2), "mpjae_deg": (15.0, 7.8)},
+    "LGD-RNN 6": {"mpjpe_mm": (32.0, 25.0), "pa_mpjpe_mm": (29.5, 17.7), "mpjae_deg": (13.6, 7.3)},
+    "BiRNN 12": {"mpjpe_mm": (45.9, 34.3), "pa_mpjpe_mm": (40.2, 22.7), "mpjae_deg": (15.1, 8.0)},
+    "LGD-RNN 12": {"mpjpe_mm": (31.2, 25.7), "pa_mpjpe_mm": (24.5, 18.0), "mpjae_deg": (12.3, 7.2)},
+}
+
+#: Evaluation subjects (``offsets`` of :func:`evaluate_models`): ``random`` = synthetic subjects
+#: from the training prior (:func:`wearpose.sensors.em.random_subject_offsets`) drawn in the
+#: ``"eval"`` seed namespace; ``unseen`` = subjects from a *wider* distribution never used for
+#: training (:func:`unseen_subject_offsets`, ``"unseen"`` namespace), EM-POSE Table 4.
+SUBJECT_MODES = ("random", "unseen")
+#: Default spread factor of the ``unseen`` subjects.
+UNSEEN_SPREAD = 2.0
+
+
+def unseen_subject_offsets(num_sensors: int, generator: torch.Generator, spread: float = UNSEEN_SPREAD) -> Any:
+    """A synthetic subject from outside the training distribution (EM-POSE Table 4 on our data).
+
+    Every size parameter of the training prior :func:`~wearpose.sensors.em.random_subject_offsets`
+    (tilt and spin of the rotation offset, skin standoff and its spread, tangential slide,
+    per-sequence translation jitter) is multiplied by ``spread``: with 2, sensors sit twice as far
+    off the skin and are twice as mis-rotated / displaced as any training subject is likely to be
+    (e.g. straps over thick clothing). Returns an :class:`~wearpose.sensors.em.EMOffsets`.
+    """
+    import inspect
+
+    from wearpose.sensors.em import random_subject_offsets
+
+    sizes = {k: float(p.default) * spread for k, p in inspect.signature(random_subject_offsets).parameters.items()
+             if isinstance(p.default, float)}
+    return random_subject_offsets(num_sensors, generator, **sizes)
+
+
+def simulate_eval_clip(motion: Any, est: Any, clip_id: str, seed: int, *, noise: str = "default",
+                       offsets: str = "random", spread: float = UNSEEN_SPREAD) -> dict[str, Any]:
+    """The evaluation simulation of one clip (:func:`~wearpose.estimators.empose.data.simulate_clip`
+    with the sensor noise seeded in the ``"eval"`` namespace, so ``random`` and ``unseen`` share the
+    noise draw and differ only in the subject)."""
+    from wearpose.estimators.empose.data import clip_seed, simulate_clip
+
+    if offsets not in SUBJECT_MODES:
+        raise ConfigError(f"evaluation offsets: expected one of {', '.join(SUBJECT_MODES)}, got {offsets!r}")
+    sub: Any = "random"
+    if offsets == "unseen":
+        g = torch.Generator().manual_seed(clip_seed(clip_id, seed, "unseen"))
+        sub = unseen_subject_offsets(len(est.sensor_names), g, spread)
+    return simulate_clip(motion, est.config, est.body, clip_seed(clip_id, seed, "eval"), noise=noise, offsets=sub)
+
+
 def _stats(xs: list[torch.Tensor], k: float) -> tuple[float, float]:
     x = torch.cat(xs) * k if xs else torch.zeros(0)
     return (float(x.mean()), float(x.std())) if x.numel() else (math.nan, math.nan)
 
 
 def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: int | None = None, *,
-                    noise: str = "default", seed: int = 0, store: Any = None, progress: Any = None
+                    noise: str = "default", seed: int = 0, store: Any = None, progress: Any = None,
+                    offsets: str = "random", spread: float = UNSEEN_SPREAD, clips: Sequence[str] | None = None
                     ) -> dict[str, Any]:
     """Evaluate several checkpoints on the same simulated recordings (module doc).
 
@@ -63,6 +124,9 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         seed: base seed of the evaluation subjects and noise.
         store: a :class:`~wearpose.motion.CorpusStore` (default: the prepared cache).
         progress: optional ``progress(done, total)``.
+        offsets: evaluation subjects, :data:`SUBJECT_MODES` (``unseen``: EM-POSE Table 4, wider
+            distribution scaled by ``spread``).
+        clips: explicit clip ids of ``split`` (instead of the first ``limit``).
 
     Returns:
         ``{"split", "clips", "frames", "noise", "seed", "kit", "joints", "models": {name: {
@@ -72,7 +136,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
     """
     from wearpose.body.skeleton import MAJOR_JOINTS
     from wearpose.estimators.empose.baselines import load_any
-    from wearpose.estimators.empose.data import clip_seed, recording_from_clip, simulate_clip
+    from wearpose.estimators.empose.data import recording_from_clip
     from wearpose.evaluate import mpjae, mpjpe, pa_mpjpe
     from wearpose.motion import CorpusStore
 
@@ -86,14 +150,13 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
                               f"{e.body_asset_id}, but the first model is for kit {first.kit_name} at {first.fps} Hz "
                               f"on body {first.body_asset_id}; one table needs one setting")
     store = store or CorpusStore()
-    ids = store.clips(split=split)[: limit or None]
+    ids = list(clips) if clips is not None else store.clips(split=split)[: limit or None]
     errs: dict[str, dict[str, list[torch.Tensor]]] = {n: {"pe": [], "pa": [], "ae": []} for n in ests}
     secs = {n: 0.0 for n in ests}
     frames = 0
     for i, cid in enumerate(ids):
         # One simulation per clip for all models (same subject, same noise draw).
-        r = simulate_clip(store.load(cid), first.config, first.body, clip_seed(cid, seed, "eval"), noise=noise,
-                          offsets="random")
+        r = simulate_eval_clip(store.load(cid), first, cid, seed, noise=noise, offsets=offsets, spread=spread)
         rec = recording_from_clip(r, first.config)
         for name, est in ests.items():
             t0 = time.perf_counter()
@@ -120,9 +183,13 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
                         "data_fingerprint": est.data_fingerprint, "train_command": est.train_command,
                         "config": est.config.to_dict(),
                         "parameters": sum(p.numel() for p in est.model.parameters()), "seconds": secs[name]}
+    subjects = ("random synthetic offsets per clip, evaluation seed namespace (never drawn for training)"
+                if offsets == "random" else
+                f"unseen subjects: synthetic offsets from a {spread:g}x wider distribution than the training prior "
+                f"(tilt, spin, standoff, slide and jitter scaled), own seed namespace")
     return {"split": split, "clips": len(ids), "frames": frames, "noise": noise, "seed": seed, "kit": first.kit_name,
             "rate_hz": first.fps, "body_asset": first.body_asset_id, "joints": "15 major (DIP/EM-POSE)",
-            "subjects": "random synthetic offsets per clip, evaluation seed namespace (never drawn for training)",
+            "offsets": offsets, "spread": spread if offsets == "unseen" else None, "subjects": subjects,
             "models": models}
 
 
@@ -152,10 +219,18 @@ def table2_markdown(result: Mapping[str, Any], digits: int = 1) -> str:
 def write_table2(result: Mapping[str, Any], path_stem: str | Path, extra: Mapping[str, Any] | None = None) -> tuple[Path, Path]:
     """Write ``<stem>.md`` (title, table, per-model training details, the paper's numbers for
     context) and ``<stem>.json`` (``result`` plus ``extra`` and the machine)."""
+    return write_table(result, path_stem, extra=extra)
+
+
+def write_table(result: Mapping[str, Any], path_stem: str | Path, *, title: str = "EM-POSE Table 2 on simulated data (12 sensors)",
+                produced_by: str = "benchmarks/empose_eval.py", paper: Mapping[str, Any] | None = PAPER_TABLE2_12,
+                paper_caption: str = "the paper's Table 2", extra: Mapping[str, Any] | None = None) -> tuple[Path, Path]:
+    """:func:`write_table2` for any table of :func:`evaluate_models` results: ``title``, the command
+    that ``produced_by`` it, the paper's rows ``paper`` (name -> metric -> (mean, std); None = none)."""
     stem = Path(path_stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
-    md = ["# EM-POSE Table 2 on simulated data (12 sensors)", "",
-          "Produced by `benchmarks/empose_eval.py` "
+    md = [f"# {title}", "",
+          f"Produced by `{produced_by}` "
           "(`wearpose.estimators.empose.evaluate.evaluate_models`).", "", table2_markdown(result), "",
           "## Models", "", "| Model | method | checkpoint | epoch | val MPJPE [mm] | parameters | estimate time [s] |",
           "| --- | --- | --- | --- | --- | --- | --- |"]
@@ -166,15 +241,17 @@ def write_table2(result: Mapping[str, Any], path_stem: str | Path, extra: Mappin
     md += ["", "Training commands:", ""]
     for name, m in result["models"].items():
         md.append(f"- {name}: `{m.get('train_command') or '?'}`")
-    md += ["", "For context, the paper's Table 2 (12 sensors, *real* test set, GPU-trained full-size models; "
-           "not comparable number for number):", "", "| Model | MPJPE [mm] | PA-MPJPE [mm] | MPJAE [°] |",
-           "| --- | --- | --- | --- |"]
-    for name, m in PAPER_TABLE2_12.items():
-        md.append(f"| {name} 12 | " + " | ".join(f"{a} ± {b}" for a, b in m.values()) + " |")
+    if paper:
+        md += ["", f"For context, {paper_caption} (*real* test set, GPU-trained full-size models; "
+               "not comparable number for number):", "", "| Model | MPJPE [mm] | PA-MPJPE [mm] | MPJAE [°] |",
+               "| --- | --- | --- | --- |"]
+        suffix = " 12" if paper is PAPER_TABLE2_12 else ""
+        for name, m in paper.items():
+            md.append(f"| {name}{suffix} | " + " | ".join(f"{a} ± {b}" for a, b in m.values()) + " |")
     if extra and extra.get("note"):
         md += ["", str(extra["note"])]
     (stem.with_suffix(".md")).write_text("\n".join(md) + "\n", encoding="utf-8")
-    blob = {**result, **(dict(extra) if extra else {}), "paper_table2_12": PAPER_TABLE2_12,
+    blob = {**result, **(dict(extra) if extra else {}), "paper": dict(paper or {}),
             "machine": {"python": platform.python_version(), "torch": torch.__version__,
                         "processor": platform.processor() or platform.machine(), "threads": torch.get_num_threads()}}
     (stem.with_suffix(".json")).write_text(json.dumps(blob, indent=2, default=str) + "\n", encoding="utf-8")

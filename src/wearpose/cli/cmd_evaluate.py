@@ -1,0 +1,141 @@
+"""``wearpose evaluate``: checkpoints on simulated held-out recordings, in the paper's metrics.
+
+Thin: resolves the model arguments (``NAME=path``, a checkpoint path, or shipped weights such as
+``empose12_cpu``) and calls :func:`wearpose.estimators.empose.evaluate.evaluate_models` (one
+simulation per clip shared by every model; metrics from :mod:`wearpose.evaluate`), then prints
+the table and optionally writes markdown + JSON with
+:func:`~wearpose.estimators.empose.evaluate.write_table`.
+
+Methods: the EM-POSE family (``empose``, ``empose-resnet``, ``empose-birnn``,
+``empose-twostage``). The IMU methods have their own protocols (PIP, BIRAE and MiPoser
+evaluate on other kits, rates and metrics); for them the command names the benchmark script.
+"""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+from typing import Any, Optional
+
+import typer
+from rich.table import Table
+
+from wearpose.cli.app import _emit, app, console, err_console
+
+#: Methods without an EM-POSE-style protocol -> the script that evaluates them.
+OTHER_PROTOCOLS = {"pip": "benchmarks/pip_eval.py", "birae": "benchmarks/birae_eval.py",
+                   "miposer": "benchmarks/miposer_eval.py", "imuposer": "benchmarks/miposer_eval.py",
+                   "empose-lbfgs": "benchmarks/empose_lbfgs.py"}
+
+
+def resolve_model(spec: str) -> tuple[str, Path]:
+    """``NAME=TARGET`` or ``TARGET`` -> (display name, checkpoint path); TARGET is a file or the
+    name of shipped weights (:func:`wearpose.weights.weight_path`). The default name is the
+    weights' name, or the run directory of a ``.../<run>/best.pt`` path."""
+    from wearpose.errors import ConfigError
+    from wearpose.weights import weight_path
+
+    name, sep, target = spec.partition("=")
+    if not sep:
+        name, target = "", spec
+    if not target or (sep and not name):
+        raise typer.BadParameter(f"{spec!r}: expected NAME=PATH, PATH or a shipped weight name", param_hint="MODELS")
+    path = Path(target)
+    if not path.is_file():
+        try:
+            path = weight_path(target)
+        except ConfigError as exc:
+            raise typer.BadParameter(f"{target!r} is neither a checkpoint file nor shipped weights ({exc})",
+                                     param_hint="MODELS") from None
+        name = name or target
+    return name or (path.parent.name if path.stem in ("best", "last") else path.stem), path
+
+
+def _check_method(name: str, path: Path) -> None:
+    from wearpose.estimators.checkpoint import load_checkpoint
+    from wearpose.estimators.empose.baselines import ESTIMATOR_NAMES
+
+    method = load_checkpoint(path).method
+    if method not in ESTIMATOR_NAMES.values():
+        script = OTHER_PROTOCOLS.get(method)
+        hint = f"; evaluate it with `python {script}`" if script else ""
+        raise typer.BadParameter(f"{name} ({path}) is a {method!r} model: `wearpose evaluate` runs the EM-POSE "
+                                 f"protocol ({', '.join(ESTIMATOR_NAMES.values())}){hint}", param_hint="MODELS")
+
+
+def _render(r: dict[str, Any]) -> None:
+    t = Table(title=f"{r['split']} split: {r['clips']} clips, {r['frames']} frames, kit {r['kit']}, "
+                    f"offsets {r['offsets']}, noise {r['noise']}")
+    for col in ("model", "MPJPE [mm]", "PA-MPJPE [mm]", "MPJAE [°]", "frames", "epoch", "time [s]"):
+        t.add_column(col, justify="left" if col == "model" else "right")
+    for name, m in r["models"].items():
+        t.add_row(name, f"{m['mpjpe_mm']:.1f} ± {m['mpjpe_std_mm']:.1f}", f"{m['pa_mpjpe_mm']:.1f} ± {m['pa_mpjpe_std_mm']:.1f}",
+                  f"{m['mpjae_deg']:.1f} ± {m['mpjae_std_deg']:.1f}", str(m["frames"]), str(m.get("epoch")),
+                  f"{m['seconds']:.1f}")
+    console.print(t)
+    console.print(f"{r['joints']} joints; mean ± std over frames with every sensor valid; {r['subjects']}.")
+    for p in r.get("written", []):
+        console.print(f"wrote {p}")
+
+
+@app.command()
+def evaluate(
+    models: list[str] = typer.Argument(..., help="Models: NAME=PATH, a checkpoint path, or shipped weights "
+                                                 "(empose12_cpu, empose6_cpu); all for one kit."),
+    split: str = typer.Option("test", help="Corpus split: test (held-out numbers) or val."),
+    clips: Optional[int] = typer.Option(None, "--clips", help="Only the first N clips of the split (sorted ids)."),
+    offsets: str = typer.Option("random", help="Evaluation subjects: random (synthetic subjects from the training "
+                                               "prior, unseen seeds) or unseen (a wider distribution, EM-POSE Table 4)."),
+    spread: float = typer.Option(2.0, help="--offsets unseen: size factor on every offset parameter of the prior."),
+    noise: str = typer.Option("default", help="EM error model of the simulation: default or none."),
+    seed: int = typer.Option(0, help="Base seed of the evaluation subjects and noise."),
+    threads: int = typer.Option(1, help="torch CPU threads."),
+    out: Optional[Path] = typer.Option(None, help="Write OUT.md and OUT.json (table, models, setting)."),
+    title: Optional[str] = typer.Option(None, help="Title of the markdown file."),
+    note: Optional[str] = typer.Option(None, help="A sentence appended to the markdown."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (progress goes to stderr)."),
+) -> None:
+    """Evaluate checkpoints on simulated held-out recordings with the paper's metrics.
+
+    Every clip of the split is simulated once (kit noise, a synthetic subject's sensor offsets,
+    seeds never used for training) and estimated by every model; MPJPE (root-aligned),
+    PA-MPJPE and MPJAE on the 15 major joints over frames with every sensor valid, mean ± std.
+
+    Example: wearpose evaluate empose12_cpu BiRNN=runs/birnn12_cpu/best.pt --clips 20 --out results/em12
+    Unseen subjects (EM-POSE Table 4): wearpose evaluate empose12_cpu --offsets unseen --spread 2
+    """
+    import torch
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from wearpose.estimators.empose.evaluate import SUBJECT_MODES, evaluate_models, write_table
+
+    if split not in ("test", "val", "train"):
+        raise typer.BadParameter(f"expected test or val, got {split!r}", param_hint="--split")
+    if offsets not in SUBJECT_MODES:
+        raise typer.BadParameter(f"expected one of {', '.join(SUBJECT_MODES)}, got {offsets!r}", param_hint="--offsets")
+    if noise not in ("default", "none"):
+        raise typer.BadParameter(f"expected default or none, got {noise!r}", param_hint="--noise")
+    if split == "train":
+        err_console.print("[yellow]warning[/]: the train split measures fit, not held-out accuracy")
+    ckpts: dict[str, Path] = {}
+    for spec in models:
+        name, path = resolve_model(spec)
+        if name in ckpts:
+            raise typer.BadParameter(f"two models named {name!r}; use NAME=PATH", param_hint="MODELS")
+        _check_method(name, path)
+        ckpts[name] = path
+    torch.set_num_threads(threads)
+    columns = (TextColumn("[bold]evaluating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns, console=err_console, transient=True) as bar:
+        task = bar.add_task("", total=None)
+        res = evaluate_models(ckpts, split, clips, noise=noise, seed=seed, offsets=offsets, spread=spread,
+                              progress=lambda d, t: bar.update(task, completed=d, total=t))
+    command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    res["command"] = command
+    if out is not None:
+        extra = {"command": command, **({"note": note} if note else {})}
+        md, js = write_table(res, out, title=title or f"wearpose evaluate ({split} split, kit {res['kit']})",
+                             produced_by=command, paper=None, extra=extra)
+        res["written"] = [str(md), str(js)]
+    _emit(res, as_json, _render)

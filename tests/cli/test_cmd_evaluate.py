@@ -1,0 +1,85 @@
+"""``wearpose evaluate``: model arguments, the EM-POSE protocol end to end on synthetic clips, and
+the unseen-subject offsets of Table 4."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from tests.estimators.test_empose import FakeStore
+from wearpose.cli import app
+from wearpose.cli.cmd_evaluate import resolve_model
+from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
+from wearpose.estimators.empose.evaluate import unseen_subject_offsets
+from wearpose.geometry import matrix_to_axis_angle
+
+runner = CliRunner()
+
+
+def test_help_has_an_example() -> None:
+    res = runner.invoke(app, ["evaluate", "--help"])
+    assert res.exit_code == 0, res.output
+    assert "Example: wearpose evaluate" in res.output and "--offsets" in res.output and "--clips" in res.output
+
+
+def test_model_arguments_resolve_to_checkpoints(tmp_path: Path) -> None:
+    name, path = resolve_model("empose12_cpu")
+    assert name == "empose12_cpu" and path.name == "empose12_cpu.pt" and path.is_file()
+    assert resolve_model("LGD=empose6_cpu")[0] == "LGD"
+    ck = tmp_path / "myrun" / "best.pt"
+    ck.parent.mkdir()
+    ck.write_bytes(b"x")
+    assert resolve_model(str(ck)) == ("myrun", ck)
+    import typer
+
+    for bad in ("nope_cpu", "=empose12_cpu", "A="):
+        with pytest.raises(typer.BadParameter):
+            resolve_model(bad)
+
+
+def test_other_methods_are_sent_to_their_own_protocol() -> None:
+    res = runner.invoke(app, ["evaluate", "pip_cpu", "--clips", "1"])
+    assert res.exit_code != 0 and "pip_eval.py" in res.output
+
+
+def test_evaluate_end_to_end_on_synthetic_clips(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    torch.manual_seed(0)
+    est = EmposeEstimator(EmposeConfig.preset("tiny", 12))
+    ck = tmp_path / "tiny12" / "best.pt"
+    est.save(ck)
+    store = FakeStore(tmp_path, {"test": 2, "val": 1})
+    monkeypatch.setattr("wearpose.motion.CorpusStore", lambda *a, **k: store)
+    out = tmp_path / "res" / "table"
+    res = runner.invoke(app, ["evaluate", f"A={ck}", str(ck), "--json", "--out", str(out), "--offsets", "unseen"])
+    assert res.exit_code == 0, res.output
+    r = json.loads(res.stdout[res.stdout.index("{"):])
+    assert (r["split"], r["clips"], r["offsets"], r["spread"]) == ("test", 2, "unseen", 2.0)
+    assert set(r["models"]) == {"A", "tiny12"}
+    a, b = r["models"]["A"], r["models"]["tiny12"]
+    assert math.isfinite(a["mpjpe_mm"]) and a["mpjpe_mm"] > 0 and a["frames"] == r["frames"] > 0
+    assert a["mpjpe_mm"] == b["mpjpe_mm"]  # the same checkpoint on the same simulated clips
+    assert "| A 12 |" in out.with_suffix(".md").read_text() and json.loads(out.with_suffix(".json").read_text())["clips"] == 2
+    res = runner.invoke(app, ["evaluate", str(ck), "--split", "val", "--clips", "1", "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout[res.stdout.index("{"):])["clips"] == 1
+
+
+def test_unseen_subjects_are_wider_than_the_training_prior() -> None:
+    from wearpose.sensors.em import random_subject_offsets
+
+    seen = [random_subject_offsets(12, torch.Generator().manual_seed(i)) for i in range(40)]
+    wide = [unseen_subject_offsets(12, torch.Generator().manual_seed(i), 2.0) for i in range(40)]
+
+    def angle(o) -> torch.Tensor:
+        return matrix_to_axis_angle(o.R).norm(dim=-1)
+
+    a_seen, a_wide = torch.cat([angle(o) for o in seen]), torch.cat([angle(o) for o in wide])
+    assert a_wide.mean() > 1.7 * a_seen.mean()
+    standoff_seen, standoff_wide = torch.cat([o.t[:, 2] for o in seen]), torch.cat([o.t[:, 2] for o in wide])
+    assert abs(float(standoff_wide.mean()) - 2 * float(standoff_seen.mean())) < 0.004
+    assert torch.allclose(unseen_subject_offsets(12, torch.Generator().manual_seed(0), 1.0).R, seen[0].R)
