@@ -1,7 +1,8 @@
 """Generic training loop shared by the estimators.
 
-:func:`train` runs a :class:`TrainTask` with Adam, a per-step learning-rate schedule (constant
-or cosine), global gradient-norm clipping, validation after every epoch, ``best.pt`` (lowest
+:func:`train` runs a :class:`TrainTask` with Adam, a per-step learning-rate schedule (constant,
+cosine, or exponential ``lr * lr_decay ** (step / lr_decay_steps)`` as TensorFlow's
+``exponential_decay``), global gradient-norm clipping, validation after every epoch, ``best.pt`` (lowest
 validation metric) and ``last.pt`` (every ``checkpoint_every`` steps and every epoch, with the
 optimiser state) checkpoints, resume from ``last.pt`` (mid-epoch: the batch order of an epoch
 is a function of the seed and the epoch, so the batches already done are skipped), a
@@ -60,7 +61,10 @@ class TrainTask(Protocol):
 class TrainSettings:
     """Loop settings. ``threads``: torch CPU threads (None = torch default); ``device``:
     ``"auto"`` (CUDA if available) or a device string; ``max_steps``: stop after this many
-    optimiser steps in total (tests); ``log_every``: steps between log lines."""
+    optimiser steps in total (tests); ``log_every``: steps between log lines. ``lr_schedule``:
+    ``"constant"``, ``"cosine"`` (to ``lr_min_factor * lr`` over all epochs) or ``"exp"``
+    (``lr * lr_decay ** (step / lr_decay_steps)``, continuous; independent of the run length,
+    so a resumed or extended run keeps the same curve)."""
 
     out_dir: Path
     epochs: int
@@ -75,6 +79,8 @@ class TrainSettings:
     log_every: int = 20
     max_steps: int | None = None
     quiet: bool = False
+    lr_decay: float = 0.9
+    lr_decay_steps: int = 5000
 
 
 def resolve_device(device: str) -> torch.device:
@@ -143,6 +149,8 @@ def _lr_at(s: TrainSettings, step: int, total: int) -> float:
     if s.lr_schedule == "cosine" and total > 0:
         f = min(1.0, step / total)
         return s.lr * (s.lr_min_factor + (1 - s.lr_min_factor) * 0.5 * (1 + math.cos(math.pi * f)))
+    if s.lr_schedule == "exp" and s.lr_decay_steps > 0:
+        return s.lr * s.lr_decay ** (step / s.lr_decay_steps)
     return s.lr
 
 
