@@ -52,6 +52,58 @@ def test_3param_is_yaw_free_and_6param_is_not() -> None:
     assert (a6 - b6).abs().max() > 0.1
 
 
+@pytest.mark.parametrize("tilt_deg", [0.0, 10.0, 40.0])
+def test_heading_error_of_one_sensor_enters_3param_only_through_root_tilt(tilt_deg: float) -> None:
+    """Eq. 1 + 3-param: ``(r31, r32, r33)`` of ``R_root^T R_i`` is the root's up axis seen from
+    sensor i; a world heading error ``d`` of sensor i moves it by exactly
+    ``2 sin(|d| / 2) sin(tilt)`` (tilt = angle of the root's up axis from vertical): zero for an
+    upright root, a leak for a tilted one. The 6-param input moves by O(|d|) at any tilt."""
+    g = torch.Generator().manual_seed(7)
+    for trial in range(5):
+        R = rand_R(6, 10 + trial).reshape(1, 6, 3, 3)
+        axis = torch.nn.functional.normalize(torch.tensor([1.0, 0.0, float(torch.randn(1, generator=g))]), dim=0)
+        R[:, 5] = rotation_y(torch.rand(1, generator=g)[0] * 6) @ axis_angle_to_matrix(math.radians(tilt_deg) * axis)
+        d = float(torch.empty(1).uniform_(0.3, 1.2, generator=g))
+        R2 = R.clone()
+        R2[:, 2] = rotation_y(torch.tensor(d)) @ R[:, 2]
+        f3 = [features(relative_orientations(x), "3param").reshape(5, 3) for x in (R, R2)]
+        f6 = [features(relative_orientations(x), "6param").reshape(5, 6) for x in (R, R2)]
+        leak = float((f3[1][2] - f3[0][2]).norm())
+        assert leak == pytest.approx(2 * math.sin(d / 2) * math.sin(math.radians(tilt_deg)), abs=1e-5)
+        assert torch.allclose(f3[0][[0, 1, 3, 4]], f3[1][[0, 1, 3, 4]])  # other sensors untouched
+        assert float((f6[1][2] - f6[0][2]).norm()) > 0.2 * d
+
+
+def test_common_heading_error_cancels_and_per_sensor_scenario_does_not() -> None:
+    """A heading error shared by all six sensors (e.g. one disturbance seen by the whole body)
+    cancels exactly in Eq. 1 for every representation; the ``magnetic`` scenario draws its
+    heading errors per sensor, so the root-relative heading errors are not zero."""
+    R = rand_R(12, 3).reshape(2, 6, 3, 3)
+    common = rotation_y(torch.tensor([0.9, -1.4]))[:, None] @ R
+    for rep in ("6param", "3param", "zhou6d"):
+        assert torch.allclose(features(relative_orientations(R), rep), features(relative_orientations(common), rep), atol=1e-5)
+    m = synthetic_motion(6, T=240, fps=60.0)
+    mag = synthesize(m, 60.0, SCENARIOS["magnetic"], seed=5)
+    rel = (mag["yaw_error"][:, :5] - mag["yaw_error"][:, 5:]).abs()
+    assert float(rel.mean()) > math.radians(5.0)
+    noise = synthesize(m, 60.0, SCENARIOS["noise"], seed=5)
+    assert float((noise["yaw_error"][:, :5] - noise["yaw_error"][:, 5:]).abs().mean()) < float(rel.mean()) / 3
+
+
+def test_exponential_learning_rate_decay_in_the_shared_loop(tmp_path: Path) -> None:
+    """Sec. IV-E: lr x ``lr_decay`` every ``lr_decay_steps`` (continuous), wired from the config."""
+    from wearpose.estimators.birae.train import _settings
+    from wearpose.estimators.train import _lr_at
+
+    cfg = BiraeConfig.preset("cpu")
+    assert cfg.lr_schedule == "exp" and BiraeConfig.preset("paper").lr_decay_steps == 5000
+    s = _settings(cfg, tmp_path, 1, resume=False, threads=1, device="cpu", checkpoint_every=10, max_steps=None, quiet=True)
+    assert s.lr_schedule == "exp" and s.lr_decay == cfg.lr_decay and s.lr_decay_steps == cfg.lr_decay_steps
+    assert _lr_at(s, 0, 50) == pytest.approx(cfg.lr)
+    assert _lr_at(s, 2 * cfg.lr_decay_steps, 50) == pytest.approx(cfg.lr * cfg.lr_decay ** 2)
+    assert _lr_at(s, cfg.lr_decay_steps // 2, 10 ** 6) == pytest.approx(cfg.lr * cfg.lr_decay ** 0.5)
+
+
 def test_inputs_invariant_to_a_common_world_rotation() -> None:
     """Eq. 1: turning the whole body (all sensors) changes no representation."""
     R = rand_R(12, 1).reshape(2, 6, 3, 3)
@@ -299,6 +351,53 @@ def test_finetune_improves_the_fit_on_target_motions(trained, tmp_path: Path) ->
     after = evaluate(tuned, recs, mc_samples=0)["mpjae_all_deg"]
     assert after < before and "finetuned_on" in tuned.meta
     assert len(scenario_recordings("test", "clean", store=store)) == 1
+
+
+def test_motion_content_folds_never_split_a_content() -> None:
+    from wearpose.estimators.birae.evaluate import content_folds, motion_content
+
+    assert motion_content("bandai/bandai-C/dataset-2_run_normal_003") == "bandai/bandai-C/dataset-2_run"
+    assert motion_content("cmu_daz/indian/indian_13") == "cmu_daz/indian/indian"
+    ids = [f"b/x/d_{c}_{st}_{i:03d}" for c in ("run", "walk", "wave", "jump") for st in ("normal", "active") for i in range(3)]
+    fold = content_folds(ids, 3)
+    assert sorted(set(fold)) == [0, 1, 2]
+    by = {}
+    for i, f in zip(ids, fold):
+        by.setdefault(motion_content(i), set()).add(f)
+    assert all(len(v) == 1 for v in by.values())
+
+
+def test_calibrate_auto_picks_a_rule_on_validation_folds_and_heading_offsets(trained) -> None:
+    from wearpose.estimators.birae.evaluate import calibrate, evaluate, scenario_recordings
+    from wearpose.estimators.birae.uncertainty import coverage
+
+    est, tmp, store = trained
+    est = BiraeEstimator.load(tmp / "run" / "best.pt")
+    recs = []
+    for i in range(6):
+        s = synthesize(synthetic_motion(60 + i, T=50), 60.0, SCENARIOS["noise"], seed=i, channels=True)
+        recs.append((f"v/s/d_{('run', 'walk', 'wave')[i % 3]}_normal_{i:03d}", make_recording(s["R_world"], 60.0, s["sim"]),
+                     s["pose"]))
+    cal = calibrate(est, recs, "auto", mc_samples=2)
+    assert cal["cv"]["folds"] == 3 and set(cal["cv"]) >= {"quantile", "nll"}
+    assert len(cal["cv"]["quantile"]["fold_coverage"]) == 3
+    best = min(("quantile", "nll"), key=lambda m: cal["cv"][m]["mean_abs_dev"])
+    assert cal["method"] == best and est.sigma_scale == pytest.approx(cal["scales"][best])
+    r = evaluate(est, recs, mc_samples=2, keep_uncertainty=True)  # sigma now calibrated
+    if best == "quantile":
+        assert coverage(r["_residual"], r["_sigma"]) == pytest.approx(GAUSS_1SIGMA, abs=0.01)
+    with pytest.raises(ValueError):
+        calibrate(est, recs, "bogus")
+    # the heading-offset diagnostic turns each sensor about the vertical by its own constant angle
+    (_, a, _), = scenario_recordings("test", "clean", store=store)
+    (_, b, _), = scenario_recordings("test", "clean", store=store, heading_offset_deg=45.0)
+    Ra = torch.as_tensor(a.on_common_grid(list(a.names)).channels["orientation"])
+    Rb = torch.as_tensor(b.on_common_grid(list(b.names)).channels["orientation"])
+    E = Rb @ Ra.transpose(-1, -2)
+    yaw = torch.atan2(E[..., 0, 2], E[..., 0, 0])
+    assert torch.allclose(E[..., 1, 1], torch.ones_like(E[..., 1, 1]), atol=1e-5)
+    assert torch.allclose(yaw, yaw[:1].expand_as(yaw), atol=1e-5) and float(yaw.abs().max()) <= math.radians(45.0) + 1e-6
+    assert float(yaw[0].std()) > 0.01
 
 
 def test_demo_runs_with_given_weights(trained, tmp_path: Path, monkeypatch) -> None:

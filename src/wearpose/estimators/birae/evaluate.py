@@ -25,8 +25,16 @@ GROUP_ORDER = ("distal", "tracking", "other", "all")
 
 
 def scenario_recordings(split: str = "test", scenario: str = "clean", rate: float = 60.0, limit: int | None = None,
-                        store: Any = None, seed: int = 0) -> list[tuple[str, Any, torch.Tensor]]:
-    """``[(clip_id, recording, gt_pose (T, 24, 3, 3))]`` for the first ``limit`` clips of ``split``."""
+                        store: Any = None, seed: int = 0, heading_offset_deg: float = 0.0
+                        ) -> list[tuple[str, Any, torch.Tensor]]:
+    """``[(clip_id, recording, gt_pose (T, 24, 3, 3))]`` for the first ``limit`` clips of ``split``.
+
+    Args:
+        heading_offset_deg: if > 0, every sensor's world orientation is also turned about the
+            vertical by its own constant angle ``U(-a, a)`` (seeded per clip): a diagnostic of
+            how much a model reads heading at all (no other change to the scenario).
+    """
+    from wearpose.geometry import rotation_y
     from wearpose.motion import CorpusStore
 
     if scenario not in SCENARIOS:
@@ -35,7 +43,13 @@ def scenario_recordings(split: str = "test", scenario: str = "clean", rate: floa
     out = []
     for cid in store.clips(split=split)[: limit or None]:
         s = synthesize(store.load(cid), rate, SCENARIOS[scenario], clip_seed(cid, seed, f"eval-{scenario}"), channels=True)
-        out.append((cid, make_recording(s["R_world"], rate, s["sim"], meta={"clip": cid, "scenario": scenario}),
+        R = s["R_world"]
+        if heading_offset_deg > 0:
+            g = torch.Generator().manual_seed(clip_seed(cid, seed, "eval-heading-offset"))
+            u = (2 * torch.rand(R.shape[1], generator=g, dtype=torch.float64) - 1) * math.radians(heading_offset_deg)
+            R = (rotation_y(u).to(R)[None] @ R).contiguous()
+        out.append((cid, make_recording(R, rate, s["sim"], meta={"clip": cid, "scenario": scenario,
+                                                                 "heading_offset_deg": heading_offset_deg}),
                     s["pose"]))
     return out
 
@@ -111,22 +125,82 @@ def public(res: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in res.items() if not k.startswith("_")}
 
 
-def calibrate(est: Any, val_recs: Sequence[tuple[str, Any, torch.Tensor]], method: str = "quantile",
-              mc_samples: int | None = None) -> dict[str, Any]:
+def motion_content(clip_id: str) -> str:
+    """Motion content of a corpus clip id (folder + name without style and take number), e.g.
+    ``bandai/bandai-C/dataset-2_run_normal_003`` -> ``bandai/bandai-C/dataset-2_run``."""
+    head, _, name = clip_id.rpartition("/")
+    parts = name.split("_")
+    if len(parts) >= 3 and parts[-1].isdigit():
+        parts = parts[:-2]
+    elif len(parts) >= 2 and parts[-1].isdigit():
+        parts = parts[:-1]
+    return f"{head}/{'_'.join(parts)}" if head else "_".join(parts)
+
+
+def content_folds(clip_ids: Sequence[str], k: int = 3) -> list[int]:
+    """Fold index per clip: whole motion contents (:func:`motion_content`) dealt round-robin to
+    ``k`` folds, largest first, so no content is in two folds."""
+    groups: dict[str, list[int]] = {}
+    for i, c in enumerate(clip_ids):
+        groups.setdefault(motion_content(c), []).append(i)
+    fold = [0] * len(clip_ids)
+    for j, (_, idx) in enumerate(sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[0]))):
+        for i in idx:
+            fold[i] = j % k
+    return fold
+
+
+CAL_METHODS = ("quantile", "nll")
+
+
+def calibrate(est: Any, val_recs: Sequence[tuple[str, Any, torch.Tensor]], method: str = "auto",
+              mc_samples: int | None = None, folds: int = 3) -> dict[str, Any]:
     """Fit the post-hoc sigma scale on validation recordings and store it in ``est``.
 
-    Returns ``{"method", "sigma_scale", "val_within_1sigma_before", "val_within_1sigma_after", ...}``.
+    ``method``: ``"quantile"`` (68.27 % of the validation residuals inside +-1 sigma), ``"nll"``
+    (Laves et al.) or ``"auto"``: choose between them on the validation data alone by
+    cross-validation over motion contents (:func:`content_folds`: fit on the other folds,
+    measure the +-1 sigma coverage on the held-out fold, whose motions the fit never saw, as on
+    a test split) and keep the method whose held-out coverage is closest to 68.27 % on average;
+    the chosen method is then fitted on all validation recordings.
+
+    Returns ``{"method", "sigma_scale", "val_within_1sigma_before", "val_within_1sigma_after",
+    "cv": {method: {"fold_coverage": [...], "mean_abs_dev": ...}} (auto), ...}``.
     """
+    from wearpose.estimators.birae.uncertainty import GAUSS_1SIGMA, coverage
+
+    if method not in (*CAL_METHODS, "auto"):
+        raise ValueError(f"calibrate: method must be one of {CAL_METHODS} or 'auto', got {method!r}")
     old = est.sigma_scale
     est.sigma_scale = 1.0
-    r = evaluate(est, val_recs, mc_samples=mc_samples, keep_uncertainty=True)
-    s = fit_sigma_scale(r["_residual"], r["_sigma"], method)
-    before = calibration_report(r["_residual"], r["_sigma"])
-    after = calibration_report(r["_residual"], r["_sigma"] * s)
+    fold = content_folds([c for c, _, _ in val_recs], folds) if method == "auto" else [0] * len(val_recs)
+    parts = []  # per fold: (residual, sigma, frames)
+    for f in sorted(set(fold)):
+        r = evaluate(est, [x for x, k in zip(val_recs, fold) if k == f], mc_samples=mc_samples, keep_uncertainty=True)
+        parts.append((r["_residual"], r["_sigma"], r["frames"], r["mc_samples"]))
+    res, sig = torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts])
+    cv: dict[str, Any] = {}
+    chosen = method
+    if method == "auto":
+        for m in CAL_METHODS:
+            cov = []
+            for f in range(len(parts)):
+                rest = [p for j, p in enumerate(parts) if j != f]
+                s_f = fit_sigma_scale(torch.cat([p[0] for p in rest]), torch.cat([p[1] for p in rest]), m)
+                cov.append(coverage(parts[f][0], parts[f][1] * s_f))
+            cv[m] = {"fold_coverage": cov, "mean_abs_dev": sum(abs(c - GAUSS_1SIGMA) for c in cov) / len(cov)}
+        chosen = min(CAL_METHODS, key=lambda m: cv[m]["mean_abs_dev"])
+    s = fit_sigma_scale(res, sig, chosen)
+    before = calibration_report(res, sig)
+    after = calibration_report(res, sig * s)
     est.sigma_scale = s
-    est.calibration = {"method": method, "sigma_scale": s, "val_clips": len(val_recs), "val_frames": r["frames"],
-                       "mc_samples": r["mc_samples"], "val_within_1sigma_before": before["within_1sigma"],
-                       "val_within_1sigma_after": after["within_1sigma"], "previous_scale": old}
+    est.calibration = {"method": chosen, "requested": method, "sigma_scale": s, "val_clips": len(val_recs),
+                       "val_frames": sum(p[2] for p in parts), "mc_samples": parts[0][3] if parts else mc_samples,
+                       "val_within_1sigma_before": before["within_1sigma"],
+                       "val_within_1sigma_after": after["within_1sigma"], "previous_scale": old,
+                       "scales": {m: fit_sigma_scale(res, sig, m) for m in CAL_METHODS}}
+    if cv:
+        est.calibration["cv"] = {"folds": len(parts), "by": "motion content", **cv}
     return dict(est.calibration)
 
 

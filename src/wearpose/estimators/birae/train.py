@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 import shutil
-import warnings
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -105,16 +104,10 @@ class BiraeTask:
 
 def _settings(cfg: Any, out: Path, epochs: int, *, resume: bool, threads: int | None, device: str,
               checkpoint_every: int, max_steps: int | None, quiet: bool, lr: float | None = None) -> TrainSettings:
-    schedule = cfg.lr_schedule
-    if schedule == "exp":
-        # The shared loop knows constant / cosine; the paper's x0.9 per 5000 steps is the closest
-        # to constant over our short runs (< 5000 steps), so say so and use that.
-        warnings.warn("BiRAE: the shared training loop has no exponential decay; using a constant learning rate",
-                      stacklevel=3)
-        schedule = "constant"
-    return TrainSettings(out_dir=out, epochs=epochs, lr=lr or cfg.lr, lr_schedule=schedule,
-                         lr_min_factor=cfg.lr_min_factor, grad_clip=cfg.grad_clip, resume=resume, threads=threads,
-                         device=device, checkpoint_every=checkpoint_every, max_steps=max_steps, quiet=quiet)
+    return TrainSettings(out_dir=out, epochs=epochs, lr=lr or cfg.lr, lr_schedule=cfg.lr_schedule,
+                         lr_min_factor=cfg.lr_min_factor, lr_decay=cfg.lr_decay, lr_decay_steps=cfg.lr_decay_steps,
+                         grad_clip=cfg.grad_clip, resume=resume, threads=threads, device=device,
+                         checkpoint_every=checkpoint_every, max_steps=max_steps, quiet=quiet)
 
 
 def train_birae(est: Any, out_dir: str | Path, *, resume: bool = False, threads: int | None = None,
