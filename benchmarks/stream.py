@@ -12,8 +12,8 @@ Scenarios:
   the weights' trained 30 Hz); the other frames are counted ``decimated``, not lost.
 - ``em12-null``: the same stream through a pass-through estimator (``--model null``): the
   server's own overhead and the transport, without the network.
-- ``imu6``: 6 IMUs at 60 Hz -> shipped weights whose card's kit is ``imu6``; reported as
-  pending when none is shipped.
+- ``imu6``: 6 IMUs at 60 Hz -> ``--imu-weights`` (default ``pip_cpu``: PIP with its physics
+  optimizer, as shipped); reported as pending when no IMU weights are shipped.
 
 The server runs in its own process (``python -m wearpose.cli serve``, as a user starts it); the
 replay client (:func:`wearpose.stream.replay`) paces frames at real time, injects 1 % malformed
@@ -22,6 +22,10 @@ frames, and times every frame from send to its pose coming back. Latency is spli
 ``compute_ms`` (the estimator's ``step``), ``queue_ms`` (waiting for the estimator, incl. the
 thread hand-off) and ``transport_ms`` (everything outside the server: encode, loopback, decode,
 the client's event loop). CPU use of both processes comes from psutil (100 % = one core).
+The server's own per-stage breakdown (``server_stats.stages_ms``: reorder, queue, compute, encode,
+send; with each stage's mean over the slowest 1 % of frames), its GC pauses (``server_stats.gc``)
+and the client's (``client_gc``), the slowest 1 % of frames split by stage (``tail_top1pct``)
+and the load average sampled during the run (``load_average_samples``) say where a tail comes from.
 Writes ``benchmarks/results/stream.json`` and prints a table.
 """
 
@@ -29,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import gc
 import json
 import os
 import platform
@@ -46,6 +51,7 @@ from rich.console import Console
 from rich.table import Table
 
 from wearpose.stream import Faults, replay
+from wearpose.stream.server import GcPauses
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -66,16 +72,30 @@ def kit_recording(clip: str, kit: str, rate: float, seed: int) -> Any:
     return Recording.from_simulation(sim, m)
 
 
-def imu_weights() -> str | None:
+def imu_weights(preferred: str) -> str | None:
     from wearpose.weights import card, list_weights
 
-    return next((w for w in list_weights() if card(w).get("kit") == "imu6"), None)
+    names = list_weights()
+    if preferred in names:
+        return preferred
+    return next((w for w in names if card(w).get("kit") == "imu6"), None)
 
 
-def start_server(model: str, stride: str, workers: int, threads: int) -> tuple[subprocess.Popen, str]:
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def start_server(model: str, stride: str, workers: int, threads: int, warmup: int) -> tuple[subprocess.Popen, str]:
     cmd = [sys.executable, "-m", "wearpose.cli", "serve", "--model", model, "--port", "0", "--stride", stride,
-           "--workers", str(workers), "--threads", str(threads), "--log-level", "ERROR"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, cwd=ROOT)
+           "--workers", str(workers), "--threads", str(threads), "--warmup", str(warmup), "--log-level", "ERROR"]
+    env = {**os.environ, "OMP_NUM_THREADS": str(threads), "MKL_NUM_THREADS": str(threads)}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, cwd=ROOT, env=env)
     line = proc.stdout.readline()
     if " on ws://" not in line:
         proc.kill()
@@ -84,17 +104,20 @@ def start_server(model: str, stride: str, workers: int, threads: int) -> tuple[s
 
 
 def run_scenario(name: str, rec: Any, model: str, args: argparse.Namespace, stride: str) -> dict[str, Any]:
-    proc, url = start_server(model, stride, args.workers, args.threads)
+    proc, url = start_server(model, stride, args.workers, args.threads, args.warmup)
+    gc_client = GcPauses().install()
     sp, me = psutil.Process(proc.pid), psutil.Process()
     c0s, c0c, t0 = sp.cpu_times(), me.cpu_times(), time.perf_counter()
     faults = Faults(malformed=args.malformed, dropout=args.dropout, dropout_frames=(1, 30), reorder=args.reorder,
                     seed=args.seed)
     last = [time.perf_counter()]
+    loads: list[float] = [round(os.getloadavg()[0], 2)]
 
     def progress(k: int, n: int) -> None:
         if time.perf_counter() - last[0] > 30:
             last[0] = time.perf_counter()
-            print(f"  {name}: {k}/{n} frames", flush=True)
+            loads.append(round(os.getloadavg()[0], 2))
+            print(f"  {name}: {k}/{n} frames, load {loads[-1]}", flush=True)
 
     try:
         res = asyncio.run(replay(rec, url, subject=0, fmt=args.format, realtime=True, duration=args.duration,
@@ -110,6 +133,9 @@ def run_scenario(name: str, rec: Any, model: str, args: argparse.Namespace, stri
     cpu = lambda a, b: round(100.0 * ((b.user - a.user) + (b.system - a.system)) / wall, 1)  # noqa: E731
     res["cpu_percent_of_one_core"] = {"server": cpu(c0s, c1s), "client": cpu(c0c, c1c)}
     res["wall_s"] = round(wall, 1)
+    res["load_average_samples"] = loads + [round(os.getloadavg()[0], 2)]
+    res["client_gc"] = gc_client.stats()
+    gc.callbacks.remove(gc_client._callback)
     res["model"] = model
     res["server_exit_code"] = proc.returncode
     res["server_stride_option"] = stride
@@ -147,6 +173,8 @@ def main() -> None:
                     help="em12: EM-POSE on every 120 Hz frame (--stride); em12-auto: EM-POSE at its trained rate "
                          "(server --stride auto); em12-null: pass-through estimator (server + transport only); imu6")
     ap.add_argument("--weights", default="empose12_cpu")
+    ap.add_argument("--imu-weights", default="pip_cpu", help="weights of the imu6 scenario")
+    ap.add_argument("--warmup", type=int, default=30, help="server --warmup (synthetic steps before ready)")
     ap.add_argument("--clip", default="cmu_daz/05/05_01", help="a test-split clip (looped)")
     ap.add_argument("--rate", type=float, default=120.0, help="EM sensor rate, Hz")
     ap.add_argument("--stride", default="1", help="server --stride: 1 = estimate every frame")
@@ -165,8 +193,10 @@ def main() -> None:
     out: dict[str, Any] = {
         "command": "python benchmarks/stream.py " + " ".join(sys.argv[1:]),
         "targets": {"frames_lost": 0, "latency_p99_ms": 10.0},
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "load_average_1m_start": os.getloadavg()[0],
-                    "torch": torch.__version__},
+        "machine": {"platform": platform.platform(), "cpu_model": cpu_model(), "cpus": os.cpu_count(),
+                    "python": platform.python_version(), "torch": torch.__version__,
+                    "load_average_start": [round(x, 2) for x in os.getloadavg()],
+                    "utc_start": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
         "scenarios": {},
     }
     em12 = None
@@ -178,14 +208,15 @@ def main() -> None:
             print(f"scenario {name}: {model}, stride {stride}", flush=True)
             out["scenarios"][name] = run_scenario(name, em12, model, args, stride)
         elif name == "imu6":
-            w = imu_weights()
+            w = imu_weights(args.imu_weights)
             if w is None:
                 out["scenarios"][name] = {"status": "pending: no shipped IMU (imu6) estimator weights in this build"}
                 continue
             out["scenarios"][name] = run_scenario(name, kit_recording(args.clip, "imu6", 60.0, args.seed), w, args, "1")
         else:
             raise SystemExit(f"unknown scenario {name!r}")
-    out["machine"]["load_average_1m_end"] = os.getloadavg()[0]
+    out["machine"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    out["machine"]["utc_end"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     for r in out["scenarios"].values():
         if "latency_ms" in r:
             r["meets_targets"] = bool(r["frames_lost"] == 0 and r["latency_ms"]["p99"] is not None
@@ -205,6 +236,16 @@ def main() -> None:
                     f"{r['cpu_percent_of_one_core']['server']}/{r['cpu_percent_of_one_core']['client']}",
                     "met" if r["meets_targets"] else "MISSED")
     Console(width=180).print(tab)
+    stages = Table(title="server stages, ms: median / p99 (mean over the slowest 1 % of frames)")
+    stages.add_column("scenario")
+    for c in ("reorder", "queue", "compute", "encode", "send", "server GC max ms", "client GC max ms"):
+        stages.add_column(c)
+    for name, r in out["scenarios"].items():
+        st = r.get("server_stats", {}).get("stages_ms") or {}
+        if st:
+            stages.add_row(name, *[f"{v['median']} / {v['p99']} ({v['mean_in_top1pct']})" for v in st.values()],
+                           str(r["server_stats"]["gc_since_ready"]["max_ms"]), str(r["client_gc"]["max_ms"]))
+    Console(width=180).print(stages)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(out, indent=2, default=str))
     print(f"wrote {args.out}")

@@ -29,6 +29,7 @@ class EchoEstimator(Estimator):
     def __init__(self, delay_s: float = 0.0) -> None:
         self.seen: list[tuple[float, np.ndarray, bool]] = []
         self.delay_s = delay_s
+        self.steps = 0  # every step since construction (reset does not clear it)
 
     def fit(self, *a: Any, **k: Any) -> Any: ...
     def save(self, path: Any) -> Any: ...
@@ -43,6 +44,7 @@ class EchoEstimator(Estimator):
         self.seen.clear()
 
     def step(self, frame: SensorFrame) -> PoseFrame:
+        self.steps += 1
         if self.delay_s:
             import time
 

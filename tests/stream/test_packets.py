@@ -106,3 +106,16 @@ def test_reorder_buffer() -> None:
     assert r.push(3, 3) == [] and r.late == 1  # too late: dropped, not estimated
     assert r.push(8, 8) == [] and r.push(8, 8) == [] and r.duplicate == 1
     assert r.flush() == [8] and r.lost == 2
+
+
+def test_reorder_buffer_orders_across_the_u32_wrap_around() -> None:
+    top = 2**32
+    r = ReorderBuffer(window=3)
+    assert r.push(top - 2, "a") == ["a"]
+    assert r.push(0, "c") == []  # after top - 1: waits for it
+    assert r.push(top - 1, "b") == ["b", "c"]  # swapped across the wrap, nothing lost
+    assert r.push(2, "e") == [] and r.push(1, "d") == ["d", "e"]
+    assert r.push(top - 1, "late") == [] and r.late == 1  # an old frame, not one 2**32 ahead
+    assert r.push(5, "f") == []  # 3 and 4 missing: waited for
+    assert r.push(6, "g") == ["f", "g"] and r.lost == 2  # 3 frames on: given up (never invented)
+    assert (r.duplicate, r.late) == (0, 1)

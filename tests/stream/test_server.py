@@ -209,3 +209,44 @@ def test_udp_frames_and_poses() -> None:
     ready, poses, bye, malformed = _run(main())
     assert ready["type"] == "ready" and [p.seq for p in poses] == list(range(30))
     assert bye["stats"]["estimated"] == 30 and malformed == 1
+
+
+def test_sequence_numbers_wrap_around_without_loss() -> None:
+    rec = tiny_recording(12)
+    st = stack_recording(rec)
+    start = 2**32 - 6
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(_Factory(), port=0) as srv, StreamClient(srv.url) as c:
+            await c.hello(Hello(0, st.names, st.channels, st.rate, "binary"))
+            order = [0, 1, 2, 3, 4, 6, 5, 7, 8, 9, 10, 11]  # frame 5 (seq 2**32 - 1) arrives after seq 0
+            for k in order:
+                await c.send_frame(FramePacket(0, (start + k) % 2**32, float(st.timestamps[k]), st.valid[k], st.data[k]))
+            final = await c.bye(0)
+            return final, [c.poses.get_nowait()[1] for _ in range(c.poses.qsize())]
+
+    final, poses = _run(main())
+    assert [p.seq for p in poses] == [(start + k) % 2**32 for k in range(12)]  # in order across the wrap
+    assert [p.timestamp for p in poses] == [float(t) for t in st.timestamps[:12]]
+    assert (final["lost"], final["late"], final["estimated"]) == (0, 0, 12)
+
+
+def test_estimator_warmed_up_before_ready_and_stages_timed() -> None:
+    from wearpose.stream.server import STAGES
+
+    rec = tiny_recording(30)
+    fac = _Factory(delay_s=0.002)
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(fac, port=0, warmup=7) as srv:
+            return await replay(rec, srv.url, realtime=False)
+
+    r = _run(main())
+    est = fac.made[0]
+    # 7 synthetic steps before ready, then reset: the estimator saw exactly the 30 real frames
+    assert est.steps == 7 + 30 and len(est.seen) == 30 and r["poses_received"] == 30
+    st = r["server_stats"]["stages_ms"]
+    assert list(st) == list(STAGES)
+    assert st["compute"]["median"] >= 2.0  # the 2 ms step
+    assert all(v["median"] >= 0 for v in st.values())
+    assert r["server_stats"]["compute_ms"]["median"] >= 2.0 and "gc_since_ready" in r["server_stats"]

@@ -45,8 +45,11 @@ def serve(
     stride: str = typer.Option("1", help="Estimate every N-th frame: 1 (every frame), N, or auto (stream rate / "
                                          "the estimator's trained rate)."),
     udp_port: Optional[int] = typer.Option(None, help="Also accept the same packets over UDP on this port."),
-    workers: int = typer.Option(2, help="Threads running estimator steps (subjects run in parallel up to this)."),
+    workers: int = typer.Option(2, help="Estimator steps running at once (each subject has its own estimator thread; "
+                                        "subjects step in parallel up to this)."),
     threads: int = typer.Option(1, help="torch CPU threads per step."),
+    warmup: int = typer.Option(30, help="Synthetic steps run on each new subject's estimator before it is ready "
+                                        "(pays tracing / first-call costs before real frames; 0: none)."),
     log_level: str = typer.Option("INFO", help="Python logging level."),
     as_json: bool = typer.Option(False, "--json", help="Print the final stats as JSON at shutdown."),
 ) -> None:
@@ -68,7 +71,7 @@ def serve(
         print(f"serving {model} on {server.url}{udp}", flush=True)
 
     final = run_server(factory, host, port, on_start=started, reorder_window=reorder_window, stride=_stride(stride),
-                       workers=workers, udp_port=udp_port)
+                       workers=workers, udp_port=udp_port, warmup=warmup, threads=threads)
     _emit(final, as_json, lambda r: console.print(f"stopped; subjects served: {len(r['finished'])}, "
                                                   f"malformed messages: {r['malformed_total']}"))
 

@@ -153,6 +153,7 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         ready = await c.hello(hello)
         off_until = np.zeros(S, dtype=np.int64)
         n_malformed = n_reordered = n_dropped_samples = 0
+        swapped: set[int] = set()  # frames sent after their successor
         lag: list[float] = []
         held: FramePacket | None = None
         period = 1.0 / (st.rate * speed)
@@ -179,6 +180,7 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
             pkt = FramePacket(subject, k, ts, valid, data)
             if held is None and k + 1 < N and faults.reorder > 0 and rng.random() < faults.reorder:
                 held, n_reordered = pkt, n_reordered + 1  # sent after its successor
+                swapped.add(k)
             else:
                 sent[k] = time.perf_counter()
                 await c.send_frame(pkt)
@@ -219,6 +221,19 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
     e2e = [(recv[s][0] - sent[s]) * 1e3 for s in got]
     srv = [recv[s][1].server_ms for s in got]
     comp = [recv[s][1].compute_ms for s in got]
+    # Where the tail comes from: the slowest 1 % of frames, split as above, and how many of them
+    # are a swapped pair (sent after its successor, or the successor that had to wait for it).
+    tail: dict[str, Any] = {}
+    if got:
+        a_e2e, a_srv, a_comp = np.asarray(e2e), np.asarray(srv), np.asarray(comp)
+        top = a_e2e >= np.percentile(a_e2e, 99)
+        seqs = np.asarray(got)[top]
+        tail = {"frames": int(top.sum()), "latency_ms_mean": round(float(a_e2e[top].mean()), 3),
+                "compute_ms_mean": round(float(a_comp[top].mean()), 3),
+                "queue_ms_mean": round(float((a_srv - a_comp)[top].mean()), 3),
+                "transport_ms_mean": round(float((a_e2e - a_srv)[top].mean()), 3),
+                "swapped_pair_frames": int(sum(1 for q in seqs if q in swapped or q - 1 in swapped)),
+                "in_first_second": int((seqs < st.rate).sum())}
     return {
         "subject": subject, "format": fmt, "rate_hz": st.rate, "sensors": len(st.names), "channels": list(st.channels),
         "frames_sent": len(sent), "frames_expected": len(expected), "poses_received": len(recv),
@@ -230,7 +245,8 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         "latency_ms": _summary_ms(e2e), "server_ms": _summary_ms(srv), "compute_ms": _summary_ms(comp),
         "transport_ms": _summary_ms(np.asarray(e2e) - np.asarray(srv)),
         "queue_ms": _summary_ms(np.asarray(srv) - np.asarray(comp)),
-        "send_lag_ms": _summary_ms(lag) if lag else None,
+        "send_lag_ms": _summary_ms(lag) if lag else None, "tail_top1pct": tail,
+        "first_frames_latency_ms": [round(x, 3) for x in e2e[:10]],
         "injected": {"malformed": n_malformed, "reordered": n_reordered, "dropped_sensor_samples": n_dropped_samples},
         "faults": asdict(faults), "ready": ready, "server_stats": server_stats,
     }

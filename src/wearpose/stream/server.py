@@ -23,18 +23,36 @@ What the server does with imperfect input (all counted in ``stats``):
 - **Estimator slower than the sensor rate**: frames queue (never dropped); ``queue_max`` and the
   ``server_ms`` of every pose show it.
 
-The estimator's ``step`` runs in a thread pool, off the event loop, so network I/O keeps
-flowing while a frame is being estimated; each subject's frames are estimated in order.
+Each subject has its own estimator thread fed by a queue, off the event loop, so network I/O
+keeps flowing while a frame is being estimated; a subject's frames are estimated in order, and
+at most ``workers`` steps run at once. The thread also encodes the pose; the event loop only
+sends it. Latency measures (all in ``stats``, per subject):
+
+- ``stages_ms``: per-frame stage times (percentiles): ``reorder`` (arrival and decode -> released
+  in order), ``queue`` (waiting for the estimator thread), ``compute`` (``step``), ``encode``
+  (pose packet built and encoded), ``send`` (hand-back to the event loop and the send), with
+  each stage's mean over the slowest 1 % of frames (where the tail comes from).
+- ``gc``: Python garbage-collector pauses in the server process.
+
+Before a subject's ``ready`` the estimator is warmed up (``warmup`` steps on a synthetic frame,
+then ``reset()``): the first steps of a fresh estimator build and optimise its traced graph and
+would otherwise stall the first real frames. After loading, the objects alive so far (modules,
+weights) are moved out of the garbage collector's reach (``gc.freeze``) so collections stay short.
 """
 
 from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import gc
 import http
 import json
 import logging
+import queue
 import signal
+import struct
+import sys
+import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -63,29 +81,48 @@ log = logging.getLogger("wearpose.stream")
 REORDER_WINDOW = 4
 #: A subscriber with more than this unsent is skipped for a pose (counted ``subscriber_skipped``).
 SUBSCRIBER_BACKLOG_BYTES = 1 << 20
-#: Latency samples kept per subject for the stats percentiles.
-STATS_SAMPLES = 20000
+#: Latency samples kept per subject for the stats percentiles (the last ones; 10 min at 120 Hz).
+STATS_SAMPLES = 1 << 17
+#: Per-frame stages timed by the server (``stats()["subjects"][k]["stages_ms"]``; module doc).
+STAGES = ("reorder", "queue", "compute", "encode", "send")
+#: Synthetic steps run on a fresh estimator before its subject's ``ready`` (module doc).
+WARMUP_STEPS = 30
+
+
+#: Sequence numbers are u32 and wrap around (serial-number arithmetic, RFC 1982).
+SEQ_MODULUS = 1 << 32
 
 
 class ReorderBuffer:
     """Releases sequence-numbered items in order, waiting at most ``window`` frames for a gap.
 
-    The first item pushed sets the start of the sequence. Counters: ``late`` (arrived after
-    its slot was passed), ``duplicate`` (already buffered), ``lost`` (gaps given up).
+    The first item pushed sets the start of the sequence. Sequence numbers are u32 and may wrap
+    around (``2**32 - 1`` is followed by ``0``): each is read as the nearest number to the next
+    expected one (serial-number arithmetic), so order holds across the wrap as long as frames are
+    less than ``2**31`` apart. Counters: ``late`` (arrived after its slot was passed),
+    ``duplicate`` (already buffered), ``lost`` (gaps given up).
     """
 
     def __init__(self, window: int = REORDER_WINDOW) -> None:
         if window < 1:
             raise ValueError(f"reorder window must be >= 1 frame, got {window}")
         self.window = window
-        self.next: int | None = None
-        self.buf: dict[int, Any] = {}
+        self.next: int | None = None  # unwrapped (may exceed 2**32 after a wrap)
+        self.buf: dict[int, Any] = {}  # unwrapped sequence -> item
         self.late = self.duplicate = self.lost = 0
+
+    def unwrap(self, seq: int) -> int:
+        """``seq`` (u32) as the unwrapped sequence number nearest to the next expected one."""
+        if self.next is None:
+            return seq
+        half = SEQ_MODULUS // 2
+        return self.next + ((seq - self.next + half) % SEQ_MODULUS) - half
 
     def push(self, seq: int, item: Any) -> list[Any]:
         """Add one item; returns the items now ready, in sequence order."""
         if self.next is None:
             self.next = seq
+        seq = self.unwrap(seq)
         if seq < self.next:
             self.late += 1
             return []
@@ -119,12 +156,73 @@ class ReorderBuffer:
         return out
 
 
-def _summary(x: deque) -> dict[str, float | None]:
-    if not x:
-        return {"median": None, "p99": None, "max": None}
+def _summary(x: Any) -> dict[str, float | None]:
     a = np.asarray(x, dtype=np.float64)
+    if not a.size:
+        return {"median": None, "p99": None, "max": None}
     return {"median": round(float(np.median(a)), 4), "p99": round(float(np.percentile(a, 99)), 4),
             "max": round(float(a.max()), 4)}
+
+
+class StageLog:
+    """Per-frame times of the :data:`STAGES` (ms) in a ring buffer of the last ``n`` frames.
+
+    :meth:`add` takes the ``len(STAGES) + 1`` time stamps (``time.perf_counter()`` s) that bound
+    the stages; :meth:`summary` gives each stage's median / p99 / max and its mean over the frames
+    whose total is in the top 1 % (``mean_in_top1pct``: which stage makes the tail).
+    """
+
+    def __init__(self, n: int = STATS_SAMPLES) -> None:
+        self.a = np.zeros((len(STAGES), n))
+        self.i = 0
+
+    def add(self, stamps: tuple[float, ...]) -> None:
+        self.a[:, self.i % self.a.shape[1]] = np.diff(stamps) * 1e3
+        self.i += 1
+
+    def total(self) -> np.ndarray:
+        return self.a[:, :min(self.i, self.a.shape[1])].sum(0)
+
+    def summary(self) -> dict[str, dict[str, float | None]]:
+        a = self.a[:, :min(self.i, self.a.shape[1])]
+        if not a.shape[1]:
+            return {}
+        tot = a.sum(0)
+        tail = tot >= np.percentile(tot, 99)
+        return {n: {**_summary(a[j]), "mean_in_top1pct": round(float(a[j][tail].mean()), 4)}
+                for j, n in enumerate(STAGES)}
+
+
+class GcPauses:
+    """Garbage-collector pauses of this process, via ``gc.callbacks`` (:meth:`install` once);
+    :meth:`stats` summarises those after a given time (e.g. since a subject's stream began)."""
+
+    def __init__(self, keep: int = 1 << 16) -> None:
+        self.events: deque = deque(maxlen=keep)  # (perf_counter at the end, generation, ms)
+        self._t0 = 0.0
+
+    def install(self) -> GcPauses:
+        if self._callback not in gc.callbacks:
+            gc.callbacks.append(self._callback)
+        return self
+
+    def _callback(self, phase: str, info: dict[str, Any]) -> None:
+        if phase == "start":
+            self._t0 = time.perf_counter()
+            return
+        t = time.perf_counter()
+        self.events.append((t, info["generation"], (t - self._t0) * 1e3))
+
+    def stats(self, since: float = 0.0) -> dict[str, Any]:
+        ev = [e for e in list(self.events) if e[0] >= since]
+        count = [sum(1 for e in ev if e[1] == g) for g in range(3)]
+        ms = [e[2] for e in ev]
+        return {"collections_per_generation": count, "total_ms": round(sum(ms), 3),
+                "max_ms": round(max(ms, default=0.0), 3)}
+
+
+#: This process's GC pauses (the server's ``stats()["gc"]``).
+GC_PAUSES = GcPauses()
 
 
 @dataclass
@@ -134,22 +232,31 @@ class _Subject:
     estimator: Estimator | None = None
     stride: int = 1
     reorder: ReorderBuffer = field(default_factory=ReorderBuffer)
-    queue: asyncio.Queue = field(default_factory=asyncio.Queue)
-    worker: asyncio.Task | None = None
+    # frames in order -> the estimator thread; its poses -> the sender task (event loop)
+    inbox: queue.SimpleQueue = field(default_factory=queue.SimpleQueue)
+    outbox: asyncio.Queue = field(default_factory=asyncio.Queue)
+    thread: threading.Thread | None = None
+    worker: asyncio.Task | None = None  # the sender task; done once every pose is sent
+    abandon: bool = False  # shutdown gave up waiting: the thread skips what is left
     ready: asyncio.Event = field(default_factory=asyncio.Event)
+    t_ready: float = 0.0  # perf_counter when the subject became ready
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
         ("received", "estimated", "published", "malformed", "masked_sensor_samples", "decimated", "estimator_errors",
          "abandoned_at_shutdown",
          "queue_max"), 0))
-    compute_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_SAMPLES))
-    server_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_SAMPLES))
+    stages: StageLog = field(default_factory=StageLog)
+    compute_cpu_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_SAMPLES))
 
     def stats(self) -> dict[str, Any]:
         r = self.reorder
-        return {**self.counts, "late": r.late, "duplicate": r.duplicate, "lost": r.lost, "queue_now": self.queue.qsize(),
+        st = self.stages
+        n = min(st.i, st.a.shape[1])
+        return {**self.counts, "late": r.late, "duplicate": r.duplicate, "lost": r.lost, "queue_now": self.inbox.qsize(),
                 "reorder_window": r.window, "stride": self.stride, "rate_hz": self.hello.rate,
                 "estimator": getattr(self.estimator, "name", None),
-                "compute_ms": _summary(self.compute_ms), "server_ms": _summary(self.server_ms)}
+                "compute_ms": _summary(st.a[STAGES.index("compute"), :n]), "server_ms": _summary(st.total()),
+                "compute_cpu_ms": _summary(self.compute_cpu_ms), "stages_ms": st.summary(),
+                "gc_since_ready": GC_PAUSES.stats(self.t_ready)}
 
 
 _END = object()  # queue sentinel: the subject's stream ended
@@ -167,14 +274,18 @@ class StreamServer:
         stride: estimate every ``stride``-th frame (by sequence number) and skip the others
             (counted ``decimated``): ``"auto"`` = round(stream rate / estimator rate), for a
             network trained at a lower rate than the sensors stream. Default 1: every frame.
-        workers: threads running estimator steps (subjects estimate in parallel up to this).
+        workers: estimator steps running at once (each subject has its own thread; at most this
+            many step at the same time) and threads loading estimators.
+        warmup: synthetic steps run on each fresh estimator before its subject's ``ready``
+            (module doc; 0: none).
+        threads: torch intra-op threads of the estimator threads (None: leave torch's setting).
         udp_port: also accept the same messages as UDP datagrams on this port (0: any free one,
             see :attr:`udp_port`; None: no UDP). Replies and poses go back to the sender's address.
     """
 
     def __init__(self, estimator_factory: Callable[[], Estimator], host: str = "127.0.0.1", port: int = 8765, *,
                  reorder_window: int = REORDER_WINDOW, stride: int | str = 1, workers: int = 2,
-                 udp_port: int | None = None) -> None:
+                 udp_port: int | None = None, warmup: int = WARMUP_STEPS, threads: int | None = 1) -> None:
         if stride != "auto" and (not isinstance(stride, int) or stride < 1):
             raise ValueError(f"stride: expected a positive integer or 'auto', got {stride!r}")
         self.factory = estimator_factory
@@ -183,7 +294,12 @@ class StreamServer:
         self._udp: Any = None
         self.reorder_window = reorder_window
         self.stride = stride
-        self.pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers, thread_name_prefix="wearpose-est")
+        self.pool = concurrent.futures.ThreadPoolExecutor(max_workers=workers, thread_name_prefix="wearpose-load")
+        self._slots = threading.BoundedSemaphore(workers)
+        self.warmup = warmup
+        self.threads = threads
+        self._loop: asyncio.AbstractEventLoop | None = None
+        GC_PAUSES.install()
         self.subjects: dict[int, _Subject] = {}
         self.subscribers: dict[Any, tuple[str, set[int] | None]] = {}
         self.connections: set[Any] = set()
@@ -199,6 +315,7 @@ class StreamServer:
     async def start(self) -> StreamServer:
         from websockets.asyncio.server import serve
 
+        self._loop = asyncio.get_running_loop()
         # No per-message compression: it costs latency and float payloads hardly compress.
         self._server = await serve(self._handle, self.host, self.port, compression=None, max_size=MAX_MESSAGE_BYTES,
                                    process_request=self._http, ping_interval=None)
@@ -223,9 +340,10 @@ class StreamServer:
             except asyncio.TimeoutError:
                 # The estimator is far behind: stop anyway, and say how many received frames it never estimated.
                 for k, s in list(self.subjects.items()):
+                    s.abandon = True  # the thread skips the rest (it cannot be interrupted mid-step)
                     if s.worker is not None:
                         s.worker.cancel()
-                    s.counts["abandoned_at_shutdown"] = max(0, s.queue.qsize() - 1)  # minus the end marker
+                    s.counts["abandoned_at_shutdown"] = max(0, s.inbox.qsize() - 1)  # minus the end marker
                     self.finished[str(k)] = s.stats()
                     log.warning("subject %d: %d received frames not estimated (shutdown after %.0f s of draining)",
                                 k, s.counts["abandoned_at_shutdown"], drain_timeout)
@@ -399,18 +517,25 @@ class StreamServer:
             log.warning("subject %d refused: %s", hello.subject, exc)
             await self._safe_send(ws, json.dumps({"type": "error", "subject": hello.subject, "error": str(exc)}))
             return
+        # What is alive now (modules, weights, traced graphs) stays: keep it out of every later
+        # collection, so a full collection does not stall a step for tens of ms.
+        gc.freeze()
         est = s.estimator
         s.stride = max(1, round(hello.rate / est.fps)) if self.stride == "auto" and est.fps > 0 else (
             1 if self.stride == "auto" else int(self.stride))
-        s.worker = asyncio.create_task(self._work(hello.subject, s))
-        s.ready.set()
         # Frames that arrived while the estimator loaded were queued before the stride was known.
         if s.stride > 1:
-            queued = _drain_queue(s.queue)
+            queued = _drain_queue(s.inbox)
             kept = [it for it in queued if it[0].seq % s.stride == 0]
             s.counts["decimated"] += len(queued) - len(kept)
             for it in kept:
-                s.queue.put_nowait(it)
+                s.inbox.put(it)
+        s.thread = threading.Thread(target=self._estimate, args=(hello.subject, s, asyncio.get_running_loop()),
+                                    name=f"wearpose-subject-{hello.subject}", daemon=True)
+        s.thread.start()
+        s.worker = asyncio.create_task(self._send_poses(s))
+        s.t_ready = time.perf_counter()
+        s.ready.set()
         est_rate = hello.rate / s.stride
         note = "" if est.fps <= 0 or abs(est_rate - est.fps) <= 0.05 * est.fps else (
             f"the estimator was trained at {est.fps:g} Hz but receives {est_rate:g} Hz "
@@ -431,6 +556,8 @@ class StreamServer:
         if offsets and hasattr(est, "set_offsets") and hasattr(est, "_offsets_from"):
             # Subject calibration (EM-POSE sensor offsets), read exactly as from a Recording.
             est.set_offsets(*est._offsets_from(_SubjectOnly(hello.subject_info)))
+        if self.warmup > 0:
+            _warm_up(est, hello, self.warmup)
         est.reset()
         return est
 
@@ -451,8 +578,8 @@ class StreamServer:
         if item[0].seq % s.stride:
             s.counts["decimated"] += 1
             return
-        s.queue.put_nowait(item)
-        s.counts["queue_max"] = max(s.counts["queue_max"], s.queue.qsize())
+        s.inbox.put((item[0], item[1], time.perf_counter()))
+        s.counts["queue_max"] = max(s.counts["queue_max"], s.inbox.qsize())
 
     async def _end_subject(self, k: int) -> dict[str, Any]:
         s = self.subjects.get(k)
@@ -464,48 +591,90 @@ class StreamServer:
         for item in s.reorder.flush():
             self._enqueue(s, item)
         if s.worker is not None and not s.worker.done():
-            s.queue.put_nowait(_END)
+            s.inbox.put(_END)
             await s.worker
         self.subjects.pop(k, None)
         self.finished[str(k)] = s.stats()
         return self.finished[str(k)]
 
-    async def _work(self, k: int, s: _Subject) -> None:
-        loop = asyncio.get_running_loop()
-        est = s.estimator
-        hello = s.hello
+    def _estimate(self, k: int, s: _Subject, loop: asyncio.AbstractEventLoop) -> None:
+        """The subject's estimator thread: frames from ``s.inbox`` in order -> ``step`` -> pose
+        packet (encoded here, off the event loop) -> ``s.outbox`` via the loop."""
+        if self.threads is not None:
+            import torch
+
+            torch.set_num_threads(self.threads)
+        est, hello = s.estimator, s.hello
+        assert est is not None
+        idx = [hello.sensors.index(n) for n in est.sensor_names]
+        binary = hello.format == "binary"
+        try:
+            while True:
+                item = s.inbox.get()
+                if item is _END:
+                    break
+                if s.abandon:
+                    continue
+                pkt, t_arr, t_rel = item
+                frame = SensorFrame(pkt.timestamp, hello.sensors, pkt.valid,
+                                    frame_channels(pkt.data, pkt.valid, hello.channels))
+                s.counts["masked_sensor_samples"] += int((~pkt.valid).sum())
+                try:
+                    with self._slots:
+                        c0 = time.thread_time()
+                        t0 = time.perf_counter()
+                        pose = est.step(frame)
+                        t1 = time.perf_counter()
+                        cpu = time.thread_time() - c0
+                except Exception as exc:  # noqa: BLE001 - one bad frame must not end the stream
+                    s.counts["estimator_errors"] += 1
+                    log.warning("subject %d seq %d: estimator error skipped: %s", k, pkt.seq, exc)
+                    continue
+                s.counts["estimated"] += 1
+                extras = {key: v for key, v in pose.extras.items() if isinstance(v, (str, int, float, bool, list))}
+                extras["sensor_valid"] = [bool(v) for v in pkt.valid[idx]]
+                out = PosePacket(k, pkt.seq, pkt.timestamp, bool(pose.valid), pose.local_rot.numpy(),
+                                 pose.betas.numpy(), None if pose.trans is None else pose.trans.numpy(),
+                                 None if pose.uncertainty is None else pose.uncertainty.numpy(), (t1 - t0) * 1e3, 0.0,
+                                 extras)
+                # server_ms (the last float) is set at send time
+                body = encode_pose_binary(out)[:-4] if binary else None
+                # queue = waiting in the inbox plus building the SensorFrame
+                stamps = (t_arr, t_rel, t0, t1, time.perf_counter())
+                loop.call_soon_threadsafe(s.outbox.put_nowait, (out, body, stamps, cpu * 1e3))
+        except RuntimeError:  # the event loop closed under us (shutdown cut short): nothing to send to
+            return
+        try:
+            loop.call_soon_threadsafe(s.outbox.put_nowait, _END)
+        except RuntimeError:
+            pass
+
+    async def _send_poses(self, s: _Subject) -> None:
+        """The subject's sender task: poses from the estimator thread -> device and subscribers."""
         while True:
-            item = await s.queue.get()
+            item = await s.outbox.get()
             if item is _END:
                 return
-            pkt, t_arr = item
-            frame = SensorFrame(pkt.timestamp, hello.sensors, pkt.valid, frame_channels(pkt.data, pkt.valid, hello.channels))
-            s.counts["masked_sensor_samples"] += int((~pkt.valid).sum())
-            try:
-                pose, compute = await loop.run_in_executor(self.pool, _timed_step, est, frame)
-            except Exception as exc:  # noqa: BLE001 - one bad frame must not end the stream
-                s.counts["estimator_errors"] += 1
-                log.warning("subject %d seq %d: estimator error skipped: %s", k, pkt.seq, exc)
-                continue
-            s.counts["estimated"] += 1
-            idx = [hello.sensors.index(n) for n in est.sensor_names]
-            extras = {key: v for key, v in pose.extras.items() if isinstance(v, (str, int, float, bool, list))}
-            extras["sensor_valid"] = [bool(v) for v in pkt.valid[idx]]
-            out = PosePacket(k, pkt.seq, pkt.timestamp, bool(pose.valid), pose.local_rot.numpy(), pose.betas.numpy(),
-                             None if pose.trans is None else pose.trans.numpy(),
-                             None if pose.uncertainty is None else pose.uncertainty.numpy(), compute * 1e3, 0.0, extras)
-            await self._publish(s, out, t_arr)
+            out, body, stamps, cpu_ms = item
+            await self._publish(s, out, body, stamps)
+            s.compute_cpu_ms.append(cpu_ms)
 
-    async def _publish(self, s: _Subject, pose: PosePacket, t_arr: float) -> None:
+    async def _publish(self, s: _Subject, pose: PosePacket, body: bytes | None, stamps: tuple[float, ...]) -> None:
+        """Send one pose; ``body``: its binary encoding without the final ``server_ms`` float."""
         cache: dict[str, str | bytes] = {}
+        pose.server_ms = (time.perf_counter() - stamps[0]) * 1e3  # measured just before the first send
 
         def msg(fmt: str) -> str | bytes:
             if fmt not in cache:
-                cache[fmt] = encode_pose_binary(pose) if fmt == "binary" else encode_pose_json(pose)
+                if fmt == "binary":
+                    cache[fmt] = (body if body is not None else encode_pose_binary(pose)[:-4]) \
+                        + _F32.pack(pose.server_ms)
+                else:
+                    cache[fmt] = encode_pose_json(pose)
             return cache[fmt]
 
-        pose.server_ms = (time.perf_counter() - t_arr) * 1e3  # measured just before the first send
         sent = await self._safe_send(s.owner, msg(s.hello.format))
+        s.stages.add((*stamps, time.perf_counter()))
         for ws, (fmt, subs) in list(self.subscribers.items()):
             if subs is None or pose.subject in subs:
                 tr = getattr(ws, "transport", None)
@@ -514,8 +683,6 @@ class StreamServer:
                     self.subscriber_skipped += 1
                     continue
                 await self._safe_send(ws, msg(fmt))
-        s.server_ms.append(pose.server_ms)
-        s.compute_ms.append(pose.compute_ms)
         s.counts["published"] += int(sent)
 
     @staticmethod
@@ -563,17 +730,33 @@ class _SubjectOnly:
     subject: dict[str, Any]
 
 
-def _drain_queue(q: asyncio.Queue) -> list[Any]:
+_F32 = struct.Struct("<f")
+
+
+def _drain_queue(q: queue.SimpleQueue) -> list[Any]:
     out = []
-    while not q.empty():
-        out.append(q.get_nowait())
-    return out
+    while True:
+        try:
+            out.append(q.get_nowait())
+        except queue.Empty:
+            return out
 
 
-def _timed_step(est: Estimator, frame: SensorFrame) -> tuple[Any, float]:
-    t0 = time.perf_counter()
-    pose = est.step(frame)
-    return pose, time.perf_counter() - t0
+def _warm_up(est: Estimator, hello: Hello, steps: int, seed: int = 0) -> None:
+    """Run ``steps`` steps on synthetic frames of ``hello``'s layout (random positions and
+    vectors, identity orientations; every sensor valid), so that the estimator's one-off costs
+    (tracing, graph optimisation, first allocations) are paid before real frames arrive. The
+    caller resets the estimator afterwards. A failing warm-up is logged, not fatal."""
+    rng = np.random.default_rng(seed)
+    S = len(hello.sensors)
+    valid = np.ones(S, bool)
+    try:
+        for k in range(steps):
+            ch = {c: (np.broadcast_to(np.eye(3, dtype=np.float32), (S, 3, 3)).copy() if c == "orientation"
+                      else (0.3 * rng.standard_normal((S, 3))).astype(np.float32)) for c in hello.channels}
+            est.step(SensorFrame(k / hello.rate, hello.sensors, valid, ch))
+    except Exception as exc:  # noqa: BLE001 - warm-up is an optimisation
+        log.warning("estimator warm-up failed after %d steps: %s", k, exc)
 
 
 def estimator_factory(model: str, method: str | None = None, threads: int | None = None) -> Callable[[], Estimator]:
