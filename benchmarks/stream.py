@@ -119,6 +119,8 @@ def run_scenario(name: str, rec: Any, model: str, args: argparse.Namespace, stri
             loads.append(round(os.getloadavg()[0], 2))
             print(f"  {name}: {k}/{n} frames, load {loads[-1]}", flush=True)
 
+    gc.collect()
+    gc.freeze()  # the recording and modules: out of the client's collections during the run
     try:
         res = asyncio.run(replay(rec, url, subject=0, fmt=args.format, realtime=True, duration=args.duration,
                                  faults=faults, progress=progress, drain_timeout=args.drain))

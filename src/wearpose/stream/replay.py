@@ -136,11 +136,13 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
     T, S = st.valid.shape
     N = T if duration is None else max(1, int(round(duration * st.rate)))
     sent: dict[int, float] = {}
-    recv: dict[int, tuple[float, PosePacket]] = {}
+    # Only plain numbers per pose (receive time, server_ms, compute_ms, valid): tens of thousands of
+    # kept PosePackets would make the client's garbage collections long, and stall its clock.
+    recv: dict[int, tuple[float, float, float, bool]] = {}
 
     def on_pose(t: float, p: PosePacket) -> None:
         if p.subject == subject:
-            recv[p.seq] = (t, p)
+            recv[p.seq] = (t, p.server_ms, p.compute_ms, p.valid)
 
     own = client is None
     c = client or StreamClient(url)
@@ -219,8 +221,8 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
     expected = [s for s in sent if s % stride == 0]
     got = [s for s in expected if s in recv]
     e2e = [(recv[s][0] - sent[s]) * 1e3 for s in got]
-    srv = [recv[s][1].server_ms for s in got]
-    comp = [recv[s][1].compute_ms for s in got]
+    srv = [recv[s][1] for s in got]
+    comp = [recv[s][2] for s in got]
     # Where the tail comes from: the slowest 1 % of frames, split as above, and how many of them
     # are a swapped pair (sent after its successor, or the successor that had to wait for it).
     tail: dict[str, Any] = {}
@@ -241,7 +243,7 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         "frames_lost_by_server": int(server_stats.get("lost", 0)) + int(server_stats.get("late", 0)),
         "gave_up_waiting": gave_up, "drain_s": round(drain_s, 3),
         "frames_queued_at_server_at_end": server_stats.get("queue_now") if gave_up else 0,
-        "invalid_pose_frames": sum(1 for s in got if not recv[s][1].valid),
+        "invalid_pose_frames": sum(1 for s in got if not recv[s][3]),
         "latency_ms": _summary_ms(e2e), "server_ms": _summary_ms(srv), "compute_ms": _summary_ms(comp),
         "transport_ms": _summary_ms(np.asarray(e2e) - np.asarray(srv)),
         "queue_ms": _summary_ms(np.asarray(srv) - np.asarray(comp)),
