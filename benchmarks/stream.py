@@ -104,8 +104,10 @@ def start_server(model: str, stride: str, workers: int, threads: int, warmup: in
 
 
 def run_scenario(name: str, rec: Any, model: str, args: argparse.Namespace, stride: str) -> dict[str, Any]:
+    gc.collect()
+    gc.freeze()  # the recording and modules: out of the client's collections during the run
     proc, url = start_server(model, stride, args.workers, args.threads, args.warmup)
-    gc_client = GcPauses().install()
+    gc_client = GcPauses().install()  # the client's pauses while it streams
     sp, me = psutil.Process(proc.pid), psutil.Process()
     c0s, c0c, t0 = sp.cpu_times(), me.cpu_times(), time.perf_counter()
     faults = Faults(malformed=args.malformed, dropout=args.dropout, dropout_frames=(1, 30), reorder=args.reorder,
@@ -119,8 +121,6 @@ def run_scenario(name: str, rec: Any, model: str, args: argparse.Namespace, stri
             loads.append(round(os.getloadavg()[0], 2))
             print(f"  {name}: {k}/{n} frames, load {loads[-1]}", flush=True)
 
-    gc.collect()
-    gc.freeze()  # the recording and modules: out of the client's collections during the run
     try:
         res = asyncio.run(replay(rec, url, subject=0, fmt=args.format, realtime=True, duration=args.duration,
                                  faults=faults, progress=progress, drain_timeout=args.drain))
@@ -198,31 +198,45 @@ def main() -> None:
         "machine": {"platform": platform.platform(), "cpu_model": cpu_model(), "cpus": os.cpu_count(),
                     "python": platform.python_version(), "torch": torch.__version__,
                     "load_average_start": [round(x, 2) for x in os.getloadavg()],
+                    "cpu_affinity": sorted(os.sched_getaffinity(0)),
+                    "env": {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")},
                     "utc_start": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
         "scenarios": {},
     }
-    em12 = None
-    for name in args.scenarios.split(","):
+    names = args.scenarios.split(",")
+    for name in names:
+        if name not in ("em12", "em12-auto", "em12-null", "imu6"):
+            raise SystemExit(f"unknown scenario {name!r}")
+    # Every recording is simulated before the first scenario, so the scenarios run back to back.
+    em12 = kit_recording(args.clip, "em12", args.rate, args.seed) if any(n.startswith("em12") for n in names) else None
+    imu_w = imu_weights(args.imu_weights) if "imu6" in names else None
+    imu6 = kit_recording(args.clip, "imu6", 60.0, args.seed) if imu_w is not None else None
+
+    def write(complete: bool) -> None:
+        out["complete"] = complete
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(out, indent=2, default=str))
+
+    for name in names:
         if name.startswith("em12"):
-            em12 = em12 if em12 is not None else kit_recording(args.clip, "em12", args.rate, args.seed)
             model, stride = {"em12": (args.weights, args.stride), "em12-auto": (args.weights, "auto"),
                              "em12-null": ("null", "1")}[name]
-            print(f"scenario {name}: {model}, stride {stride}", flush=True)
-            out["scenarios"][name] = run_scenario(name, em12, model, args, stride)
-        elif name == "imu6":
-            w = imu_weights(args.imu_weights)
-            if w is None:
-                out["scenarios"][name] = {"status": "pending: no shipped IMU (imu6) estimator weights in this build"}
-                continue
-            out["scenarios"][name] = run_scenario(name, kit_recording(args.clip, "imu6", 60.0, args.seed), w, args, "1")
+            rec = em12
+        elif imu_w is None:
+            out["scenarios"][name] = {"status": "pending: no shipped IMU (imu6) estimator weights in this build"}
+            continue
         else:
-            raise SystemExit(f"unknown scenario {name!r}")
+            model, stride, rec = imu_w, "1", imu6
+        print(f"scenario {name}: {model}, stride {stride}", flush=True)
+        t_start = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        r = run_scenario(name, rec, model, args, stride)
+        r["utc_start"], r["utc_end"] = t_start, time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        r["meets_targets"] = bool(r["frames_lost"] == 0 and r["latency_ms"]["p99"] is not None
+                                  and r["latency_ms"]["p99"] < 10.0)
+        out["scenarios"][name] = r
+        write(False)  # a partial result survives an interrupted run
     out["machine"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
     out["machine"]["utc_end"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-    for r in out["scenarios"].values():
-        if "latency_ms" in r:
-            r["meets_targets"] = bool(r["frames_lost"] == 0 and r["latency_ms"]["p99"] is not None
-                                      and r["latency_ms"]["p99"] < 10.0)
     tab = Table(title=f"stream benchmark, {args.duration:g} s per scenario, loopback, {args.format} packets")
     for c in ("scenario", "sent", "poses", "lost", "e2e med/p99/max ms", "compute med/p99", "queue p99",
               "transport p99", "cpu srv/cli %", "targets"):
@@ -248,8 +262,7 @@ def main() -> None:
             stages.add_row(name, *[f"{v['median']} / {v['p99']} ({v['mean_in_top1pct']})" for v in st.values()],
                            str(r["server_stats"]["gc_since_ready"]["max_ms"]), str(r["client_gc"]["max_ms"]))
     Console(width=180).print(stages)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(out, indent=2, default=str))
+    write(True)
     print(f"wrote {args.out}")
 
 
