@@ -250,3 +250,27 @@ def test_estimator_warmed_up_before_ready_and_stages_timed() -> None:
     assert st["compute"]["median"] >= 2.0  # the 2 ms step
     assert all(v["median"] >= 0 for v in st.values())
     assert r["server_stats"]["compute_ms"]["median"] >= 2.0 and "gc_since_ready" in r["server_stats"]
+
+
+def test_estimator_errors_are_counted_and_the_stream_goes_on() -> None:
+    rec = tiny_recording(20)
+
+    class Flaky(EchoEstimator):
+        def step(self, frame):  # noqa: ANN001, ANN202
+            pose = super().step(frame)
+            n = len(self.seen)
+            if n % 5 == 0:
+                raise RuntimeError("flaky step")
+            if n % 7 == 0:
+                pose.local_rot = "not a tensor"  # a bad pose: building its packet fails
+            return pose
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(Flaky, port=0, warmup=0) as srv:
+            return await replay(rec, srv.url, realtime=False)
+
+    r = _run(main())
+    s = r["server_stats"]
+    bad = {n for n in range(1, 21) if n % 5 == 0 or n % 7 == 0}  # steps 5, 7, 10, 14, 15, 20
+    assert s["estimator_errors"] == len(bad) and s["estimated"] == 20 - len(bad)
+    assert r["poses_received"] == 20 - len(bad) and r["frames_lost"] == len(bad)

@@ -612,42 +612,44 @@ class StreamServer:
             while True:
                 item = s.inbox.get()
                 if item is _END:
-                    break
+                    return
                 if s.abandon:
                     continue
                 pkt, t_arr, t_rel = item
-                frame = SensorFrame(pkt.timestamp, hello.sensors, pkt.valid,
-                                    frame_channels(pkt.data, pkt.valid, hello.channels))
-                s.counts["masked_sensor_samples"] += int((~pkt.valid).sum())
                 try:
+                    frame = SensorFrame(pkt.timestamp, hello.sensors, pkt.valid,
+                                        frame_channels(pkt.data, pkt.valid, hello.channels))
+                    s.counts["masked_sensor_samples"] += int((~pkt.valid).sum())
                     with self._slots:
                         c0 = time.thread_time()
                         t0 = time.perf_counter()
                         pose = est.step(frame)
                         t1 = time.perf_counter()
                         cpu = time.thread_time() - c0
+                    extras = {key: v for key, v in pose.extras.items() if isinstance(v, (str, int, float, bool, list))}
+                    extras["sensor_valid"] = [bool(v) for v in pkt.valid[idx]]
+                    out = PosePacket(k, pkt.seq, pkt.timestamp, bool(pose.valid), pose.local_rot.numpy(),
+                                     pose.betas.numpy(), None if pose.trans is None else pose.trans.numpy(),
+                                     None if pose.uncertainty is None else pose.uncertainty.numpy(), (t1 - t0) * 1e3,
+                                     0.0, extras)
+                    # server_ms (the last float) is set at send time
+                    body = encode_pose_binary(out)[:-4] if binary else None
                 except Exception as exc:  # noqa: BLE001 - one bad frame must not end the stream
                     s.counts["estimator_errors"] += 1
                     log.warning("subject %d seq %d: estimator error skipped: %s", k, pkt.seq, exc)
                     continue
                 s.counts["estimated"] += 1
-                extras = {key: v for key, v in pose.extras.items() if isinstance(v, (str, int, float, bool, list))}
-                extras["sensor_valid"] = [bool(v) for v in pkt.valid[idx]]
-                out = PosePacket(k, pkt.seq, pkt.timestamp, bool(pose.valid), pose.local_rot.numpy(),
-                                 pose.betas.numpy(), None if pose.trans is None else pose.trans.numpy(),
-                                 None if pose.uncertainty is None else pose.uncertainty.numpy(), (t1 - t0) * 1e3, 0.0,
-                                 extras)
-                # server_ms (the last float) is set at send time
-                body = encode_pose_binary(out)[:-4] if binary else None
                 # queue = waiting in the inbox plus building the SensorFrame
                 stamps = (t_arr, t_rel, t0, t1, time.perf_counter())
-                loop.call_soon_threadsafe(s.outbox.put_nowait, (out, body, stamps, cpu * 1e3))
-        except RuntimeError:  # the event loop closed under us (shutdown cut short): nothing to send to
-            return
-        try:
-            loop.call_soon_threadsafe(s.outbox.put_nowait, _END)
-        except RuntimeError:
-            pass
+                try:
+                    loop.call_soon_threadsafe(s.outbox.put_nowait, (out, body, stamps, cpu * 1e3))
+                except RuntimeError:  # the event loop closed under us (shutdown cut short): nothing to send to
+                    return
+        finally:
+            try:
+                loop.call_soon_threadsafe(s.outbox.put_nowait, _END)  # the sender task ends after the last pose
+            except RuntimeError:
+                pass
 
     async def _send_poses(self, s: _Subject) -> None:
         """The subject's sender task: poses from the estimator thread -> device and subscribers."""
