@@ -81,6 +81,17 @@ def imu_weights(preferred: str) -> str | None:
     return next((w for w in names if card(w).get("kit") == "imu6"), None)
 
 
+def git_state() -> dict[str, Any]:
+    """The commit and whether the code the benchmark runs (src/) had uncommitted edits."""
+    def run(*cmd: str) -> str:
+        try:
+            return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=10).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            return ""
+    dirty = run("git", "status", "--porcelain", "--", "src")
+    return {"commit": run("git", "rev-parse", "HEAD"), "src_uncommitted": dirty.splitlines()}
+
+
 def cpu_model() -> str:
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -194,6 +205,7 @@ def main() -> None:
     torch.set_num_threads(1)
     out: dict[str, Any] = {
         "command": "python benchmarks/stream.py " + " ".join(sys.argv[1:]),
+        "git": git_state(),
         "targets": {"frames_lost": 0, "latency_p99_ms": 10.0},
         "machine": {"platform": platform.platform(), "cpu_model": cpu_model(), "cpus": os.cpu_count(),
                     "python": platform.python_version(), "torch": torch.__version__,
