@@ -208,10 +208,10 @@ def test_contact_rules():
     assert not opt.contact_mask(h, np.array([1.0, 0.0]))[lf]
     h[JOINT_INDEX["left_knee"]] = 0.001  # kneeling: any candidate below 0.5 cm
     assert opt.contact_mask(h, np.zeros(2))[JOINT_INDEX["left_knee"]]
-    h[rf] = 0.001  # a foot on the ground with low probability: free by default, in contact literally
-    assert not opt.contact_mask(h, np.zeros(2))[rf]
-    opt.config = PhysicsConfig(foot_contact_requires_prob=False)
+    h[rf] = 0.001  # a foot on the ground with low probability: in contact (paper), free with the old departure
     assert opt.contact_mask(h, np.zeros(2))[rf]
+    opt.config = PhysicsConfig(foot_contact_requires_prob=True)
+    assert not opt.contact_mask(h, np.zeros(2))[rf]
 
 
 def test_run_shapes_and_errors(char):
@@ -255,3 +255,38 @@ def test_rotation_error_and_pose_output_match_pinocchio(char):
 def axis_angle(R: np.ndarray) -> np.ndarray:
     from wearpose.geometry import matrix_to_axis_angle
     return matrix_to_axis_angle(torch.from_numpy(R)).numpy()
+
+
+def test_planted_foot_does_not_lift_and_released_foot_may(char):
+    """A foot in contact that the network calls planted may not rise faster than sigma; with a
+    low probability (push-off) it may."""
+    lf = JOINT_INDEX["left_foot"]
+    vel = torch.zeros(NUM_JOINTS, 3)
+    vel[[lf, JOINT_INDEX["left_ankle"], JOINT_INDEX["left_knee"]], 1] = 1.0  # lift the left leg at 1 m/s
+    rise = {}
+    for p in (1.0, 0.0):
+        opt = PhysicsOptimizer(char, PhysicsConfig())
+        opt.reset(EYE, torch.zeros(3))
+        y0 = opt.joint_positions()[lf, 1]
+        for _ in range(6):
+            st = opt.step(EYE, vel, torch.tensor([p, 1.0]))
+        rise[p] = float(st.joints[lf, 1]) - y0
+        assert bool(st.contacts[0]) or p == 0.0
+    dt = 1 / 60
+    assert rise[1.0] <= 6 * PhysicsConfig().sigma * dt + 1e-6
+    assert rise[0.0] > 5 * rise[1.0] and rise[0.0] > 5e-3
+
+
+def test_reused_qp_matches_a_fresh_solve(char):
+    import proxsuite
+
+    opt = PhysicsOptimizer(char)
+    rng = np.random.default_rng(0)
+    for _ in range(3):  # same size: the object is reused
+        M = rng.normal(size=(6, 6))
+        H, g = M @ M.T + np.eye(6), rng.normal(size=6)
+        C, l, u = rng.normal(size=(4, 6)), np.full(4, -np.inf), rng.uniform(0, 1, 4)
+        x = opt._solve_reused(H, g, C, l, u).x
+        ref = proxsuite.proxqp.dense.solve(H, g, None, None, C, l, u, eps_abs=1e-9, eps_rel=0.0).x
+        np.testing.assert_allclose(x, ref, atol=1e-4)
+    assert len(opt._qps) == 1

@@ -26,20 +26,34 @@ def train_pip_cmd(
     learned_init: bool = typer.Option(True, "--learned-init/--no-learned-init",
                                       help="Learned RNN initialisation I_PL / I_VA (off: Table 2 ablation)."),
     limit: Optional[int] = typer.Option(None, help="Use only N training clips spread over the split (quick runs)."),
+    sitting_clips: Optional[int] = typer.Option(None, help="Add N synthetic sitting clips to train (N/10 to val)."),
+    lr: Optional[float] = typer.Option(None, help="Override the learning rate."),
+    init_from: Optional[Path] = typer.Option(None, help="Start from this checkpoint's weights (fine-tuning; fresh optimiser)."),
     checkpoint_every: int = typer.Option(100, help="Save last.pt every N optimiser steps (and every epoch)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Train PIP's kinematics RNNs (P_L, P_A, R_A, V_A, C_F, I_PL, I_VA) on virtual IMUs (kit imu6).
 
     Example: wearpose train pip --config cpu --threads 1 --out runs/pip_cpu
+
+    Fine-tune with synthetic sitting: wearpose train pip --config cpu --threads 1 --init-from
+    runs/pip_cpu/best.pt --sitting-clips 150 --epochs 2 --lr 3e-4 --out runs/pip_cpu_sit
     """
     from wearpose.estimators.pip import PipConfig, PipEstimator, train_pip
 
-    cfg = PipConfig.preset(config).override(hidden=hidden, batch_size=batch_size, learned_init=learned_init)
+    cfg = PipConfig.preset(config).override(hidden=hidden, batch_size=batch_size, learned_init=learned_init,
+                                            sitting_clips=sitting_clips, lr=lr)
     if hidden is not None:
         cfg = cfg.override(init_widths=(hidden, 2 * hidden))
     out = out or Path("runs") / f"pip_{config}{'' if learned_init else '_noinit'}"
     est = PipEstimator(cfg, physics=False)
+    if init_from is not None and not resume:
+        from wearpose.estimators.checkpoint import load_checkpoint
+
+        ck = load_checkpoint(init_from)
+        ck.check(method="pip", path=init_from)
+        est.model.load_state_dict(ck.weights)  # same architecture required (strict)
+        est.meta["init_from"] = str(init_from)
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     res = train_pip(est, out, epochs=epochs, resume=resume, threads=threads, device=device, limit_train=limit,
                     checkpoint_every=checkpoint_every, train_command=command, quiet=as_json,

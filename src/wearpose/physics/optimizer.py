@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -53,7 +54,6 @@ import torch
 from wearpose.body import JOINT_INDEX, NUM_JOINTS, PARENTS
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.physics._blas import limit_blas_threads
-from wearpose.geometry import matrix_to_axis_angle
 from wearpose.physics.character import DFS_ORDER, PhysicsCharacter
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -152,9 +152,12 @@ class PhysicsConfig:
     contact_prob_threshold: float = 0.5
     min_contact_weight: float = 0.001
     ground_bound: bool = True
-    foot_contact_requires_prob: bool = True
+    foot_contact_requires_prob: bool = False
     guard_all_candidates: bool = True
     foot_square_shift: float = 0.5
+    contact_no_lift: bool = True
+    position_skip_feet: bool = False
+    release_low_prob_feet: bool = True
     ground_y: float | None = None
     foot_joints: tuple[int, int] = (JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"])
     contact_candidates: tuple[int, ...] = tuple(
@@ -290,6 +293,11 @@ class PhysicsOptimizer:
         self._dfs = np.array(DFS_ORDER)
         self._pin_ids = [int(j) for j in character.pin_id]
         self._rot_diag = (np.arange(3, self.nv), np.arange(3, self.nv))
+        pj = c.position_joints if c.dual_pd else (0,)
+        if c.dual_pd and c.position_skip_feet:
+            pj = tuple(j for j in pj if j not in c.foot_joints)
+        self._pos_joints = np.array(pj)
+        self._qps: dict[tuple[int, int], Any] = {}
         self.q: np.ndarray | None = None
         self.v = np.zeros(self.nv)
         self.ground_y = 0.0
@@ -361,6 +369,27 @@ class PhysicsOptimizer:
                     offs[i, :, [0, 2]] += shift * d[[0, 2]][:, None]
         return offs
 
+    def _solve_reused(self, H: np.ndarray, g: np.ndarray, C: np.ndarray, l: np.ndarray, u: np.ndarray) -> Any:
+        """Solve ``min x'Hx/2 + g'x s.t. l <= Cx <= u`` with a proxsuite dense QP object kept per
+        problem size (the size only changes with the number of contact joints, so a handful of
+        objects serve a whole sequence): ``update`` reuses the workspace instead of allocating
+        one per frame. Initial guess: the equality-constrained one (as ``dense.solve``); warm
+        starting from the previous frame's result was tried and ended at inaccurate contact
+        forces (up to 1 kN off) within the tolerance test, so it is not used."""
+        key = (H.shape[0], C.shape[0])
+        qp = self._qps.get(key)
+        if qp is None:
+            qp = proxsuite.proxqp.dense.QP(H.shape[0], 0, C.shape[0])
+            qp.settings.eps_abs = self.config.eps_abs
+            qp.settings.eps_rel = 0.0
+            qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
+            qp.init(H, g, None, None, C, l, u)
+            self._qps[key] = qp
+        else:
+            qp.update(H, g, None, None, C, l, u)
+        qp.solve()
+        return qp.results
+
     # ------------------------------------------------------------------ step
     def step(self, pose_target: torch.Tensor, joint_vel: torch.Tensor, contact_prob: torch.Tensor) -> PhysicsState:
         """One frame: reference pose ``(24, 3, 3)`` (local rotations), reference joint velocities
@@ -386,9 +415,10 @@ class PhysicsOptimizer:
         # log(R^T R_ref) per joint, in the joint's frame = Pinocchio's difference(q, q_ref) on the
         # rotational DoFs (tested), without building q_ref.
         rel = np.swapaxes(dyn.R, 1, 2) @ R_ref
-        rot_err = matrix_to_axis_angle(torch.from_numpy(rel)).numpy()[self._dfs].reshape(-1)
+        # Pinocchio's SO(3) log per joint: a tenth of the cost of a batched torch call at this size
+        rot_err = np.concatenate([pin.log3(rel[j]) for j in self._dfs])
         qdd_rot_des = c.kp_theta * rot_err - c.kd_theta * v[3:]
-        pj = np.array(c.position_joints if c.dual_pd else (0,))
+        pj = self._pos_joints
         Jp = dyn.J[pj, :3].reshape(-1, nv)  # (3P, nv)
         r_dot = Jp @ v
         rdd_des = c.kp_r * (v_ref[pj].reshape(-1) * dt) - c.kd_r * r_dot  # r_ref - r = v_ref dt (Eq. 4)
@@ -425,7 +455,14 @@ class PhysicsOptimizer:
         hi = np.empty((nj, 3))
         lo[:, [0, 2]], hi[:, [0, 2]] = -c.sigma, c.sigma
         lo[:, 1] = -heights[cj] / dt if c.ground_bound else 0.0
-        hi[:, 1] = np.inf
+        hi[:, 1] = np.maximum(c.sigma, -heights[cj] / dt) if c.contact_no_lift else np.inf
+        if not c.foot_contact_requires_prob and c.release_low_prob_feet:
+            # a foot on the ground that the network no longer calls planted (push-off) still
+            # carries force, but may roll, slide and lift (PIP's code: bound -log(min(p,.85)/.85))
+            for i, j in enumerate(cj):
+                k = c.foot_joints.index(j) if j in c.foot_joints else -1
+                if k >= 0 and probs[k] <= c.contact_prob_threshold:
+                    lo[i, [0, 2]], hi[i, [0, 2]], hi[i, 1] = -np.inf, np.inf, np.inf
         rows = [dt * Jj]
         lows, highs = [(lo - vj).reshape(-1)], [(hi - vj).reshape(-1)]
         if c.guard_all_candidates:
@@ -433,8 +470,16 @@ class PhysicsOptimizer:
             free = np.array([j for j in c.contact_candidates if not cmask[j]], dtype=int)
             Jy = dyn.J[free, 1]
             rows.append(dt * Jy)
-            lows.append(-heights[free] / dt - Jy @ v)
-            highs.append(np.full(len(free), np.inf))
+            vy = Jy @ v
+            lows.append(-heights[free] / dt - vy)
+            up = np.full(len(free), np.inf)
+            if c.contact_no_lift:
+                # a foot the network calls planted but that is still above the ground may come
+                # down, not go up (PIP's released code bounds the feet this way whatever the height)
+                for f, p in zip(c.foot_joints, probs):
+                    if p > c.contact_prob_threshold and not cmask[f]:
+                        up[free == f] = c.sigma
+            highs.append(up - vy)
         Jk = np.vstack(rows)
         n_k = Jk.shape[0]
         n_l = 3 * npts
@@ -455,7 +500,7 @@ class PhysicsOptimizer:
             g = A_t.T @ (self._w_tau * dyn.h)
             g[:nv] += g_q
             t_qp, c_qp = time.perf_counter(), time.thread_time()
-            res = proxsuite.proxqp.dense.solve(H, g, None, None, C, l, u, eps_abs=c.eps_abs, eps_rel=0.0)
+            res = self._solve_reused(H, g, C, l, u)
             qp_ms, qp_cpu_ms = (time.perf_counter() - t_qp) * 1000.0, (time.thread_time() - c_qp) * 1000.0
             qdd, lam = res.x[:nv], res.x[nv:]
             tau = dyn.M @ qdd + dyn.h - Jc.T @ lam

@@ -230,3 +230,56 @@ def test_train_pip_cli_help() -> None:
 
     res = CliRunner().invoke(app, ["train", "pip", "--help"])
     assert res.exit_code == 0 and "Example: wearpose train pip" in res.output
+
+
+def test_numpy_stepper_matches_torch_and_fast_path_equals_torch_path(body) -> None:
+    from wearpose.estimators.pip.model import NumpyStepper
+
+    torch.manual_seed(1)
+    net = PipNet(tiny()).eval()
+    x = torch.randn(1, 8, 72)
+    st0 = net.initial_states(torch.randn(1, 15), torch.randn(1, 72))
+    with torch.no_grad():
+        out, _ = net(x, st0)
+    s = NumpyStepper(net)
+    s.set_states(st0)
+    steps = [s.step(x[0, t].numpy()) for t in range(8)]
+    for k in out:
+        got = torch.from_numpy(__import__("numpy").stack([o[k] for o in steps]))
+        assert torch.allclose(got, out[k][0], atol=1e-5), k
+    # estimator: numpy online path == torch online path
+    cfg = tiny()
+    est = PipEstimator(cfg, body=body, physics=False)
+    r, _ = _recording(body, motion(3, T=20), cfg)
+    est.set_initial_state(r["pose"][0], trans=r["trans"][0])
+    res = {}
+    for fast in (True, False):
+        est.fast_step = fast
+        est.reset()
+        res[fast] = torch.stack([est.step_tensors(r["acc"][t], r["ori"][t]).local_rot for t in range(20)])
+    assert torch.allclose(res[True], res[False], atol=1e-5)
+
+
+def test_synthetic_sitting_is_ambiguous_for_the_imus(body) -> None:
+    from wearpose.body.skeleton import JOINT_INDEX
+    from wearpose.estimators.pip.sitting import sitting_motion, sitting_sequence
+
+    m = sitting_motion(torch.Generator().manual_seed(3), body)
+    m2 = sitting_motion(torch.Generator().manual_seed(3), body)
+    assert torch.equal(m.pose, m2.pose) and torch.equal(m.trans, m2.trans)  # seeded
+    names = [s[0] for s in m.meta["segments"]]
+    assert "sit" in names and sum(s[2] for s in m.meta["segments"]) == m.pose.shape[0]
+    j = body(m.pose, m.betas, m.trans, return_vertices=False).joints
+    ank = [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]
+    assert (j[:, ank].mean(1) - j[0, ank].mean(0)).norm(dim=-1).max() < 1e-4  # feet planted
+    # the shank keeps its direction whether seated or standing: the lower-leg IMUs cannot tell
+    shank = j[:, ank[0]] - j[:, JOINT_INDEX["left_knee"]]
+    shank = shank / shank.norm(dim=-1, keepdim=True)
+    assert (shank @ shank[0]).min() > math.cos(math.radians(0.5))
+    # seated: pelvis lower by most of a thigh length
+    first_sit = next(s for s in m.meta["segments"] if s[0] == "sit")[1]
+    stand = next((s for s in m.meta["segments"] if s[0] == "stand"), None)
+    if stand is not None:
+        assert j[stand[1], 0, 1] - j[first_sit, 0, 1] > 0.2
+    seq = sitting_sequence(body)
+    assert seq.pose.shape[0] == 60 + 90 + 60

@@ -41,7 +41,9 @@ class PipConfig(ConfigIO):
     lowest foot height (rules out the slow apex of a jump).
     Data: ``rate`` Hz, ``seq_len`` frames per window, ``window_stride``, ``train_noise`` IMU
     error model (``default`` / ``none``), ``max_train_clips`` (0 = whole train split),
-    ``val_clips`` (validation clips per epoch, 0 = all), ``seed``.
+    ``val_clips`` (validation clips per epoch, 0 = all), ``seed``, ``sitting_clips`` synthetic
+    sitting clips (:mod:`~wearpose.estimators.pip.sitting`; the corpus has none) added to the
+    train split (and a tenth as many, at least 4, to val); 0 = corpus only.
     Optimisation: ``lr``, ``lr_schedule``, ``lr_min_factor``, ``batch_size``, ``epochs``,
     ``grad_clip``.
     """
@@ -70,6 +72,7 @@ class PipConfig(ConfigIO):
     max_train_clips: int = 0
     val_clips: int = 0
     seed: int = 0
+    sitting_clips: int = 0
     lr: float = 1e-3
     lr_schedule: str = "constant"
     lr_min_factor: float = 0.1

@@ -209,7 +209,55 @@ def build_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, lim
             clips by source and motion type, so a prefix would be one kind of motion).
         cache_root: directory of the tensor cache (default ``<corpus cache>/estimators/pip``).
         progress: optional callable ``progress(done, total)``.
+
+    With ``cfg.sitting_clips`` > 0, synthetic sitting clips (:func:`sitting_count`) follow the
+    corpus clips (cached separately, so the corpus cache is shared with runs without them).
     """
+    from wearpose.motion import CorpusStore
+
+    data = _build_corpus_split(split, cfg, body, store=store, limit=limit, cache_root=cache_root, progress=progress)
+    n_sit = sitting_count(cfg, split)
+    if n_sit == 0:
+        return data
+    return concat_data(data, _build_sitting(split, n_sit, cfg, body, Path(cache_root) if cache_root is not None else
+                                            Path((store or CorpusStore()).root) / "estimators" / "pip"))
+
+
+def sitting_count(cfg: PipConfig, split: str) -> int:
+    """Synthetic sitting clips added to ``split`` (``cfg.sitting_clips`` to train, a tenth, at
+    least 4, to val, none to test)."""
+    n = int(cfg.sitting_clips)
+    if n <= 0 or split not in ("train", "val"):
+        return 0
+    return n if split == "train" else max(4, n // 10)
+
+
+def concat_data(a: PipData, b: PipData) -> PipData:
+    """Clips of ``a`` then ``b`` in one :class:`PipData` (fingerprint of both)."""
+    return PipData(**{k: torch.cat([getattr(a, k), getattr(b, k)]) for k in TENSORS},
+                   starts=torch.cat([a.starts, b.starts + a.num_frames]), lengths=torch.cat([a.lengths, b.lengths]),
+                   clip_ids=[*a.clip_ids, *b.clip_ids], fingerprint=fingerprint([a.fingerprint, b.fingerprint], {}),
+                   settings={**a.settings, **b.settings})
+
+
+def _build_sitting(split: str, n: int, cfg: PipConfig, body: Any, root: Path) -> PipData:
+    """``n`` synthetic sitting clips (:func:`~wearpose.estimators.pip.sitting.sitting_motion`),
+    seeds in a per-split namespace, simulated like corpus clips; cached under ``root``."""
+    from wearpose.estimators.pip.sitting import sitting_motion
+
+    ids = [f"synthetic/sitting/{split}/{i:04d}" for i in range(n)]
+    settings = {**data_settings(cfg, body), "sitting_version": 2}
+    fp = fingerprint(ids, {**settings, "split": split})
+
+    def one(cid: str) -> dict[str, Any]:
+        seed = clip_seed(cid, cfg.seed, "pip-sitting")
+        return simulate_clip(sitting_motion(torch.Generator().manual_seed(seed), body, cfg.rate), cfg, body, seed)
+
+    return _simulate_cached(root / f"{split}-sitting-{fp[:16]}.pt", ids, fp, settings, one)
+
+
+def _build_corpus_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, limit: int | None = None,
+                        cache_root: str | Path | None = None, progress: Any = None) -> PipData:
     from wearpose.motion import CorpusStore
 
     store = store or CorpusStore()
@@ -219,7 +267,15 @@ def build_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, lim
     settings = data_settings(cfg, body)
     fp = fingerprint(ids, {**settings, "split": split})
     root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "pip"
-    path = root / f"{split}-{fp[:16]}.pt"
+    return _simulate_cached(root / f"{split}-{fp[:16]}.pt", ids, fp, settings,
+                            lambda cid: simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed, "pip")),
+                            progress)
+
+
+def _simulate_cached(path: Path, ids: list[str], fp: str, settings: dict[str, Any], one: Any,
+                     progress: Any = None) -> PipData:
+    """Load ``path`` or simulate every clip id with ``one(cid)`` (:func:`simulate_clip`'s dict),
+    concatenate and save it there."""
     if path.is_file():
         d = torch.load(path, weights_only=True)
         return PipData(**{k: d[k] for k in (*TENSORS, "starts", "lengths")}, clip_ids=list(d["clip_ids"]),
@@ -227,7 +283,7 @@ def build_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, lim
     cols: dict[str, list[torch.Tensor]] = {k: [] for k in TENSORS}
     starts, lengths, total = [], [], 0
     for c, cid in enumerate(ids):
-        r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed, "pip"))
+        r = one(cid)
         for k in TENSORS:
             cols[k].append(r[k])
         T = int(r["x"].shape[0])

@@ -125,51 +125,20 @@ def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int 
                         "rotation metrics with ignored joints masked (PIP protocol)"}
 
 
-def sitting_pose() -> torch.Tensor:
-    """A seated pose ``(24, 3, 3)``: thighs forward (hips -90 deg about X), shanks down (knees
-    +90 deg), arms down by the sides (the calibration I-pose), torso upright. The corpus has no
-    sitting clip, so the long-sitting test is built from this pose."""
-    from wearpose.calibration import calibration_pose
-    from wearpose.body.skeleton import JOINT_INDEX
-    from wearpose.geometry import rotation_x
-
-    P = calibration_pose("ipose").float()
-    for side in ("left", "right"):
-        P[JOINT_INDEX[f"{side}_hip"]] = rotation_x(torch.tensor(-math.pi / 2))
-        P[JOINT_INDEX[f"{side}_knee"]] = rotation_x(torch.tensor(math.pi / 2))
-    return P
-
-
-def sitting_sequence(body: Any, seconds_down: float = 1.5, seconds_stand: float = 1.0, fps: float = 60.0) -> Any:
-    """Stand (arms down) -> sit down (slerp of every joint, pelvis lowered by the thigh length)
-    -> one frame seated: a :class:`~wearpose.motion.MotionSequence` for the sitting test."""
-    from wearpose.calibration import calibration_pose
-    from wearpose.geometry import slerp_matrix
-    from wearpose.motion import MotionSequence
-
-    stand, sit = calibration_pose("ipose").float(), sitting_pose()
-    n0, n1 = int(seconds_stand * fps), int(seconds_down * fps)
-    s = torch.cat([torch.zeros(n0), 0.5 - 0.5 * torch.cos(torch.linspace(0, math.pi, n1)), torch.ones(int(fps))])
-    pose = slerp_matrix(stand.expand(len(s), 24, 3, 3), sit.expand(len(s), 24, 3, 3), s[:, None].expand(len(s), 24))
-    rest = body.rest_joints(torch.zeros(10)).cpu()
-    drop = float(rest[1, 1] - rest[4, 1])  # hip to knee: the pelvis sinks by about a thigh length
-    trans = torch.zeros(len(s), 3)
-    trans[:, 1] = 0.95 - drop * s
-    trans[:, 2] = 0.1 * s
-    return MotionSequence(pose, torch.zeros(10), trans, fps, {"clip": "synthetic/sit-down"})
-
-
 @torch.no_grad()
-def sitting_drift(est: Any, hours: float = 1.0, start: str = "standing", chunk: int = 36_000, seed: int = 0,
-                  noise: str = "none") -> dict[str, Any]:
-    """PIP Fig. 9: a sit-down (or already seated, ``start="seated"``) followed by ``hours`` of
+def sitting_drift(est: Any, hours: float = 1.0, start: str = "standing", chunk: int = 3600, seed: int = 0,
+                  noise: str = "none", every_s: float = 600.0) -> dict[str, Any]:
+    """PIP Fig. 6 / Fig. 9: a sit-down (:func:`~wearpose.estimators.pip.sitting.sitting_sequence`;
+    or already seated, ``start="seated"``: only its last, seated second) followed by ``hours`` of
     perfectly still input (zero accelerations, the seated orientations), kinematics only.
 
-    Returns the root-relative angular error (all joints, deg) of the estimate against the seated
-    pose at the start of the still period, after 1 min and at the end, and the drift: the mean
-    joint angle between the estimates at the start and at the end of the still period (total
-    and per hour).
+    Returns the root-relative angular error against the seated pose (all joints, and the upper
+    legs alone, the quantity of PIP's Fig. 6) at the start of the still period, after 1 min and
+    at the end, a series every ``every_s`` seconds, and the drift: the mean joint angle between
+    the estimates at the start and at the end of the still period (Fig. 9's "total drift").
     """
+    from wearpose.estimators.pip.data import imu_features
+    from wearpose.estimators.pip.sitting import sitting_pose, sitting_sequence
     from wearpose.evaluate.metrics import joint_angle_errors
 
     body, cfg = est.body, est.config
@@ -181,34 +150,41 @@ def sitting_drift(est: Any, hours: float = 1.0, start: str = "standing", chunk: 
         r = {k: (v[keep] if isinstance(v, torch.Tensor) and v.dim() > 0 and v.shape[0] == n else v) for k, v in r.items()}
     _init(est, r)
     est.model.eval()
-    from wearpose.estimators.pip.data import imu_features
-
     x = imu_features(r["acc"], r["ori"], cfg.acc_scale)
     x_still = imu_features(torch.zeros_like(r["acc"][-1]), r["ori"][-1], cfg.acc_scale)
     states = est._start_states()
     out, states = est.model(x[None], states)
     target = sitting_pose()
-
-    def err(rot6: torch.Tensor, ori_root: torch.Tensor) -> tuple[float, torch.Tensor]:
-        pose = est._decode({"rot6": rot6, "vel": torch.zeros(1, 72), "contact_logit": torch.zeros(1, 2)},
-                           ori_root[None])["pose"][0]
-        return math.degrees(float(joint_angle_errors(pose, target, "root_relative").mean())), pose
-
     root = r["ori"][-1, 5]
-    e0, p0 = err(out["rot6"][0, -1:], root)
+    legs = [1, 2]  # SMPL left/right hip joints: the upper-leg orientations
+
+    def err(rot6: torch.Tensor) -> tuple[float, float, torch.Tensor]:
+        pose = est._decode({"rot6": rot6, "vel": torch.zeros(1, 72), "contact_logit": torch.zeros(1, 2)},
+                           root[None])["pose"][0]
+        e = joint_angle_errors(pose, target, "root_relative")
+        return math.degrees(float(e.mean())), math.degrees(float(e[legs].mean())), pose
+
+    e0, l0, p0 = err(out["rot6"][0, -1:])
     total = int(hours * 3600 * cfg.rate)
+    every = max(1, int(every_s * cfg.rate))
+    series = [{"minutes": 0.0, "error_deg": e0, "upper_leg_error_deg": l0}]
     done, e1min = 0, None
     t0 = time.perf_counter()
     last = out["rot6"][0, -1:]
     while done < total:
-        n = min(chunk, total - done)
+        n = min(chunk, total - done, every - done % every)
         o, states = est.model(x_still.expand(1, n, -1), states)
         if e1min is None and done + n >= int(60 * cfg.rate):
-            e1min = err(o["rot6"][0, int(60 * cfg.rate) - done - 1:int(60 * cfg.rate) - done], root)[0]
+            e1min = err(o["rot6"][0, int(60 * cfg.rate) - done - 1:int(60 * cfg.rate) - done])[0]
         last = o["rot6"][0, -1:]
         done += n
-    e_end, p_end = err(last, root)
+        if done % every == 0 or done == total:
+            e, le, _ = err(last)
+            series.append({"minutes": done / cfg.rate / 60, "error_deg": e, "upper_leg_error_deg": le})
+    e_end, l_end, p_end = err(last)
     drift = math.degrees(float(joint_angle_errors(p_end, p0, "root_relative").mean()))
     return {"start": start, "hours": hours, "frames": total, "error_at_start_deg": e0, "error_after_1min_deg": e1min,
-            "error_at_end_deg": e_end, "drift_total_deg": drift, "drift_per_hour_deg": drift / hours if hours else None,
+            "error_at_end_deg": e_end, "upper_leg_error_at_start_deg": l0, "upper_leg_error_at_end_deg": l_end,
+            "upper_leg_error_max_deg": max(s["upper_leg_error_deg"] for s in series),
+            "drift_total_deg": drift, "drift_per_hour_deg": drift / hours if hours else None, "series": series,
             "learned_init": bool(est.learned_init and est.config.learned_init), "seconds": time.perf_counter() - t0}

@@ -1,0 +1,147 @@
+"""Synthetic sitting motion for PIP (the corpus has no sitting clip).
+
+PIP's learned RNN initialisation matters most for poses the six IMUs cannot tell apart, the
+paper's example being sitting still vs standing still (Sec. 3.1.2, Fig. 6, Fig. 9): the pelvis
+and lower-leg sensors read the same orientations and zero acceleration in both. Our corpus
+(CMU + Bandai) holds no sitting at all, so a network trained on it never sees the ambiguity and
+the learned initialisation cannot show its effect. :func:`sitting_motion` synthesises clips
+with it: stand still -> sit down -> sit still -> (stand up -> stand still), or starting
+already seated, with
+
+- seated hip flexion 75-100 deg and the same knee flexion, so the shanks stay vertical (the
+  lower-leg IMUs read what they read when standing; a first version with knee = hip +-10 deg
+  left the shank tilt as a cue, and a network trained without learned initialisation read the
+  seated state from it);
+- an upright pelvis (small random tilt shared by both holds) and a random heading;
+- one random arm/spine/head posture shared by the standing and seated holds, so the upper body
+  does not give the state away either;
+- a slow sway (< 2 deg, 0.1-0.5 Hz) on the spine, neck and arms during the holds (people do not
+  hold perfectly still; the IMU noise model adds sensor noise on top);
+- feet planted: the translation keeps the midpoint of the two ankles fixed, so the pelvis
+  moves down and back by itself.
+
+Everything is drawn from a ``torch.Generator`` seeded by the caller.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+
+from wearpose.body.skeleton import JOINT_INDEX
+from wearpose.geometry import axis_angle_to_matrix, rotation_x, rotation_y, rotation_z, slerp_matrix
+
+_SWAY_JOINTS = ("spine1", "spine2", "spine3", "neck", "head", "left_shoulder", "right_shoulder", "left_elbow",
+                "right_elbow")
+
+
+def _u(g: torch.Generator, lo: float, hi: float) -> float:
+    return lo + (hi - lo) * float(torch.rand((), generator=g))
+
+
+def sitting_pose(hip_deg: float = 90.0, knee_deg: float = 90.0, base: torch.Tensor | None = None) -> torch.Tensor:
+    """A seated pose ``(24, 3, 3)``: ``base`` (default: the calibration I-pose, arms down) with
+    both thighs flexed forward by ``hip_deg`` (rotation about -X) and both knees by ``knee_deg``."""
+    from wearpose.calibration import calibration_pose
+
+    P = (calibration_pose("ipose") if base is None else base).float().clone()
+    for side in ("left", "right"):
+        P[JOINT_INDEX[f"{side}_hip"]] = rotation_x(torch.tensor(-math.radians(hip_deg))) @ P[JOINT_INDEX[f"{side}_hip"]]
+        P[JOINT_INDEX[f"{side}_knee"]] = rotation_x(torch.tensor(math.radians(knee_deg))) @ P[JOINT_INDEX[f"{side}_knee"]]
+    return P
+
+
+def _upper_body(g: torch.Generator) -> torch.Tensor:
+    """A random standing posture ``(24, 3, 3)``: arms hanging or resting forward, elbows bent
+    0-90 deg, small spine/head tilts; legs straight."""
+    from wearpose.calibration import calibration_pose
+
+    P = calibration_pose("ipose").float().clone()
+    for name, lim in (("spine1", 6.0), ("spine3", 6.0), ("neck", 10.0), ("head", 10.0)):
+        aa = torch.tensor([_u(g, -lim, lim), _u(g, -lim, lim), _u(g, -lim / 2, lim / 2)]).mul(math.pi / 180)
+        P[JOINT_INDEX[name]] = axis_angle_to_matrix(aa)
+    for side, s in (("left", 1.0), ("right", -1.0)):
+        sh = P[JOINT_INDEX[f"{side}_shoulder"]]
+        fwd = rotation_x(torch.tensor(-math.radians(_u(g, 0.0, 50.0))))  # swing the hanging arm forward (+Z)
+        out = rotation_z(torch.tensor(s * math.radians(_u(g, -5.0, 20.0))))  # and outward (+-X)
+        M = fwd @ out @ sh
+        P[JOINT_INDEX[f"{side}_shoulder"]] = M
+        # bend the forearm forward about the world X axis, expressed in the upper arm's frame
+        P[JOINT_INDEX[f"{side}_elbow"]] = M.T @ rotation_x(torch.tensor(-math.radians(_u(g, 0.0, 90.0)))) @ M
+    return P
+
+
+def _sway(g: torch.Generator, T: int, fps: float) -> torch.Tensor:
+    """``(T, 24, 3, 3)`` slow small rotations (identity outside :data:`_SWAY_JOINTS`)."""
+    R = torch.eye(3).repeat(T, 24, 1, 1)
+    t = torch.arange(T, dtype=torch.float32) / fps
+    for name in _SWAY_JOINTS:
+        f = torch.rand(3, generator=g) * 0.4 + 0.1
+        ph = torch.rand(3, generator=g) * 2 * math.pi
+        amp = torch.rand(3, generator=g) * math.radians(1.5)
+        aa = amp * torch.sin(2 * math.pi * f * t[:, None] + ph)
+        R[:, JOINT_INDEX[name]] = axis_angle_to_matrix(aa)
+    return R
+
+
+def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tuple[float, float] = (3.0, 20.0)) -> Any:
+    """One synthetic sitting clip (module doc) as a :class:`~wearpose.motion.MotionSequence`
+    at ``fps`` with zero betas; ``meta["segments"]`` lists ``(name, first_frame, frames)``."""
+    from wearpose.motion import MotionSequence
+
+    stand = _upper_body(g)
+    hip = _u(g, 75.0, 100.0)
+    sit = sitting_pose(hip, hip, base=stand)  # shanks vertical, as when standing: the IMUs cannot tell
+    start_seated = _u(g, 0, 1) < 0.3
+    end_seated = _u(g, 0, 1) < 0.3
+    plan: list[tuple[str, int]] = []
+    if not start_seated:
+        plan += [("stand", int(_u(g, 1.0, 4.0) * fps)), ("down", int(_u(g, 0.8, 2.0) * fps))]
+    plan.append(("sit", int(_u(g, *hold_s) * fps)))
+    if not end_seated:
+        plan += [("up", int(_u(g, 0.8, 2.0) * fps)), ("stand", int(_u(g, 1.0, 4.0) * fps))]
+    s_parts, segs, first = [], [], 0
+    for name, n in plan:
+        if name == "stand":
+            s_parts.append(torch.zeros(n))
+        elif name == "sit":
+            s_parts.append(torch.ones(n))
+        else:
+            ramp = 0.5 - 0.5 * torch.cos(torch.linspace(0, math.pi, n))
+            s_parts.append(ramp if name == "down" else 1 - ramp)
+        segs.append((name, first, n))
+        first += n
+    s = torch.cat(s_parts)
+    T = len(s)
+    pose = slerp_matrix(stand.expand(T, 24, 3, 3), sit.expand(T, 24, 3, 3), s[:, None].expand(T, 24))
+    pose = pose @ _sway(g, T, fps)
+    tilt = rotation_x(torch.tensor(math.radians(_u(g, -5.0, 5.0))))
+    pose[:, 0] = rotation_y(torch.tensor(_u(g, -math.pi, math.pi))) @ tilt
+    betas = torch.zeros(10)
+    with torch.no_grad():
+        j = body(pose, betas, torch.zeros(T, 3), return_vertices=False).joints.float()
+    ankles = j[:, [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]].mean(1)
+    trans = ankles[0] - ankles  # the ankles' midpoint stays where it starts
+    trans[:, 1] += float(-j[0, [JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"]], 1].min())  # feet on y = 0
+    return MotionSequence(pose, betas, trans, fps, {"clip": "synthetic/sitting", "segments": segs})
+
+
+def sitting_sequence(body: Any, seconds_stand: float = 1.0, seconds_down: float = 1.5, fps: float = 60.0) -> Any:
+    """Deterministic stand (arms down) -> sit down (90/90 deg) -> one second seated: the start of
+    the long-sitting test (Fig. 6 / Fig. 9)."""
+    from wearpose.calibration import calibration_pose
+    from wearpose.motion import MotionSequence
+
+    stand, sit = calibration_pose("ipose").float(), sitting_pose()
+    n0, n1 = int(seconds_stand * fps), int(seconds_down * fps)
+    s = torch.cat([torch.zeros(n0), 0.5 - 0.5 * torch.cos(torch.linspace(0, math.pi, n1)), torch.ones(int(fps))])
+    T = len(s)
+    pose = slerp_matrix(stand.expand(T, 24, 3, 3), sit.expand(T, 24, 3, 3), s[:, None].expand(T, 24))
+    with torch.no_grad():
+        j = body(pose, torch.zeros(10), torch.zeros(T, 3), return_vertices=False).joints.float()
+    ankles = j[:, [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]].mean(1)
+    trans = ankles[0] - ankles
+    trans[:, 1] += float(-j[0, [JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"]], 1].min())
+    return MotionSequence(pose, torch.zeros(10), trans, fps, {"clip": "synthetic/sit-down"})
