@@ -114,6 +114,66 @@ def test_rotation_correction_and_degraded_flag():
     assert out2["level"][200] > 1.0 > out2["level"][50]
 
 
+def _ramp(R: np.ndarray, start: int, rise: int, hold: int, deg: float) -> np.ndarray:
+    """``R`` with a rotation offset growing linearly to ``deg`` over ``rise`` frames, held ``hold`` frames."""
+    Rm = R.copy()
+    amp = np.r_[np.linspace(0, deg, rise), np.full(hold, deg)]
+    for i, a in enumerate(np.radians(amp)):
+        Rm[start + i] = R[start + i] @ axis_angle_to_matrix(torch.tensor([a, 0.0, 0.0], dtype=torch.float64)).numpy()
+    return Rm
+
+
+def test_anchor_before_the_onset_keeps_a_growing_distortion_out_of_the_correction():
+    # interference that grows over ~0.17 s: by the time it crosses the threshold the previous
+    # frames are already distorted; restarting the gyro chain 36 frames back avoids that
+    R, p, gyro = _clean_stream()
+    Rm = _ramp(R, 150, 20, 30, 20.0)
+    acc = np.zeros_like(p)
+    sl = slice(175, 200)
+    err = {}
+    for L in (1, 36):
+        out = MIM(MIMConfig(position="none", threshold_deg=5.0, anchor_frames=L)).process(Rm, p, gyro, acc, FPS)
+        if L == 36:  # with the previous frame as anchor the flag flickers: the chain starts distorted
+            assert out["corrected"][160:200].all()
+        err[L] = np.degrees(rotation_error(out["R"][sl], R[sl]).mean())
+    raw = np.degrees(rotation_error(Rm[sl], R[sl]).mean())
+    assert err[36] < 0.3 * raw and err[36] < 0.5 * err[1]
+
+
+def test_hysteresis_and_position_test():
+    R, p, gyro = _clean_stream()
+    acc = np.gradient(np.gradient(p, 1 / FPS, axis=0), 1 / FPS, axis=0)
+    # a 6 cm position jump without any rotation change: only the position test sees it
+    pm = p.copy()
+    pm[200:220] += np.array([0.06, 0.0, 0.0])
+    off, _ = detect(R, gyro, FPS, 5.0, p=pm, acc=acc)
+    on, _ = detect(R, gyro, FPS, 5.0, p=pm, acc=acc, pos_threshold_cm=3.0)
+    assert not off[195:225].any() and on[200:215].all() and not on[:190].any()
+    # hysteresis: a distortion hovering between release and detection thresholds stays flagged
+    Rm = _ramp(R, 150, 6, 40, 8.0)
+    Rm[156:196] = np.stack([R[i] @ axis_angle_to_matrix(torch.tensor([np.radians(8.0 if i < 160 else 4.0), 0.0, 0.0],
+                                                                        dtype=torch.float64)).numpy() for i in range(156, 196)])
+    plain, _ = detect(Rm, gyro, FPS, 5.0)
+    hyst, _ = detect(Rm, gyro, FPS, 5.0, release_ratio=0.5)
+    assert hyst[165:195].all() and not plain[165:195].any()
+
+
+def test_kalman_fusion_corrects_a_position_spike():
+    R, p, gyro = _clean_stream()
+    acc = np.gradient(np.gradient(p, 1 / FPS, axis=0), 1 / FPS, axis=0)
+    pm, Rm = p.copy(), R.copy()
+    ramp = np.r_[np.linspace(0, 1, 20), np.ones(20)]
+    pm[200:240] += 0.1 * ramp[:, None] * np.array([0.0, 1.0, 0.0])
+    for i in range(200, 240):
+        Rm[i] = R[i] @ axis_angle_to_matrix(torch.tensor([0.0, 0.0, 0.35 * ramp[i - 200]], dtype=torch.float64)).numpy()
+    out = MIM(MIMConfig(position="fusion")).process(Rm, pm, gyro, acc, FPS)  # shipped forecaster
+    c = out["corrected"]
+    assert c[210:240].all()
+    raw = np.linalg.norm(pm[c] - p[c], axis=1).mean()
+    fus = np.linalg.norm(out["p"][c] - p[c], axis=1).mean()
+    assert fus < 0.02 and fus < 0.3 * raw  # exact acceleration, clean state 12 frames before the detection
+
+
 def _tiny_forecaster():
     torch.manual_seed(0)
     return NBeats(NBeatsConfig(width=16, layers=2))
@@ -127,7 +187,7 @@ def test_numpy_nbeats_matches_torch():
     np.testing.assert_allclose(NumpyNBeats(m)(x), ref, atol=1e-5)
 
 
-@pytest.mark.parametrize("method", ["none", "hold", "odometry", "nbeats", "fusion"])
+@pytest.mark.parametrize("method", ["none", "hold", "odometry", "nbeats", "fusion", "fusion-eq3"])
 def test_position_methods_run_and_stay_bounded(method):
     R, p, gyro = _clean_stream()
     acc = np.gradient(np.gradient(p, 1 / FPS, axis=0), 1 / FPS, axis=0)
