@@ -116,7 +116,7 @@ def standing(body: BodyModel, cfg: PhysicsConfig, seconds: float = 2.0) -> dict:
 
 
 #: The paper's literal reading of each PhysicsConfig departure (docs/physics.md).
-LITERAL = {"weights_in_norm": False, "min_contact_weight": 0.005, "ground_bound": False,
+LITERAL = {"weights_in_norm": False, "min_contact_weight": 0.005, "ground_bound": False, "contact_no_lift": False,
            "foot_contact_requires_prob": False, "guard_all_candidates": False, "foot_square_shift": 0.0}
 
 

@@ -2,7 +2,7 @@
 physics (one PhysicsOptimizer step: dynamics, QP, update) separately, end to end, and the QP solve
 time distribution.
 
-Run: ``python benchmarks/pip_latency.py [--weights pip_cpu | --ckpt runs/pip_cpu/best.pt] [--frames N]``.
+Run: ``taskset -c 0 python benchmarks/pip_latency.py [--weights pip_cpu | --ckpt runs/pip_cpu/best.pt] [--frames N]``.
 Simulates a held-out test clip (imu6, default noise), replays it frame by frame through
 ``PipEstimator.step_tensors`` with physics (dual PD) and times each call (wall clock; the physics
 step also in thread CPU time, less inflated when other processes compete for the 2 cores).
@@ -66,19 +66,24 @@ def main() -> None:
         phys.append(f.extras["physics_ms"])
         phys_cpu.append(f.extras["physics_cpu_ms"])
         qp.append(f.extras["qp_ms"])
-    # kinematics alone (physics off), same frames
-    est.physics = False
-    est.reset()
-    kin_only = []
-    for t in range(T):
-        t0 = time.perf_counter()
-        est.step_tensors(r["acc"][t], r["ori"][t])
-        kin_only.append((time.perf_counter() - t0) * 1000)
+    def kinematics_only(fast: bool) -> list[float]:
+        """Wall ms per frame with physics off; ``fast=False``: the LSTMs in torch (the pre-numpy path)."""
+        est.physics, est.fast_step = False, fast
+        est.reset()
+        ms = []
+        for t in range(T):
+            t0 = time.perf_counter()
+            est.step_tensors(r["acc"][t], r["ori"][t])
+            ms.append((time.perf_counter() - t0) * 1000)
+        est.fast_step = True
+        return ms
+
+    kin_only, kin_torch = kinematics_only(True), kinematics_only(False)
     qa = np.asarray(qp[5:])
     res = {
         "clip": clip, "frames": T, "weights": path, "threads": args.threads, "fps": est.fps,
         "end_to_end_ms": _stats(total), "end_to_end_cpu_ms": _stats(total_cpu), "kinematics_ms": _stats(kin),
-        "kinematics_cpu_ms": _stats(kin_cpu), "kinematics_only_step_ms": _stats(kin_only),
+        "kinematics_cpu_ms": _stats(kin_cpu), "kinematics_only_step_ms": _stats(kin_only), "kinematics_only_step_torch_ms": _stats(kin_torch),
         "physics_step_ms": _stats(phys), "physics_step_cpu_ms": _stats(phys_cpu), "qp_solve_ms": _stats(qp),
         "qp_histogram_ms": {"edges": [0, 0.25, 0.5, 1, 2, 4, 8, 16, 1e9],
                             "counts": np.histogram(qa, [0, 0.25, 0.5, 1, 2, 4, 8, 16, 1e9])[0].tolist()},
@@ -86,14 +91,14 @@ def main() -> None:
                        "cpu_p99_le_16ms": _stats(total_cpu)["p99"] <= 16.0,
                        "cpu_median_le_5ms": _stats(total_cpu)["median"] <= 5.0},
         "machine": {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-                    "load_average": list(os.getloadavg())},
+                    "load_average": list(os.getloadavg()), "affinity": sorted(os.sched_getaffinity(0))},
         "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
     tab = Table(title=f"PIP online latency per frame ({T} frames of {clip}, {args.threads} thread, load {os.getloadavg()[0]:.1f})")
     for c in ("part", "median ms", "p99 ms", "max ms"):
         tab.add_column(c)
-    for k in ("end_to_end_ms", "end_to_end_cpu_ms", "kinematics_ms", "kinematics_cpu_ms", "kinematics_only_step_ms", "physics_step_ms", "physics_step_cpu_ms",
-              "qp_solve_ms"):
+    for k in ("end_to_end_ms", "end_to_end_cpu_ms", "kinematics_ms", "kinematics_cpu_ms", "kinematics_only_step_ms",
+              "kinematics_only_step_torch_ms", "physics_step_ms", "physics_step_cpu_ms", "qp_solve_ms"):
         s = res[k]
         tab.add_row(k, f"{s['median']:.2f}", f"{s['p99']:.2f}", f"{s['max']:.2f}")
     Console().print(tab)

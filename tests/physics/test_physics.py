@@ -208,10 +208,10 @@ def test_contact_rules():
     assert not opt.contact_mask(h, np.array([1.0, 0.0]))[lf]
     h[JOINT_INDEX["left_knee"]] = 0.001  # kneeling: any candidate below 0.5 cm
     assert opt.contact_mask(h, np.zeros(2))[JOINT_INDEX["left_knee"]]
-    h[rf] = 0.001  # a foot on the ground with low probability: in contact (paper), free with the old departure
-    assert opt.contact_mask(h, np.zeros(2))[rf]
-    opt.config = PhysicsConfig(foot_contact_requires_prob=True)
+    h[rf] = 0.001  # a foot on the ground with low probability: free by default, in contact literally
     assert not opt.contact_mask(h, np.zeros(2))[rf]
+    opt.config = PhysicsConfig(foot_contact_requires_prob=False)
+    assert opt.contact_mask(h, np.zeros(2))[rf]
 
 
 def test_run_shapes_and_errors(char):
@@ -259,22 +259,23 @@ def axis_angle(R: np.ndarray) -> np.ndarray:
 
 def test_planted_foot_does_not_lift_and_released_foot_may(char):
     """A foot in contact that the network calls planted may not rise faster than sigma; with a
-    low probability (push-off) it may."""
+    low probability it leaves contact and may; without ``contact_no_lift`` the planted one may too."""
     lf = JOINT_INDEX["left_foot"]
     vel = torch.zeros(NUM_JOINTS, 3)
     vel[[lf, JOINT_INDEX["left_ankle"], JOINT_INDEX["left_knee"]], 1] = 1.0  # lift the left leg at 1 m/s
     rise = {}
-    for p in (1.0, 0.0):
-        opt = PhysicsOptimizer(char, PhysicsConfig())
+    for p in (1.0, 0.0, None):
+        opt = PhysicsOptimizer(char, PhysicsConfig(contact_no_lift=p is not None))
+        p = 1.0 if p is None else p
         opt.reset(EYE, torch.zeros(3))
         y0 = opt.joint_positions()[lf, 1]
         for _ in range(6):
             st = opt.step(EYE, vel, torch.tensor([p, 1.0]))
-        rise[p] = float(st.joints[lf, 1]) - y0
-        assert bool(st.contacts[0]) or p == 0.0
+        rise[(p, opt.config.contact_no_lift)] = float(st.joints[lf, 1]) - y0
     dt = 1 / 60
-    assert rise[1.0] <= 6 * PhysicsConfig().sigma * dt + 1e-6
-    assert rise[0.0] > 5 * rise[1.0] and rise[0.0] > 5e-3
+    assert rise[(1.0, True)] <= 6 * PhysicsConfig().sigma * dt + 1e-6
+    assert rise[(0.0, True)] > 5 * rise[(1.0, True)] and rise[(0.0, True)] > 5e-3
+    assert rise[(1.0, False)] > 5 * rise[(1.0, True)]
 
 
 def test_reused_qp_matches_a_fresh_solve(char):
