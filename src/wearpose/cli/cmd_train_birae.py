@@ -28,6 +28,9 @@ def train_birae_cmd(
     batch_size: Optional[int] = typer.Option(None, help="Override the batch size."),
     train_clips: Optional[int] = typer.Option(None, help="Use only the first N training clips (quick runs)."),
     checkpoint_every: int = typer.Option(50, help="Save last.pt every N optimiser steps (and every epoch)."),
+    init_from: Optional[Path] = typer.Option(None, help="Start from this BiRAE checkpoint's weights (same --rep); "
+                                                          "with --epochs-clean 0 it continues in the augmented phase."),
+    lr: Optional[float] = typer.Option(None, help="Override the initial learning rate."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Train BiRAE: clean synthetic orientations first, then noise/impulse/yaw-drift augmented.
@@ -40,12 +43,12 @@ def train_birae_cmd(
     if rep not in REPS:
         raise typer.BadParameter(f"unknown representation {rep!r}; expected one of {', '.join(REPS)}", param_hint="--rep")
     cfg = BiraeConfig.preset(config, rep).override(hidden=hidden, width=width, batch_size=batch_size,
-                                                   train_clips=train_clips)
+                                                   train_clips=train_clips, lr=lr)
     out = out or Path("runs") / f"birae_{rep}_{config}"
     est = BiraeEstimator(cfg)
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     res = train_birae(est, out, resume=resume, threads=threads, device=device, epochs_clean=epochs_clean,
-                      epochs_aug=epochs_aug, checkpoint_every=checkpoint_every, train_command=command,
+                      epochs_aug=epochs_aug, checkpoint_every=checkpoint_every, train_command=command, init_from=init_from,
                       quiet=as_json, console=None if as_json else console)
     res = {"method": "birae", "rep": rep, "config": cfg.to_dict(), **res}
 

@@ -298,6 +298,20 @@ def test_train_resume_save_load_estimate(trained, tmp_path: Path) -> None:
     assert world.extras["frame"] == "world" and torch.allclose(world.local_rot[:, 0], s["R_world"][:, 5], atol=1e-6)
 
 
+def test_init_from_continues_a_checkpoint_and_zero_epochs_skip_a_phase(trained, tmp_path: Path) -> None:
+    est, tmp, store = trained
+    src = tmp / "run" / "best.pt"
+    ref = BiraeEstimator.load(src)
+    fresh = BiraeEstimator(tiny())
+    res = fresh.fit(tmp_path / "cont", store=store, cache_root=tmp / "cache", quiet=True, threads=1,
+                    epochs_clean=0, epochs_aug=0, init_from=src)
+    assert res["best_checkpoint"] is None and fresh.meta["init_from"] == str(src)
+    assert all(torch.equal(a, b) for a, b in zip(fresh.model.state_dict().values(), ref.model.state_dict().values()))
+    with pytest.raises(CheckpointMismatchError):
+        BiraeEstimator(tiny("3param")).fit(tmp_path / "bad", store=store, cache_root=tmp / "cache", quiet=True,
+                                           threads=1, epochs_clean=0, epochs_aug=0, init_from=src)
+
+
 def test_online_step_equals_windowed_and_declares_latency(trained) -> None:
     est, _, store = trained
     est.set_window(6, 3)

@@ -114,22 +114,24 @@ def train_birae(est: Any, out_dir: str | Path, *, resume: bool = False, threads:
                 device: str = "cpu", epochs_clean: int | None = None, epochs_aug: int | None = None,
                 max_steps: int | None = None, checkpoint_every: int = 50, train_command: str = "",
                 quiet: bool = False, store: Any = None, cache_root: str | Path | None = None,
-                console: Any = None) -> dict[str, Any]:
+                console: Any = None, init_from: str | Path | None = None) -> dict[str, Any]:
     """Synthesise/load the data and train ``est`` in place: clean phase, then augmented phase.
 
     Args:
         est: a :class:`~wearpose.estimators.birae.BiraeEstimator` (its config drives everything).
         out_dir: run directory (``clean/``, ``aug/``, ``best.pt``).
         resume: continue each phase from its ``last.pt``.
-        epochs_clean / epochs_aug: override the config's.
+        epochs_clean / epochs_aug: override the config's (0 skips a phase).
         max_steps: optimiser steps per phase (tests).
+        init_from: start from this BiRAE checkpoint's weights (same representation and sizes;
+            e.g. continue a run with a new schedule or validation set); recorded in ``meta``.
 
     Returns:
         ``{"clean": <loop result>, "aug": <loop result>, "best": val MPJAE deg, "out_dir", ...}``.
     """
     from rich.console import Console
 
-    from wearpose.estimators.checkpoint import load_checkpoint
+    from wearpose.estimators.checkpoint import CheckpointMismatchError, load_checkpoint
 
     console = console or Console(quiet=quiet)
     if threads:
@@ -152,16 +154,25 @@ def train_birae(est: Any, out_dir: str | Path, *, resume: bool = False, threads:
     else:
         est.train_command = train_command
     est.meta.update({"train_clips": len(tr.clip_ids), "train_frames": tr.num_frames, "val_clips": len(va.clip_ids)})
+    if init_from is not None:
+        init = load_checkpoint(init_from)
+        init.check(method=est.name, kit=est.kit_name, path=init_from)
+        if init.config.get("rep") != cfg.rep:
+            raise CheckpointMismatchError(f"{init_from}: --init-from checkpoint has rep {init.config.get('rep')!r}, "
+                                          f"this run trains {cfg.rep!r}")
+        est.model.load_state_dict(init.weights)
+        est.meta["init_from"] = str(init_from)
+        console.print(f"initialised from {init_from}")
     est.model.to(torch.device(device))
     kw = dict(resume=resume, threads=threads, device=device, checkpoint_every=checkpoint_every, max_steps=max_steps,
               quiet=quiet)
     console.print("phase 1/2: clean synthetic orientations")
-    r1 = train(BiraeTask(est, tr, va, False), _settings(cfg, out / "clean", epochs_clean or cfg.epochs_clean, **kw), console)
+    r1 = train(BiraeTask(est, tr, va, False), _settings(cfg, out / "clean", cfg.epochs_clean if epochs_clean is None else epochs_clean, **kw), console)
     best1 = out / "clean" / "best.pt"
     if best1.is_file():
         est.model.load_state_dict(load_checkpoint(best1).weights)
     console.print("phase 2/2: noise / impulse / yaw-drift augmented orientations")
-    r2 = train(BiraeTask(est, tr, va, True), _settings(cfg, out / "aug", epochs_aug or cfg.epochs_aug, **kw), console)
+    r2 = train(BiraeTask(est, tr, va, True), _settings(cfg, out / "aug", cfg.epochs_aug if epochs_aug is None else epochs_aug, **kw), console)
     best2 = out / "aug" / "best.pt"
     final = best2 if best2.is_file() else best1
     if final.is_file():
