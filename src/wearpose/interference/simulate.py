@@ -277,7 +277,8 @@ def rotation_error(R1: np.ndarray, R2: np.ndarray) -> np.ndarray:
 def simulate_condition(motion_or_trajectories: Any, condition: str | ConditionPreset = "standard", *,
                        sensors: Sequence[str] = ("left_wrist", "right_wrist"), seed: int = 0, body: Any = None,
                        source: str = "head", imu_noise: ImuNoise | None = ImuNoise(), scene: Scene | None = None,
-                       tracker: TrackerConfig | None = None, floor_height: float | None = None) -> ConditionSim:
+                       tracker: TrackerConfig | None = None, floor_height: float | None = None,
+                       source_pose: tuple[Any, Any] | None = None) -> ConditionSim:
     """Simulate EM tracking with metal interference (module doc).
 
     Args:
@@ -291,6 +292,8 @@ def simulate_condition(motion_or_trajectories: Any, condition: str | ConditionPr
         scene: use this scene instead of drawing one.
         tracker: solver settings (default: numpy LM, the same least-squares problem as scipy's).
         floor_height: world ``y`` of the floor; default: 0 (the corpus puts the feet on y = 0).
+        source_pose: ``(R (3, 3), p (3,))`` of a room-fixed source (``source="world"``); default
+            as :func:`~wearpose.interference.trajectories.body_trajectories`.
 
     Returns:
         :class:`ConditionSim`.
@@ -304,7 +307,7 @@ def simulate_condition(motion_or_trajectories: Any, condition: str | ConditionPr
         if body is None:
             from wearpose.body import BodyModel
             body = BodyModel()
-        traj = body_trajectories(motion_or_trajectories, body, sensors, source=source)
+        traj = body_trajectories(motion_or_trajectories, body, sensors, source=source, source_pose=source_pose)
     fps = traj.fps
     if scene is None:
         scene = draw_scene(preset, traj, _seed(seed, "scene"), 0.0 if floor_height is None else floor_height)

@@ -154,7 +154,44 @@ def evaluate_imuposer(est: Any, split: str = "test", limit: int | None = None, *
             "summary": table.summary(), "seconds": time.time() - t0}
 
 
-def interference_recording(motion: Any, est: Any, cs: Any, which: str, seed: int) -> Any:
+def _to_head(rec: Any, kit: str, em_name: str, R_src: np.ndarray, p_src: np.ndarray,
+             source_pose: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """EM poses measured against a room-fixed source -> relative to the headset (the kit's EM
+    convention), through the recording's headset VIO pose (held to the EM instants): composing
+    them back with the headset (as :func:`~.data.raw_inputs` does) gives the room-fixed
+    measurement in the headset's world (MI-Poser App. A)."""
+    from wearpose.estimators.miposer.data import kit_streams
+
+    vio, _ = kit_streams(rec, kit)
+    h, s = rec.sensor(vio), rec.sensor(em_name)
+    n = min(len(R_src), s.num_frames)
+    i = np.clip(np.searchsorted(np.asarray(h.timestamps), np.asarray(s.timestamps[:n]) + 1e-6) - 1, 0, h.num_frames - 1)
+    hR = np.asarray(h.orientation, dtype=np.float64)[i]
+    hp = np.asarray(h.position, dtype=np.float64)[i]
+    SR, Sp = (np.asarray(x, dtype=np.float64) for x in source_pose)
+    Rw = np.einsum("ij,tjk->tik", SR, R_src[:n])
+    pw = p_src[:n] @ SR.T + Sp
+    return np.einsum("tji,tjk->tik", hR, Rw), np.einsum("tji,tj->ti", hR, pw - hp)
+
+
+def world_source_pose(motion: Any, body: Any, forward: float = 1.1, down: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """The room-fixed source of :mod:`benchmarks.interference` (MI-Poser User Study 2): ``forward``
+    m in front of the first-frame head (its horizontal facing), ``down`` m lower, world-aligned."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        so = body.sites(motion.pose[:1], motion.betas, motion.trans[:1], ["head"])
+    hR, hp = so.rotations[0, 0].double().numpy(), so.positions[0, 0].double().numpy()
+    f = hR[:, 2].copy()
+    f[1] = 0.0
+    f /= max(np.linalg.norm(f), 1e-9)
+    return np.eye(3), hp + forward * f - np.array([0.0, down, 0.0])
+
+
+def interference_recording(motion: Any, est: Any, cs: Any, which: str, seed: int,
+                           override: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
+                           source_pose: tuple[np.ndarray, np.ndarray] | None = None) -> Any:
     """A MI-Poser recording of ``motion`` (T-pose prefix included) whose wrist EM streams are the
     interference simulation ``cs`` (:func:`wearpose.interference.simulate_condition`, sensors on
     the wrist sites, head-worn source): ``which="measured"`` (interfered) or ``"true"``. The
@@ -173,6 +210,11 @@ def interference_recording(motion: Any, est: Any, cs: Any, which: str, seed: int
         s, c = rec.sensor(spec.name), cs[spec.site]
         n = min(s.num_frames, c.num_frames)
         R, p = (c.R, c.p) if which == "measured" else (c.R_true, c.p_true)
+        if override and spec.site in override:
+            R, p = override[spec.site]
+        if source_pose is not None:
+            R, p = _to_head(rec, est.kit_name, spec.name, np.asarray(R, np.float64), np.asarray(p, np.float64), source_pose)
+            n = min(n, len(R))
         s.orientation = np.asarray(R[:n], dtype=np.float32)
         s.position = np.asarray(p[:n], dtype=np.float32)
         s.valid = np.asarray(c.valid[:n], dtype=bool).copy()
@@ -183,7 +225,8 @@ def interference_recording(motion: Any, est: Any, cs: Any, which: str, seed: int
 def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None, *, clip_stride: int = 1,
                         condition: str = "standard", seed: int = 0, frame_stride: int = 1, mim_config: Any = None,
                         store: Any = None, progress: Callable[[int, int], None] | None = None,
-                        references: bool = True, mim_variants: dict[str, Any] | None = None) -> dict[str, Any]:
+                        references: bool = True, mim_variants: dict[str, Any] | None = None,
+                        source: str = "head", max_range: float = 1.5) -> dict[str, Any]:
     """End-to-end upper-body error under simulated metal interference, with and without MIM.
 
     Per clip (every ``clip_stride``-th of ``split``): the T-pose + clip motion at 60 Hz, the wrist
@@ -198,6 +241,11 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
     ``mim_variants`` (name -> ``MIMConfig``, default ``{"MIM": mim_config}``) adds one interfered
     run per MIM setting (``"<condition>+<name>"``); the interference-free reference with MIM and
     the detection counts use the first.
+
+    ``source="world"``: the wrists are tracked against a room-fixed source (MI-Poser User Study 2,
+    :func:`world_source_pose`), MIM runs on those streams at 120 Hz, and the (corrected) poses
+    reach the estimator through the headset's VIO pose (:func:`_to_head`); clips whose wrists
+    leave ``max_range`` m of the source are skipped.
     """
     from wearpose.calibration import calibrate
     from wearpose.estimators.miposer.data import calibrated_inputs, raw_inputs, tpose_then
@@ -219,13 +267,22 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
     det = {"frames": 0, "interfered_true": 0, "detected": 0, "detected_and_true": 0}
     fallback = None
     mim_was = est.mim
+    skipped = 0
     t0 = time.time()
     try:
         for k, cid in enumerate(ids):
             m = resample(store.load(cid), est.fps)
             mm, prefix = tpose_then(m, est.config.tpose_s, est.config.blend_s)
             s = clip_seed(cid, seed, "e2e")
-            cs = simulate_condition(mm, condition, sensors=sites, seed=s, body=est.body)
+            sp = None
+            if source == "world":
+                sp = world_source_pose(mm, est.body)
+                cs = simulate_condition(mm, condition, sensors=sites, seed=s, body=est.body, source="world", source_pose=sp)
+                if max(float(np.linalg.norm(cs[site].p_true, axis=1).max()) for site in sites) > max_range:
+                    skipped += 1
+                    continue
+            else:
+                cs = simulate_condition(mm, condition, sensors=sites, seed=s, body=est.body)
             imu = {n: (cs[site].gyro, cs[site].acc) for n, site in zip(names, sites)}
             bad120 = np.zeros(cs[sites[0]].num_frames, bool)
             for site in sites:
@@ -234,9 +291,23 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
             window = (min(0.1, 0.25 * est.config.tpose_s), max(hold - 1, 1) / est.fps)
             mtype = motion_type(store.entry(cid))
             for run, (which, use_mim) in runs.items():
-                rec = interference_recording(mm, est, cs, which, s)
                 info = None
-                if use_mim is not None:
+                if sp is not None:
+                    over = None
+                    if use_mim is not None:
+                        from wearpose.estimators.miposer.mim import make_mim
+
+                        over, info = {}, {}
+                        for n, site in zip(names, sites):
+                            c = cs[site]
+                            R0, p0 = (c.R, c.p) if which == "measured" else (c.R_true, c.p_true)
+                            o = make_mim(variants[use_mim]).process(R0, p0, c.gyro, c.acc, c.fps)
+                            over[site] = (o["R"], o["p"])
+                            info[n] = o
+                    rec = interference_recording(mm, est, cs, which, s, override=over, source_pose=sp)
+                else:
+                    rec = interference_recording(mm, est, cs, which, s)
+                if use_mim is not None and sp is None:
                     from wearpose.estimators.miposer.mim import mitigate_recording
 
                     rec, info = mitigate_recording(rec, est.kit_name, variants[use_mim], imu)
@@ -266,7 +337,8 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
                 progress(k + 1, len(ids))
     finally:
         est.mim = mim_was
-    return {"split": split, "clips": len(ids), "clip_stride": clip_stride, "condition": condition, "seed": seed,
+    return {"split": split, "clips": len(ids) - skipped, "skipped_out_of_range": skipped, "source": source,
+            "clip_stride": clip_stride, "condition": condition, "seed": seed,
             "frame_stride": frame_stride, "mim_position_fallback": fallback,
             "mim_variants": {k: (dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v) for k, v in variants.items()},
             "runs": {r: {"all": tables[r].summary(), "interfered_frames": hit[r].summary()} for r in runs},
