@@ -283,3 +283,14 @@ def test_synthetic_sitting_is_ambiguous_for_the_imus(body) -> None:
         assert j[stand[1], 0, 1] - j[first_sit, 0, 1] > 0.2
     seq = sitting_sequence(body)
     assert seq.pose.shape[0] == 60 + 90 + 60
+
+
+def test_sitting_drift_reports_series_and_upper_legs(body) -> None:
+    from wearpose.estimators.pip.evaluate import sitting_drift
+
+    torch.manual_seed(0)
+    est = PipEstimator(tiny(), body=body, physics=False)
+    r = sitting_drift(est, hours=2 / 60, start="seated", chunk=1000, every_s=60.0)
+    assert r["frames"] == 7200 and [s["minutes"] for s in r["series"]] == [0.0, 1.0, 2.0]
+    assert 0.0 <= r["upper_leg_error_at_end_deg"] <= 180.0 and r["drift_total_deg"] >= 0.0
+    assert r["upper_leg_error_max_deg"] == max(s["upper_leg_error_deg"] for s in r["series"])
