@@ -30,16 +30,6 @@ from pathlib import Path
 
 import torch
 
-#: Paper's Table 3 (12 sensors, real test set): label -> MPJPE, PA-MPJPE, MPJAE (mean, std).
-PAPER_TABLE3_12 = {
-    "no [R|t]": ((167.6, 212.7), (134.3, 113.3), (37.5, 34.7)),
-    "no t": ((35.6, 25.8), (29.0, 19.4), (14.4, 10.0)),
-    "ori only": ((50.8, 30.0), (31.2, 20.4), (14.3, 9.8)),
-    "pos only": ((33.6, 28.3), (27.5, 20.8), (16.2, 11.3)),
-    "no RNN": ((36.9, 25.4), (26.5, 19.9), (14.3, 10.3)),
-    "full": ((31.8, 21.0), (24.8, 16.4), (13.3, 9.2)),
-}
-
 
 def _command(argv: list[str] | None) -> str:
     return "python " + shlex.join([sys.argv[0], *(argv if argv is not None else sys.argv[1:])])
@@ -60,7 +50,7 @@ def cmd_train(a: argparse.Namespace, argv: list[str] | None) -> int:
 
 def cmd_table(a: argparse.Namespace, argv: list[str] | None) -> int:
     from wearpose.estimators.empose.config import TABLE3_ABLATIONS
-    from wearpose.estimators.empose.evaluate import evaluate_models, write_table
+    from wearpose.estimators.empose.evaluate import PAPER_TABLE3_12, evaluate_models, write_table
 
     ckpts: dict[str, str] = {}
     for key, (label, _) in TABLE3_ABLATIONS.items():
@@ -78,8 +68,9 @@ def cmd_table(a: argparse.Namespace, argv: list[str] | None) -> int:
             print(f"  {d}/{t} clips ({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
 
     res = evaluate_models(ckpts, a.split, a.limit, seed=a.seed, progress=prog)
-    note = (f"Equal budget: every row trained from scratch for {a.epochs} epochs of the `cpu` preset (cosine "
-            f"learning rate over those epochs, 1 thread), best-validation checkpoint. The shipped "
+    ep = f"{a.epochs} epoch{'s' if a.epochs != 1 else ''}"
+    note = (f"Equal budget: every row trained from scratch for {ep} of the `cpu` preset (1143 training clips, "
+            f"batch 32, cosine learning rate over the budget, 1 thread), best-validation checkpoint. The shipped "
             f"`empose12_cpu` (Table 2: 15.3 mm) trained 17 epochs, so the 'full' row here is a shorter "
             f"run of the same model; compare rows with each other, not with Table 2.")
     extra = {"command": _command(argv), "wall_seconds": time.time() - t0, "budget_epochs": a.epochs,

@@ -16,7 +16,9 @@ from wearpose.estimators import iter_frames
 from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
 from wearpose.estimators.empose.config import TABLE3_ABLATIONS, ablation_config
 from wearpose.estimators.empose.data import recording_from_clip, simulate_clip
+from wearpose.estimators.empose.model import PRED_JOINTS, decode_omega
 from wearpose.estimators.empose.train import train_empose
+from wearpose.geometry import axis_angle_to_matrix, matrix_to_rot6d
 
 
 def tiny(ablation: str = "full", **kw) -> EmposeConfig:
@@ -24,10 +26,10 @@ def tiny(ablation: str = "full", **kw) -> EmposeConfig:
 
 
 def test_ablation_options_are_validated_and_cover_table3() -> None:
-    assert {label for label, _ in TABLE3_ABLATIONS.values()} == {"full", "no [R|t]", "no t", "pos only", "ori only", "no RNN"}
-    assert tiny("no_t").offsets == "rot" and tiny("pos_only").inputs == "position" and tiny("no_rnn").init == "rest"
+    assert {label for label, _ in TABLE3_ABLATIONS.values()} == {"full", "no [R,t]", "no t", "pos only", "ori only", "no RNN"}
+    assert tiny("no_t").offsets == "rot" and tiny("pos_only").inputs == "position" and tiny("no_rnn").init == "mean"
     assert tiny("full") == EmposeConfig.preset("tiny", 12).override(iterations=2)
-    for bad in ({"inputs": "pos"}, {"init": "mean"}, {"offsets": "t"}):
+    for bad in ({"inputs": "pos"}, {"init": "rest"}, {"offsets": "t"}):
         with pytest.raises(ConfigError):
             EmposeConfig.preset("tiny", 12).override(**bad)
     with pytest.raises(ConfigError, match="ablation"):
@@ -80,6 +82,11 @@ def test_no_rnn_starts_every_frame_from_one_learned_estimate(body: BodyModel) ->
     x = torch.randn(2, 5, 12 * 12)
     omega0, _ = est.model.initial(x)
     assert omega0.shape == (2, 5, est.model.omega_dim) and torch.equal(omega0, omega0[:1, :1].expand_as(omega0))
+    # The start is the mean training pose: a data set of one repeated pose starts there exactly.
+    pose = axis_angle_to_matrix(0.5 * torch.randn(24, 3, generator=torch.Generator().manual_seed(0)))
+    est.model.set_mean_start(matrix_to_rot6d(pose).expand(7, 24, 6))
+    rot, betas = decode_omega(est.model.initial(x)[0][0, 0], cfg.rep)
+    assert torch.allclose(rot[list(PRED_JOINTS)], pose[list(PRED_JOINTS)], atol=1e-5) and torch.equal(betas, torch.zeros(10))
 
 
 @pytest.mark.parametrize("ablation", ["no_t", "pos_only", "ori_only", "no_rnn"])

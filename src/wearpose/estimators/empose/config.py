@@ -41,9 +41,9 @@ class EmposeConfig(ConfigIO):
     the "no [R|t]" ablation), ``seed``.
     Ablations of Table 3 (defaults = the full model): ``inputs`` the measured modalities the
     network sees and L_r compares (``"both"``; ``"position"`` = "pos only", ``"orientation"`` =
-    "ori only"), ``init`` the start of LGD (``"rnn"`` = Omega^(0) from the RNN; ``"rest"`` = "no
-    RNN": a learned constant Omega^(0) around the zero pose / mean shape, the same for every
-    frame, so LGD runs frame-wise like the original LGD).
+    "ori only"), ``init`` the start of LGD (``"rnn"`` = Omega^(0) from the RNN; ``"mean"`` = "no
+    RNN": one learned constant Omega^(0) for every frame, initialised at the mean training pose
+    and mean shape, so LGD runs frame-wise like the original LGD).
     Optimisation: ``lr``, ``lr_schedule`` (``constant`` / ``cosine``), ``lr_min_factor``,
     ``batch_size``, ``epochs``, ``grad_clip`` (max global grad norm, 0 = off), ``val_clips``
     (validation clips used each epoch, 0 = all).
@@ -100,8 +100,8 @@ class EmposeConfig(ConfigIO):
                               f"got {self.train_noise!r} / {self.offsets!r}")
         if self.inputs not in ("both", "position", "orientation"):
             raise ConfigError(f"EmposeConfig.inputs: expected 'both', 'position' or 'orientation', got {self.inputs!r}")
-        if self.init not in ("rnn", "rest"):
-            raise ConfigError(f"EmposeConfig.init: expected 'rnn' or 'rest', got {self.init!r}")
+        if self.init not in ("rnn", "mean"):
+            raise ConfigError(f"EmposeConfig.init: expected 'rnn' or 'mean', got {self.init!r}")
         if self.model not in ("lgd", "resnet", "birnn", "twostage"):
             raise ConfigError(f"EmposeConfig.model: expected 'lgd', 'resnet', 'birnn' or 'twostage', got {self.model!r}")
 
@@ -132,11 +132,11 @@ class EmposeConfig(ConfigIO):
 
 #: EM-POSE Table 3 rows: ablation key -> (label, :class:`EmposeConfig` overrides of the full model).
 TABLE3_ABLATIONS: dict[str, tuple[str, dict[str, Any]]] = {
-    "noRt": ("no [R|t]", {"offsets": "none"}),
+    "noRt": ("no [R,t]", {"offsets": "none"}),
     "no_t": ("no t", {"offsets": "rot"}),
     "ori_only": ("ori only", {"inputs": "orientation"}),
     "pos_only": ("pos only", {"inputs": "position"}),
-    "no_rnn": ("no RNN", {"init": "rest"}),
+    "no_rnn": ("no RNN", {"init": "mean"}),
     "full": ("full", {}),
 }
 

@@ -45,7 +45,7 @@ PAPER_TABLE2_12 = {
 
 #: Paper's Table 3 (ablations, 12 sensors, real test set), same layout.
 PAPER_TABLE3_12 = {
-    "no [R|t]": {"mpjpe_mm": (167.6, 212.7), "pa_mpjpe_mm": (134.3, 113.3), "mpjae_deg": (37.5, 34.7)},
+    "no [R,t]": {"mpjpe_mm": (167.6, 212.7), "pa_mpjpe_mm": (134.3, 113.3), "mpjae_deg": (37.5, 34.7)},
     "no t": {"mpjpe_mm": (35.6, 25.8), "pa_mpjpe_mm": (29.0, 19.4), "mpjae_deg": (14.4, 10.0)},
     "ori only": {"mpjpe_mm": (50.8, 30.0), "pa_mpjpe_mm": (31.2, 20.4), "mpjae_deg": (14.3, 9.8)},
     "pos only": {"mpjpe_mm": (33.6, 28.3), "pa_mpjpe_mm": (27.5, 20.8), "mpjae_deg": (16.2, 11.3)},

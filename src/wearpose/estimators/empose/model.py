@@ -226,8 +226,24 @@ class LGDRNN(nn.Module):
             self.rnn = nn.LSTM(F, cfg.hidden, cfg.rnn_layers, batch_first=True)
             self.head = nn.Linear(cfg.hidden, D)
         else:  # "no RNN" ablation: one learned start for every frame (no temporal model at all)
-            self.omega_init = nn.Parameter(torch.zeros(D))
+            self.omega_init = nn.Parameter(torch.zeros(D))  # offset from omega_rest; see set_mean_start
         self.update = UpdateNet(2 * D + F, cfg.width, cfg.mlp_layers, D, cfg.dropout_mlp)
+
+    @torch.no_grad()
+    def set_mean_start(self, pose6: torch.Tensor) -> None:
+        """"no RNN" (``cfg.init == "mean"``): start LGD at the mean training pose and mean shape.
+
+        Args:
+            pose6: ``(F, 24, 6)`` ground-truth local rotations in 6D (root in the source frame),
+                e.g. :attr:`EmposeData.pose6`; their mean is projected back to rotations.
+
+        Why: L_r is blind to the root orientation relative to the EM source (the source rides on the
+        pelvis), so LGD updates get no gradient for it; from the zero pose the learned constant has
+        to travel ~70 degrees at Adam's step size, which a short training cannot do.
+        """
+        R = rot6d_to_matrix(pose6.reshape(-1, NUM_JOINTS, 6).double().mean(0)).float()
+        omega = torch.cat([encode_pose(R, self.rep), torch.zeros(NUM_BETAS)]).to(self.omega_rest)
+        self.omega_init.copy_(omega - self.omega_rest)
 
     def select_inputs(self, x: torch.Tensor) -> torch.Tensor:
         """The measured features this model uses (``cfg.inputs``) from the full ``(..., S * 12)``
@@ -240,10 +256,10 @@ class LGDRNN(nn.Module):
                 ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
         """RNN estimate ``Omega^(0)`` ``(B, T, D)`` from ``x`` ``(B, T, S * 12)`` (and the LSTM state).
 
-        With ``cfg.init == "rest"`` ("no RNN") the learned constant start for every frame; the
+        With ``cfg.init == "mean"`` ("no RNN") the learned constant start for every frame; the
         ``state`` passes through unchanged (zeros when None, so the online trace keeps its form)."""
         x = self.select_inputs(x)
-        if self.cfg.init == "rest":
+        if self.cfg.init == "mean":
             if state is None:
                 z = x.new_zeros(self.cfg.rnn_layers, x.shape[0], self.cfg.hidden)
                 state = (z, z)

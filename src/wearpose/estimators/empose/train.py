@@ -112,6 +112,8 @@ def train_empose(est: EmposeEstimator, out_dir: str | Path, *, epochs: int | Non
     est.meta.update({"train_clips": len(tr.clip_ids), "train_frames": tr.num_frames, "val_clips": len(va.clip_ids)})
     from wearpose.estimators.train import resolve_device
 
+    if getattr(cfg, "init", "rnn") == "mean":
+        est.model.set_mean_start(tr.pose6)  # "no RNN" ablation (a resumed run loads its own weights over it)
     est.to(resolve_device(device))  # network and body together: L_r runs the body inside the model
     # Estimators with another network (the Table 2 baselines) bring their own task.
     task = est.make_task(tr, va) if hasattr(est, "make_task") else EmposeTask(est, tr, va)
