@@ -142,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
                                 source=args.e2e_source)
         r.update(command=command, weights=wpath, machine=machine)
         md = ("# MI-Poser end-to-end upper-body error under metal interference, with and without MIM\n\n"
-              f"`{command}`\n\n{r['clips']} {args.split} clips (every {args.e2e_clip_stride}th), every {args.e2e_frame_stride}th "
+              f"`{command}`\n\n{r['clips']} {args.split} clips (every {args.e2e_clip_stride}-th), every {args.e2e_frame_stride}-th "
               f"clip frame; wrist EM simulated by wearpose.interference ('{r['condition']}' condition, "
               + ("head-worn source), " if args.e2e_source == "head" else
                  f"room-fixed source 1.1 m in front of the first-frame head as in User Study 2, wrists within 1.5 m of it: "
