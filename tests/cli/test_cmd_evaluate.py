@@ -83,3 +83,14 @@ def test_unseen_subjects_are_wider_than_the_training_prior() -> None:
     standoff_seen, standoff_wide = torch.cat([o.t[:, 2] for o in seen]), torch.cat([o.t[:, 2] for o in wide])
     assert abs(float(standoff_wide.mean()) - 2 * float(standoff_seen.mean())) < 0.004
     assert torch.allclose(unseen_subject_offsets(12, torch.Generator().manual_seed(0), 1.0).R, seen[0].R)
+
+
+@pytest.mark.corpus
+def test_shipped_weights_on_two_test_clips() -> None:
+    """The shipped LGD-RNN (a checkpoint from before the ablation options existed) through the
+    command on the real corpus: finite, plausible figures."""
+    res = runner.invoke(app, ["evaluate", "empose12_cpu", "--clips", "2", "--json"])
+    assert res.exit_code == 0, res.output
+    m = json.loads(res.stdout[res.stdout.index("{"):])["models"]["empose12_cpu"]
+    assert m["config"]["inputs"] == "both" and m["config"]["init"] == "rnn"
+    assert 5.0 < m["mpjpe_mm"] < 60.0 and m["frames"] > 0
