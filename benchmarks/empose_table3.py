@@ -12,7 +12,7 @@ Train one row (one at a time; 1 thread)::
     python benchmarks/empose_table3.py train no_t --epochs 3 --out runs/t3_no_t
 
 (``full`` and ``noRt`` are the same as ``wearpose train empose --config cpu --epochs 3`` with
-``--offsets random`` / ``none``.) Then the table::
+``--offsets random`` / ``none``; every row is also ``wearpose train empose --ablation <row>``.) Then the table::
 
     python benchmarks/empose_table3.py table --runs runs/t3 --epochs 3 [--limit N]
 

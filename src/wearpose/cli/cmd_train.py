@@ -40,6 +40,8 @@ def train_empose_cmd(
     batch_size: Optional[int] = typer.Option(None, help="Override the batch size."),
     offsets: Optional[str] = typer.Option(None, help="Subject offsets in training data: random (default) or none "
                                                      "(EM-POSE's 'no [R|t]' ablation)."),
+    ablation: Optional[str] = typer.Option(None, help="An EM-POSE Table 3 ablation of the LGD-RNN: noRt, no_t, "
+                                                       "ori_only, pos_only, no_rnn (or full)."),
     limit: Optional[int] = typer.Option(None, help="Use only the first N training clips (quick runs)."),
     checkpoint_every: int = typer.Option(100, help="Save last.pt every N optimiser steps (and every epoch)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
@@ -47,6 +49,7 @@ def train_empose_cmd(
     """Train EM-POSE (LGD-RNN or a Table 2 baseline) on virtual EM sensors.
 
     Example: wearpose train empose --sensors 12 --config cpu --threads 1 --out runs/empose12_cpu
+    Table 3 row: wearpose train empose --ablation no_t --epochs 3 --threads 1 --out runs/t3_no_t
     """
     method = "empose"
     from wearpose.estimators.empose.baselines import baseline_config, estimator_class
@@ -58,6 +61,15 @@ def train_empose_cmd(
         raise typer.BadParameter(f"expected random or none, got {offsets!r}", param_hint="--offsets")
     cfg = baseline_config(config, sensors, model).override(hidden=hidden, width=width, iterations=iterations,
                                                         batch_size=batch_size, offsets=offsets)
+    if ablation is not None:
+        from wearpose.estimators.empose.config import TABLE3_ABLATIONS, ablation_config
+
+        if model != "lgd":
+            raise typer.BadParameter(f"ablations are of the LGD-RNN; got --model {model}", param_hint="--ablation")
+        if ablation not in TABLE3_ABLATIONS:
+            raise typer.BadParameter(f"unknown ablation {ablation!r}; expected one of {', '.join(TABLE3_ABLATIONS)}",
+                                     param_hint="--ablation")
+        cfg = ablation_config(cfg, ablation)
     out = out or Path("runs") / f"{method if model == 'lgd' else model}{sensors}_{config}"
     est = estimator_class(model)(cfg)
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
