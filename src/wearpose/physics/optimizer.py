@@ -318,6 +318,7 @@ class PhysicsOptimizer:
                 lowest contact-candidate joint of this pose.
         """
         self.q = self.char.q_from_pose(pose_local, trans)
+        self._qps = {}  # a fresh solver state per sequence: results do not depend on earlier sequences
         self.v = np.zeros(self.nv) if velocity is None else np.asarray(velocity, dtype=np.float64).copy()
         if ground_y is None:
             ground_y = self.config.ground_y
@@ -460,7 +461,10 @@ class PhysicsOptimizer:
         hi = np.empty((nj, 3))
         lo[:, [0, 2]], hi[:, [0, 2]] = -c.sigma, c.sigma
         lo[:, 1] = -heights[cj] / dt if c.ground_bound else 0.0
-        hi[:, 1] = np.maximum(c.sigma, -heights[cj] / dt) if c.contact_no_lift else np.inf
+        hi[:, 1] = np.inf
+        if c.contact_no_lift:  # planted feet only: other joints (knees, hands) leave the ground freely
+            feet = np.isin(cj, c.foot_joints)
+            hi[feet, 1] = np.maximum(c.sigma, -heights[cj[feet]] / dt)
         rows = [dt * Jj]
         lows, highs = [(lo - vj).reshape(-1)], [(hi - vj).reshape(-1)]
         if c.guard_all_candidates:
