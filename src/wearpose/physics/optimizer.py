@@ -101,8 +101,8 @@ class PhysicsConfig:
             rule). PIP's released code likewise frees a foot whose probability is low.
         contact_no_lift: a foot the network calls planted (probability above the threshold) may
             not rise faster than ``sigma`` -- in contact its vertical velocity joins the no-sliding
-            bound, above the ground (not yet in contact) it may only come down -- and any contact
-            joint may not rise faster than ``sigma`` unless it is pushed out of the ground. The
+            bound (unless pushed out of the ground), above the ground (not yet in contact) it may
+            only come down; other contact joints (knees, hands) are not bound this way. The
             paper bounds only ``ydot >= 0``; PIP's released code bounds a foot's upward speed by
             ``-log(min(p, 0.85) / 0.85)`` (0 for a confident contact) whatever its height. Why:
             without it a planted foot drifts up a few mm, its Signorini weight ``d_c`` (its
