@@ -8,23 +8,7 @@ from typing import Any, Sequence
 
 import torch
 
-
-def _plt() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(plt: Any, fig: Any, path: str | Path) -> Path:
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+from wearpose.viewer.figures import pyplot, save_figure
 
 
 def uncertainty_bands(path: str | Path, fps: float, mean: torch.Tensor, sigma: torch.Tensor, truth: torch.Tensor,
@@ -35,7 +19,7 @@ def uncertainty_bands(path: str | Path, fps: float, mean: torch.Tensor, sigma: t
         mean, sigma, truth: ``(T, 15, 3)`` radians (major-joint order).
         joints: ``(label, position in the 15 major joints)`` per panel.
     """
-    plt = _plt()
+    plt = pyplot()
     T = mean.shape[0]
     t = torch.arange(T) / fps
     k = 180.0 / math.pi
@@ -55,12 +39,12 @@ def uncertainty_bands(path: str | Path, fps: float, mean: torch.Tensor, sigma: t
     axes[0][0].legend(fontsize=7, loc="upper left")
     if title:
         fig.suptitle(title, fontsize=10)
-    return _save(plt, fig, path)
+    return save_figure(fig, path, dpi=110)
 
 
 def reliability_diagram(path: str | Path, curves: dict[str, dict[str, list[float]]], title: str = "") -> Path:
     """Observed vs expected coverage of Gaussian central intervals, one line per curve."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(4.8, 4.6))
     ax.plot([0, 1], [0, 1], color="0.6", ls="--", lw=1, label="perfect calibration")
     for name, c in curves.items():
@@ -72,4 +56,4 @@ def reliability_diagram(path: str | Path, curves: dict[str, dict[str, list[float
     ax.legend(fontsize=7, loc="upper left")
     if title:
         ax.set_title(title, fontsize=9)
-    return _save(plt, fig, path)
+    return save_figure(fig, path, dpi=110)

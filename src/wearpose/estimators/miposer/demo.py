@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from wearpose.viewer.figures import pyplot, save_figure
+
 
 def _to_calibrated(body: Any, pose: torch.Tensor, trans: torch.Tensor, res: Any) -> tuple[torch.Tensor, torch.Tensor]:
     """A world-frame track in the calibrated world (rotation ``R^{WM}`` and shift of ``res``; SMPL
@@ -38,11 +40,7 @@ def _to_calibrated(body: Any, pose: torch.Tensor, trans: torch.Tensor, res: Any)
 
 def _timeline_png(path: Path, t: np.ndarray, rows: list[dict[str, Any]], t60: np.ndarray, err_off: np.ndarray,
                   err_on: np.ndarray, title: str) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, axes = plt.subplots(len(rows) + 1, 1, figsize=(10, 2.0 * (len(rows) + 1)), sharex=True)
     for ax, r in zip(axes, rows):
         ax.plot(t, r["pos_error_cm"], color="k", lw=0.8, label="true EM position error (cm)")
@@ -58,10 +56,7 @@ def _timeline_png(path: Path, t: np.ndarray, rows: list[dict[str, Any]], t60: np
     ax.set_xlabel("time (s)")
     ax.legend(loc="upper right", fontsize=7)
     axes[0].set_title(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=90)
 
 
 def run_demo(clip: str, out: str | Path, weights: str = "miposer_cpu", condition: str = "standard",

@@ -14,6 +14,8 @@ from typing import Any
 
 import torch
 
+from wearpose.viewer.figures import pyplot, save_figure
+
 #: Gravity magnitude used for "body weight", m/s^2.
 G = 9.81
 
@@ -40,10 +42,7 @@ def physical_plots(track: Any, mass_kg: float, out_png: str | Path, title: str) 
     """Two stacked plots: vertical GRF of the left/right foot and their sum against body weight;
     torque magnitude at the shoulders and elbows. Returns the PNG path, or None without matplotlib."""
     try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        plt = pyplot()
     except ImportError:
         return None
     ex = track.extras
@@ -63,12 +62,7 @@ def physical_plots(track: Any, mass_kg: float, out_png: str | Path, title: str) 
     ax[1].set_xlabel("time [s]")
     ax[1].legend(loc="upper right", fontsize=8)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    out_png = Path(out_png)
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out_png, dpi=90)
-    plt.close(fig)
-    return out_png
+    return save_figure(fig, out_png, dpi=90)
 
 
 def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: float = 10.0, seed: int = 0,
