@@ -62,14 +62,15 @@ def train_empose_cmd(
     cfg = baseline_config(config, sensors, model).override(hidden=hidden, width=width, iterations=iterations,
                                                         batch_size=batch_size, offsets=offsets)
     if ablation is not None:
-        from wearpose.estimators.empose.config import TABLE3_ABLATIONS, ablation_config
+        from wearpose.errors import ConfigError
+        from wearpose.estimators.empose.config import ablation_config
 
         if model != "lgd":
             raise typer.BadParameter(f"ablations are of the LGD-RNN; got --model {model}", param_hint="--ablation")
-        if ablation not in TABLE3_ABLATIONS:
-            raise typer.BadParameter(f"unknown ablation {ablation!r}; expected one of {', '.join(TABLE3_ABLATIONS)}",
-                                     param_hint="--ablation")
-        cfg = ablation_config(cfg, ablation)
+        try:
+            cfg = ablation_config(cfg, ablation)
+        except ConfigError as exc:  # names the unknown row and the known ones
+            raise typer.BadParameter(str(exc), param_hint="--ablation") from None
     out = out or Path("runs") / f"{method if model == 'lgd' else model}{sensors}_{config}"
     est = estimator_class(model)(cfg)
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
