@@ -3,7 +3,13 @@
 Run::
 
     python benchmarks/birae_eval.py --ckpt 6param=runs/birae6_cpu/best.pt --ckpt 3param=runs/birae3_cpu/best.pt \\
+        [--ckpt 3param_rate=runs/birae3r_cpu/best.pt --ckpt zhou6d=runs/birae6d_cpu/best.pt] \\
         [--sections tables,calibration,framerate,window] [--limit N] [--save-calibrated]
+
+Rows: one ``--ckpt NAME=PATH`` per input representation (Table 1 rows: ``6param``, ``3param``,
+``3param_rate``, ``zhou6d``); every JSON carries each row's training chain (``training``:
+warm-start runs behind the checkpoint via ``--init-from``, epochs and optimiser steps up to each
+kept checkpoint, see ``evaluate.training_chain``) and ``birae_tables.md`` opens with that budget.
 
 Sections (each writes ``benchmarks/results/birae_<section>.md`` and ``.json``):
 
@@ -46,12 +52,12 @@ RESULTS = Path(__file__).parent / "results"
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 
 
-def _write(stem: str, md: str, js: dict[str, Any]) -> None:
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"{stem}.md").write_text(md)
-    (RESULTS / f"{stem}.json").write_text(json.dumps(js, indent=2, default=float) + "\n")
+def _write_to(stem: str, md: str, js: dict[str, Any], out: Path = RESULTS) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{stem}.md").write_text(md)
+    (out / f"{stem}.json").write_text(json.dumps(js, indent=2, default=float) + "\n")
     print(md)
-    print(f"wrote {RESULTS / stem}.md/.json", file=sys.stderr)
+    print(f"wrote {out / stem}.md/.json", file=sys.stderr)
 
 
 def _row(name: str, r: dict[str, Any]) -> str:
@@ -59,6 +65,32 @@ def _row(name: str, r: dict[str, Any]) -> str:
 
 
 HEAD = "| model | distal | tracking | other | all 15 |\n| --- | --- | --- | --- | --- |"
+REP_LABEL = {"6param": "6-param (Appendix A)", "3param": "3-param (r31, r32, r33)",
+             "3param_rate": "3-param + angular rate (aux. loss)", "zhou6d": "Zhou 6D"}
+
+
+def budget_table(ests: dict[str, Any], training: dict[str, Any]) -> str:
+    """Markdown: every row's input and training budget (warm-start chain, epochs and optimiser
+    steps up to each kept checkpoint) against its preset's nominal epochs."""
+    md = ["## Rows and their training budget\n",
+          "Epochs and optimiser steps count up to the checkpoint each run kept (best validation epoch), which is what "
+          "the next run of the chain (`--init-from`) started from; wall-clock depends on the machine's load.\n",
+          "| model | input | chain (runs, kept epochs, steps) | epochs clean + aug | optimiser steps | train wall-clock (min) "
+          "| preset epochs clean + aug | val MPJAE of the kept checkpoint (deg, val clips) |",
+          "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+
+    def f(v: Any, fmt: str = "{}") -> str:
+        return "?" if v is None else fmt.format(v)
+
+    for n, e in ests.items():
+        s, last = training[n]["summary"], (training[n]["chain"] or [{}])[-1]
+        ph = last.get("phases", {}).get("aug") or last.get("phases", {}).get("clean") or {}
+        val = f"{ph['val_mpjae_deg']:.2f} ({last.get('val_clips')})" if ph.get("val_mpjae_deg") is not None else "?"
+        secs = s["train_seconds"]
+        md.append(f"| {n} | {REP_LABEL.get(e.config.rep, e.config.rep)} | {s['text']} | {f(s['epochs_clean'])} + "
+                  f"{f(s['epochs_aug'])} | {f(s['steps'])} | {f(None if secs is None else secs / 60, '{:.0f}')} | "
+                  f"{e.config.epochs_clean} + {e.config.epochs_aug} | {val} |")
+    return "\n".join(md)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -75,11 +107,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--window-models", type=int, default=1, help="window section: first N checkpoints only")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--save-calibrated", action="store_true")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="write the .md/.json and the reliability PNG here instead of benchmarks/results and docs/img (trial runs)")
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
+    res_dir, img_dir = (a.out, a.out) if a.out else (RESULTS, IMG)
+
+    def _write(stem: str, md: str, js: dict[str, Any]) -> None:
+        _write_to(stem, md, js, res_dir)
     from wearpose.estimators.birae import BiraeEstimator
     from wearpose.estimators.birae.data import scenario_settings
-    from wearpose.estimators.birae.evaluate import calibrate, evaluate, public, scenario_recordings, uncertainty_summary
+    from wearpose.estimators.birae.evaluate import (
+        budget_summary, calibrate, evaluate, public, scenario_recordings, training_chain, uncertainty_summary,
+    )
 
     ckpts = {}
     for spec in a.ckpt:
@@ -97,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
               "split": a.split, "checkpoints": ckpts, "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
               "train_commands": {n: e.train_command for n, e in ests.items()},
               "configs": {n: e.config.to_dict() for n, e in ests.items()}}
+    chains = {n: training_chain(p) for n, p in ckpts.items()}
+    common["training"] = {n: {"summary": budget_summary(c), "chain": c} for n, c in chains.items()}
     recs: dict[str, Any] = {}
 
     def get(scn: str, split: str = a.split, rate: float = 60.0, limit: int | None = a.limit, offset: float = 0.0) -> Any:
@@ -141,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
                    "clipstart_vs_noise": pct(r, "magnetic_clipstart", "noise"), "heading45_vs_noise": pct(r, "heading45", "noise")}
                for n, r in res.items()}
         md = [f"# BiRAE on the {a.split} split (MPJAE, degrees; offline, MC-dropout mean)\n",
-              "## Table 1 structure: clean synthetic sensors\n", HEAD]
+              budget_table(ests, common["training"]),
+              "\n## Table 1 structure: clean synthetic sensors\n", HEAD]
         md += [_row(n, r["clean"]) for n, r in res.items()]
         md += ["\n## Table 2 structure: simulated real-sensor noise (2 deg white, impulses, 0.1 deg/s yaw bias)\n", HEAD]
         md += [_row(n, r["noise"]) for n, r in res.items()]
@@ -182,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
             # aleatoric only (no MC-dropout) for comparison, on the nominal scenario
             r0 = evaluate(e, get("noise"), mc_samples=0, keep_uncertainty=True)
             out[n]["noise_aleatoric_only"] = {k: v for k, v in uncertainty_summary(r0).items() if k != "reliability"}
-        png = reliability_diagram(IMG / "birae_reliability.png", curves,
+        png = reliability_diagram(img_dir / "birae_reliability.png", curves,
                                   f"BiRAE sigma calibration ({a.split} split, sigma scale fitted on val/noise)")
         from wearpose.estimators.birae.uncertainty import coverage
 

@@ -312,6 +312,44 @@ def test_init_from_continues_a_checkpoint_and_zero_epochs_skip_a_phase(trained, 
                                            threads=1, epochs_clean=0, epochs_aug=0, init_from=src)
 
 
+def test_training_chain_follows_init_from_and_counts_kept_steps(trained, tmp_path: Path) -> None:
+    import json
+    import shutil
+
+    from wearpose.estimators.birae.evaluate import budget_summary, training_chain
+
+    _, tmp, store = trained
+    src = tmp / "run" / "best.pt"
+    cont = tmp_path / "cont"
+    BiraeEstimator(tiny()).fit(cont, store=store, cache_root=tmp / "cache", quiet=True, threads=1, epochs_clean=0,
+                               epochs_aug=2, init_from=src, train_command=f"wearpose train birae --out {cont}")
+
+    def steps_at(log: Path, epoch: int) -> int:  # independent reading: batches per epoch x kept epoch
+        start = json.loads(log.read_text().splitlines()[0])
+        return start["batches_per_epoch"] * epoch
+
+    kept = {ph: BiraeEstimator.load(tmp / "run" / ph / "best.pt").meta["epoch"] for ph in ("clean", "aug")}
+    kept_cont = BiraeEstimator.load(cont / "best.pt").meta["epoch"]
+    first = steps_at(tmp / "run" / "clean" / "log.jsonl", kept["clean"]) + steps_at(tmp / "run" / "aug" / "log.jsonl", kept["aug"])
+    second = steps_at(cont / "aug" / "log.jsonl", kept_cont)
+    # a shipped copy elsewhere finds its run through the --out of its command
+    shipped = tmp_path / "weights" / "w.pt"
+    shipped.parent.mkdir()
+    shutil.copyfile(cont / "best.pt", shipped)
+    for p in (cont / "best.pt", shipped):
+        chain = training_chain(p)
+        assert [c["run"] for c in chain] == [str(tmp / "run"), str(cont)]
+        assert chain[0]["phases"]["clean"]["epochs"] == kept["clean"] and chain[0]["steps"] == first
+        assert chain[1]["phases"]["clean"]["epochs"] == 0 and chain[1]["steps"] == second
+        s = budget_summary(chain)
+        assert s["steps"] == first + second and s["epochs_aug"] == kept["aug"] + kept_cont and s["runs"] == 2
+        assert "run (" in s["text"] and "-> cont (" in s["text"]
+    # a checkpoint without logs or command: one run of unknown budget
+    lone = tmp_path / "lone.pt"
+    BiraeEstimator(tiny()).save(lone)
+    assert budget_summary(training_chain(lone))["steps"] is None and training_chain(lone)[0]["run"] is None
+
+
 def test_online_step_equals_windowed_and_declares_latency(trained) -> None:
     est, _, store = trained
     est.set_window(6, 3)

@@ -14,6 +14,7 @@ turns them into a :class:`~wearpose.recording.Recording` and the estimator runs 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import torch
@@ -210,3 +211,105 @@ def uncertainty_summary(res: dict[str, Any]) -> dict[str, Any]:
                              joint_sigma=res["_joint_sigma"])
     rep["reliability"] = reliability_curve(res["_residual"], res["_sigma"])
     return rep
+
+
+def _epoch_rows(log: Path) -> dict[int, dict[str, Any]]:
+    """Last ``"epoch"`` record per epoch of a training ``log.jsonl`` (a resumed epoch logs again)."""
+    import json
+
+    rows: dict[int, dict[str, Any]] = {}
+    if log.is_file():
+        for line in log.read_text().splitlines():
+            try:
+                r = json.loads(line)
+            except ValueError:  # a line torn by a killed run
+                continue
+            if r.get("type") == "epoch":
+                rows[int(r["epoch"])] = r
+    return rows
+
+
+def _run_dir(path: Path, ckpt: Any) -> Path | None:
+    """The training run directory of a checkpoint: its own folder when it holds ``clean/`` or
+    ``aug/`` (``<run>/best.pt``, ``<run>/calibrated.pt``), the phase's run when the checkpoint sits
+    in ``<run>/<phase>/``, else the ``--out`` of its training command (shipped weights)."""
+    import shlex
+
+    for d in (path.parent, path.parent.parent):
+        if (d / "clean").is_dir() or (d / "aug").is_dir():
+            return d
+    try:
+        argv = shlex.split(ckpt.train_command or "")
+    except ValueError:
+        argv = []
+    for i, a in enumerate(argv):
+        out = argv[i + 1] if a == "--out" and i + 1 < len(argv) else a[6:] if a.startswith("--out=") else None
+        if out and Path(out).is_dir():
+            return Path(out)
+    return None
+
+
+def training_chain(path: str | Path, max_depth: int = 10) -> list[dict[str, Any]]:
+    """The training runs behind a BiRAE checkpoint, oldest first, with the budget each contributed.
+
+    Follows ``meta["init_from"]`` (``wearpose train birae --init-from``) back to the first run.
+    For every run: its command, the phase the checkpoint came from, and per phase the epochs and
+    optimiser steps up to the *kept* (best) epoch, which is what the next run started from, read
+    from the phase's ``log.jsonl``; ``train_seconds`` is the wall-clock of those epochs (depends on
+    the machine's load). A phase whose log is missing reports ``None`` figures.
+
+    Returns ``[{"run", "checkpoint", "command", "init_from", "val_clips", "phases": {"clean"|"aug": {"epochs",
+    "steps", "train_seconds", "val_mpjae_deg"}}, "steps"}]``; ``steps`` is ``None`` if unknown.
+    """
+    from wearpose.estimators.checkpoint import load_checkpoint
+
+    chain: list[dict[str, Any]] = []
+    p: Path | None = Path(path)
+    seen: set[str] = set()
+    while p is not None and len(chain) < max_depth and str(p.resolve()) not in seen:
+        seen.add(str(p.resolve()))
+        ck = load_checkpoint(p)
+        run = _run_dir(p, ck)
+        phase = ck.meta.get("phase", "aug")
+        phases: dict[str, Any] = {}
+        # an augmented-phase model started from the same run's best clean checkpoint
+        for ph in (("clean", "aug") if phase == "aug" else ("clean",)):
+            kept = ck.meta.get("epoch") if ph == phase else None
+            if kept is None and run is not None and (run / ph / "best.pt").is_file():
+                kept = load_checkpoint(run / ph / "best.pt").meta.get("epoch")
+            rows = _epoch_rows(run / ph / "log.jsonl") if run is not None else {}
+            if kept is None:
+                if ph != phase and run is not None and (run / ph).is_dir() and not rows:
+                    phases[ph] = {"epochs": 0, "steps": 0, "train_seconds": 0.0, "val_mpjae_deg": None}
+                continue
+            kept = int(kept)
+            ok = kept in rows
+            phases[ph] = {"epochs": kept, "steps": int(rows[kept]["steps"]) if ok else None,
+                          "train_seconds": sum(float(r.get("train_seconds", 0.0)) for e, r in rows.items() if e <= kept) if ok else None,
+                          "val_mpjae_deg": rows[kept].get("val_mpjae_deg") if ok else None}
+        steps = [v["steps"] for v in phases.values()]
+        init = ck.meta.get("init_from")
+        chain.append({"run": str(run) if run is not None else None, "checkpoint": str(p), "command": ck.train_command,
+                      "init_from": init, "val_clips": ck.meta.get("val_clips"), "phases": phases,
+                      "steps": sum(steps) if steps and None not in steps else None})
+        p = Path(init) if init and Path(init).is_file() else None
+    return chain[::-1]
+
+
+def budget_summary(chain: list[dict[str, Any]]) -> dict[str, Any]:
+    """Totals of a :func:`training_chain`: ``{"epochs_clean", "epochs_aug", "steps", "train_seconds",
+    "runs", "text"}`` (``text``: one line, e.g. ``"birae6_cpu (clean 1 + aug 3 ep, 452 steps) ->
+    birae6_v2 (aug 13 ep, 1469 steps)"``); unknown parts make the totals ``None``."""
+    def total(key: str, ph: str | None = None) -> Any:
+        if any(not c["phases"] for c in chain):  # a run without logs: its budget is unknown
+            return None
+        vals = [v[key] for c in chain for k, v in c["phases"].items() if ph is None or k == ph]
+        return None if None in vals else (sum(vals) if vals else 0)
+
+    parts = []
+    for c in chain:
+        name = Path(c["run"]).name if c["run"] else Path(c["checkpoint"]).stem
+        eps = " + ".join(f"{k} {v['epochs']}" for k, v in c["phases"].items() if v["epochs"])
+        parts.append(f"{name} ({eps or 'no'} ep, {c['steps'] if c['steps'] is not None else '?'} steps)")
+    return {"epochs_clean": total("epochs", "clean"), "epochs_aug": total("epochs", "aug"), "steps": total("steps"),
+            "train_seconds": total("train_seconds"), "runs": len(chain), "text": " -> ".join(parts)}
