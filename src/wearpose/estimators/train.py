@@ -16,6 +16,11 @@ by the slice's share so the gradient DDP averages equals the single-process grad
 global batch. Rank 0 validates, logs and saves checkpoints. The global batch is therefore the
 same for any number of processes: adding processes divides the work per step, not the batch.
 Batch norm statistics are per rank (one slice), the one known difference to a 1-process run.
+
+Run setup shared by the methods' ``train_*`` functions: :func:`train_estimator` (build the
+train/val splits, resume bookkeeping, device, :class:`TrainSettings` from the method config, then
+:func:`train`), :func:`resume_provenance`, :func:`loop_settings`, and :class:`WindowTask`, the
+window batching / epoch seeding / checkpointing common to the window-based tasks.
 """
 
 from __future__ import annotations
@@ -26,12 +31,12 @@ import os
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Iterable, Protocol
+from typing import Any, Callable, Iterable, Protocol
 
 import torch
 from torch import nn
 
-from wearpose.estimators.checkpoint import load_checkpoint
+from wearpose.estimators.checkpoint import load_checkpoint, save_checkpoint
 
 
 class TrainTask(Protocol):
@@ -293,3 +298,125 @@ def train(task: TrainTask, s: TrainSettings, console: Any = None) -> dict[str, A
         if own_group:
             dist.destroy_process_group()
     return {"best": best, "history": history, "out_dir": str(out), "steps": gstep}
+
+
+# --------------------------------------------------------------------------- run setup of the estimators
+
+
+class WindowTask:
+    """The part of a :class:`TrainTask` common to methods trained on fixed-length windows of
+    their training data: ``__init__(est, train_data, val_data)``, :meth:`num_batches`,
+    :meth:`batches` (the order of an epoch is seeded by ``config.seed`` and the epoch, so a
+    resumed run skips the batches it did) and :meth:`save` (``est.checkpoint(meta, train_state)``).
+
+    Subclasses give :meth:`window` and the ``loss`` / ``validate`` / ``val_metric`` of
+    :class:`TrainTask`. The data must have ``windows(length, stride)`` and
+    ``iter_batches(length, stride, batch_size, generator, skip=...)`` (as
+    :class:`~wearpose.estimators.empose.data.EmposeData`).
+    """
+
+    def __init__(self, est: Any, train_data: Any, val_data: Any | None) -> None:
+        self.est, self.cfg = est, est.config
+        self.model = est.model
+        self.train_data, self.val_data = train_data, val_data
+        self._nw = len(train_data.windows(*self.window()))
+
+    def window(self) -> tuple[int, int]:
+        """``(length, stride)`` of the training windows, frames."""
+        raise NotImplementedError
+
+    def num_batches(self) -> int:
+        from wearpose.estimators.empose.data import num_batches
+
+        return num_batches(self._nw, self.cfg.batch_size)
+
+    def batches(self, epoch: int, skip: int) -> Iterable[Any]:
+        g = torch.Generator().manual_seed(self.cfg.seed * 100_003 + epoch)
+        return self.train_data.iter_batches(*self.window(), self.cfg.batch_size, g, skip=skip)
+
+    def save(self, path: Path, meta: dict[str, Any], train_state: dict[str, Any] | None) -> None:
+        save_checkpoint(self.est.checkpoint(meta, train_state), path)
+
+
+def loop_settings(cfg: Any, out_dir: str | Path, epochs: int, *, lr: float | None = None, **loop: Any) -> TrainSettings:
+    """:class:`TrainSettings` from a method config's optimisation fields (``lr``, ``lr_schedule``,
+    ``lr_min_factor``, ``grad_clip``, and ``lr_decay`` / ``lr_decay_steps`` where the config has
+    them) and the run's ``loop`` options (``resume``, ``threads``, ``device``,
+    ``checkpoint_every``, ``max_steps``, ``quiet``). ``lr`` overrides ``cfg.lr``."""
+    decay = {k: getattr(cfg, k) for k in ("lr_decay", "lr_decay_steps") if hasattr(cfg, k)}
+    return TrainSettings(out_dir=Path(out_dir), epochs=epochs, lr=lr or cfg.lr, lr_schedule=cfg.lr_schedule,
+                         lr_min_factor=cfg.lr_min_factor, grad_clip=cfg.grad_clip, **decay, **loop)
+
+
+def resume_provenance(est: Any, last: Path, *, resume: bool, train_command: str, console: Any) -> None:
+    """Record who trained ``est``, before :func:`train` continues or starts the run.
+
+    Resuming from an existing ``last``: the checkpoint must fit ``est`` (method, kit, body asset:
+    :class:`~wearpose.estimators.checkpoint.CheckpointMismatchError` otherwise), a config other
+    than the checkpoint's is warned about, ``est.train_command`` stays the command that started
+    the run and ``train_command`` goes to ``est.meta["resumed_with"]``. Otherwise a non-empty
+    ``train_command`` becomes ``est.train_command``.
+    """
+    if resume and last.is_file():
+        prev = load_checkpoint(last)
+        prev.check(method=est.name, kit=est.kit_name, body_asset=est.body_asset_id, path=last)
+        if prev.config != est.config.to_dict():
+            console.print(f"[yellow]warning[/]: resuming {last} with a different config than it was trained with")
+        est.train_command = prev.train_command  # the command that started the run
+        est.meta["resumed_with"] = train_command
+    elif train_command:
+        est.train_command = train_command
+
+
+def train_estimator(est: Any, out_dir: str | Path, build: Callable[..., Any], make_task: Callable[[Any, Any], TrainTask],
+                    *, label: str, epochs: int | None = None, resume: bool = False, threads: int | None = None,
+                    device: str = "auto", limit_train: int | None = None, limit_val: int | None = None,
+                    max_steps: int | None = None, checkpoint_every: int = 100, train_command: str = "",
+                    quiet: bool = False, store: Any = None, cache_root: str | Path | None = None, console: Any = None,
+                    progress_every: int = 200, val_frames: bool = True) -> dict[str, Any]:
+    """Build the data of a method, set the run up and train ``est`` in place with :func:`train`.
+
+    In order: torch CPU ``threads``; the train and val splits (``build``, progress printed every
+    ``progress_every`` clips); ``est.data_fingerprint`` = the training data's;
+    :func:`resume_provenance` of ``<out_dir>/last.pt``; ``est.meta`` gets the clip and frame
+    counts; the task; ``est.to(device)``; :func:`train` with :func:`loop_settings`.
+
+    Args:
+        est: the estimator: ``config`` (with ``kit``, ``rate``, ``epochs``, ``val_clips`` and the
+            fields of :func:`loop_settings`), ``name``, ``kit_name``, ``body_asset_id``,
+            ``data_fingerprint``, ``train_command``, ``meta`` and ``to(device)``.
+        out_dir: run directory (``last.pt``, ``best.pt``, ``log.jsonl``).
+        build: ``build(split, store=, limit=, cache_root=, progress=)`` -> data with
+            ``clip_ids``, ``num_frames`` and ``fingerprint``.
+        make_task: ``(train_data, val_data)`` -> the :class:`TrainTask`.
+        label: the method's name in the log (``"PIP"``).
+        epochs: override ``config.epochs``.
+        limit_train / limit_val: N clips of the split (default all / ``config.val_clips``, 0 = all).
+        max_steps: stop after N optimiser steps (tests).
+        val_frames: also print the validation frame count.
+        The other options are :class:`TrainSettings`'.
+
+    Returns:
+        :func:`train`'s result.
+    """
+    from rich.console import Console
+
+    console = console or Console(quiet=quiet)
+    if threads:
+        torch.set_num_threads(int(threads))
+    cfg = est.config
+    prog = (lambda d, t: console.print(f"  simulated {d}/{t} clips") if (d % progress_every == 0 or d == t) else None)  # noqa: E731
+    console.print(f"{label} data: simulating/loading train split ({cfg.kit}, {cfg.rate:g} Hz)")
+    tr = build("train", store=store, limit=limit_train, cache_root=cache_root, progress=prog)
+    va = build("val", store=store, limit=limit_val if limit_val is not None else (cfg.val_clips or None),
+               cache_root=cache_root, progress=prog)
+    val = f"{len(va.clip_ids)} clips, {va.num_frames} frames" if val_frames else f"{len(va.clip_ids)} clips"
+    console.print(f"train: {len(tr.clip_ids)} clips, {tr.num_frames} frames; val: {val}; fingerprint {tr.fingerprint[:16]}")
+    est.data_fingerprint = tr.fingerprint
+    resume_provenance(est, Path(out_dir) / "last.pt", resume=resume, train_command=train_command, console=console)
+    est.meta.update({"train_clips": len(tr.clip_ids), "train_frames": tr.num_frames, "val_clips": len(va.clip_ids)})
+    task = make_task(tr, va)
+    est.to(resolve_device(device))  # network and body together: some losses run the body model
+    s = loop_settings(cfg, out_dir, epochs or cfg.epochs, resume=resume, threads=threads, device=device,
+                      checkpoint_every=checkpoint_every, max_steps=max_steps, quiet=quiet)
+    return train(task, s, console)
