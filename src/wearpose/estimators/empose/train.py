@@ -8,30 +8,20 @@ from typing import Any
 
 import torch
 
-from wearpose.estimators.checkpoint import save_checkpoint
-from wearpose.estimators.empose.data import EmposeData, build_split, clip_seed, num_batches, recording_from_clip, simulate_clip
+from wearpose.estimators.empose.data import EmposeData, build_split, clip_seed, recording_from_clip, simulate_clip
 from wearpose.estimators.empose.estimator import EmposeEstimator
 from wearpose.estimators.empose.model import lgd_loss, sensor_features
-from wearpose.estimators.train import TrainSettings, train
+from wearpose.estimators.train import WindowTask, train_estimator
 
 
-class EmposeTask:
-    """:class:`~wearpose.estimators.train.TrainTask` for the LGD-RNN."""
+class EmposeTask(WindowTask):
+    """:class:`~wearpose.estimators.train.TrainTask` for the LGD-RNN (windows of ``seq_len``
+    frames every ``window_stride``)."""
 
     val_metric = "val_mpjpe_mm"
 
-    def __init__(self, est: EmposeEstimator, train_data: EmposeData, val_data: EmposeData | None) -> None:
-        self.est, self.cfg = est, est.config
-        self.model = est.model
-        self.train_data, self.val_data = train_data, val_data
-        self._nw = len(train_data.windows(self.cfg.seq_len, self.cfg.window_stride))
-
-    def num_batches(self) -> int:
-        return num_batches(self._nw, self.cfg.batch_size)
-
-    def batches(self, epoch: int, skip: int):
-        g = torch.Generator().manual_seed(self.cfg.seed * 100_003 + epoch)
-        return self.train_data.iter_batches(self.cfg.seq_len, self.cfg.window_stride, self.cfg.batch_size, g, skip=skip)
+    def window(self) -> tuple[int, int]:
+        return self.cfg.seq_len, self.cfg.window_stride
 
     def _forward(self, b: dict[str, torch.Tensor], device: torch.device, train: bool):
         b = {k: v.to(device) for k, v in b.items()}
@@ -65,62 +55,29 @@ class EmposeTask:
         return {"val_loss": tot / max(n, 1), "val_mpjpe_mm": float(cat(pe).mean()) * 1000,
                 "val_mpjpe_rnn_mm": float(cat(pe0).mean()) * 1000, "val_mpjae_deg": math.degrees(float(cat(ae).mean()))}
 
-    def save(self, path: Path, meta: dict[str, Any], train_state: dict[str, Any] | None) -> None:
-        save_checkpoint(self.est.checkpoint(meta, train_state), path)
 
-
-def train_empose(est: EmposeEstimator, out_dir: str | Path, *, epochs: int | None = None, resume: bool = False,
-                 threads: int | None = None, device: str = "auto", limit_train: int | None = None,
-                 limit_val: int | None = None, max_steps: int | None = None, checkpoint_every: int = 100,
-                 train_command: str = "", quiet: bool = False, store: Any = None,
-                 cache_root: str | Path | None = None, console: Any = None) -> dict[str, Any]:
+def train_empose(est: EmposeEstimator, out_dir: str | Path, **run: Any) -> dict[str, Any]:
     """Simulate/load the training data and train ``est`` in place.
 
     Args:
-        est: the estimator (its config drives data, model and optimisation).
+        est: the estimator (its config drives data, model and optimisation; an estimator with
+            ``make_task`` (the Table 2 baselines, the two-stage model) brings its own task).
         out_dir: run directory (``last.pt``, ``best.pt``, ``log.jsonl``).
-        epochs: override ``config.epochs``.
-        limit_train / limit_val: first N clips of the split (default all / ``config.val_clips``).
-        max_steps: stop after N optimiser steps (tests).
+        run: the run options of :func:`~wearpose.estimators.train.train_estimator`: ``epochs``
+            (override ``config.epochs``), ``limit_train`` / ``limit_val`` (first N clips of the
+            split; default all / ``config.val_clips``), ``resume``, ``threads``, ``device``,
+            ``max_steps``, ``checkpoint_every``, ``train_command``, ``quiet``, ``store``,
+            ``cache_root``, ``console``.
     """
-    from rich.console import Console
-
-    console = console or Console(quiet=quiet)
-    if threads:
-        torch.set_num_threads(int(threads))
     cfg = est.config
-    prog = (lambda d, t: console.print(f"  simulated {d}/{t} clips") if (d % 200 == 0 or d == t) else None)  # noqa: E731
-    console.print(f"EM-POSE data: simulating/loading train split ({cfg.kit}, {cfg.rate:g} Hz)")
-    tr = build_split("train", cfg, est.body, store=store, limit=limit_train, cache_root=cache_root, progress=prog)
-    va = build_split("val", cfg, est.body, store=store, limit=limit_val if limit_val is not None else (cfg.val_clips or None),
-                     cache_root=cache_root, progress=prog)
-    console.print(f"train: {len(tr.clip_ids)} clips, {tr.num_frames} frames; val: {len(va.clip_ids)} clips, "
-                  f"{va.num_frames} frames; fingerprint {tr.fingerprint[:16]}")
-    est.data_fingerprint = tr.fingerprint
-    last = Path(out_dir) / "last.pt"
-    if resume and last.is_file():
-        from wearpose.estimators.checkpoint import load_checkpoint
 
-        prev = load_checkpoint(last)
-        prev.check(method=est.name, kit=est.kit_name, body_asset=est.body_asset_id, path=last)
-        if prev.config != cfg.to_dict():
-            console.print(f"[yellow]warning[/]: resuming {last} with a different config than it was trained with")
-        est.train_command = prev.train_command  # the command that started the run
-        est.meta["resumed_with"] = train_command
-    elif train_command:
-        est.train_command = train_command
-    est.meta.update({"train_clips": len(tr.clip_ids), "train_frames": tr.num_frames, "val_clips": len(va.clip_ids)})
-    from wearpose.estimators.train import resolve_device
+    def make_task(tr: EmposeData, va: EmposeData) -> Any:
+        if getattr(cfg, "init", "rnn") == "mean":
+            est.model.set_mean_start(tr.pose6)  # "no RNN" ablation (a resumed run loads its own weights over it)
+        return est.make_task(tr, va) if hasattr(est, "make_task") else EmposeTask(est, tr, va)
 
-    if getattr(cfg, "init", "rnn") == "mean":
-        est.model.set_mean_start(tr.pose6)  # "no RNN" ablation (a resumed run loads its own weights over it)
-    est.to(resolve_device(device))  # network and body together: L_r runs the body inside the model
-    # Estimators with another network (the Table 2 baselines) bring their own task.
-    task = est.make_task(tr, va) if hasattr(est, "make_task") else EmposeTask(est, tr, va)
-    s = TrainSettings(out_dir=Path(out_dir), epochs=epochs or cfg.epochs, lr=cfg.lr, lr_schedule=cfg.lr_schedule,
-                      lr_min_factor=cfg.lr_min_factor, grad_clip=cfg.grad_clip, resume=resume, threads=threads,
-                      device=device, checkpoint_every=checkpoint_every, max_steps=max_steps, quiet=quiet)
-    return train(task, s, console)
+    return train_estimator(est, out_dir, lambda split, **kw: build_split(split, cfg, est.body, **kw), make_task,
+                           label="EM-POSE", **run)
 
 
 def evaluate_empose(checkpoint: str | Path | EmposeEstimator, split: str = "test", limit: int | None = None, *,
