@@ -10,9 +10,9 @@ from typing import Any
 import torch
 
 from wearpose.estimators.empose.train import EmposeTask
-from wearpose.estimators.pip.data import PipData, build_split
+from wearpose.estimators.pip.data import build_split
 from wearpose.estimators.pip.model import pip_loss, run_windows
-from wearpose.estimators.train import TrainSettings, resolve_device, train
+from wearpose.estimators.train import train_estimator
 
 
 class PipTask(EmposeTask):
@@ -56,53 +56,19 @@ class PipTask(EmposeTask):
                 "val_root_vel_cm_s": float(torch.cat(ve).mean()) * 100}
 
 
-
-def train_pip(est: Any, out_dir: str | Path, *, epochs: int | None = None, resume: bool = False,
-              threads: int | None = None, device: str = "auto", limit_train: int | None = None,
-              limit_val: int | None = None, max_steps: int | None = None, checkpoint_every: int = 100,
-              train_command: str = "", quiet: bool = False, store: Any = None,
-              cache_root: str | Path | None = None, console: Any = None) -> dict[str, Any]:
+def train_pip(est: Any, out_dir: str | Path, *, limit_train: int | None = None, **run: Any) -> dict[str, Any]:
     """Simulate/load the training data and train ``est`` (a :class:`PipEstimator`) in place.
 
     Args:
         est: the estimator (its config drives data, model and optimisation).
         out_dir: run directory (``last.pt``, ``best.pt``, ``log.jsonl``).
-        epochs: override ``config.epochs``.
-        limit_train / limit_val: N clips of the split spread over it (default
-            ``config.max_train_clips`` (0 = all) / ``config.val_clips``).
-        max_steps: stop after N optimiser steps (tests).
+        limit_train: N clips of the train split spread over it (default ``config.max_train_clips``, 0 = all).
+        run: the run options of :func:`~wearpose.estimators.train.train_estimator`: ``epochs``
+            (override ``config.epochs``), ``limit_val`` (N validation clips spread over the split;
+            default ``config.val_clips``), ``resume``, ``threads``, ``device``, ``max_steps``,
+            ``checkpoint_every``, ``train_command``, ``quiet``, ``store``, ``cache_root``, ``console``.
     """
-    from rich.console import Console
-
-    console = console or Console(quiet=quiet)
-    if threads:
-        torch.set_num_threads(int(threads))
     cfg = est.config
-    prog = (lambda d, t: console.print(f"  simulated {d}/{t} clips") if (d % 100 == 0 or d == t) else None)  # noqa: E731
-    console.print(f"PIP data: simulating/loading train split ({cfg.kit}, {cfg.rate:g} Hz)")
-    tr = build_split("train", cfg, est.body, store=store, limit=limit_train or cfg.max_train_clips or None,
-                     cache_root=cache_root, progress=prog)
-    va = build_split("val", cfg, est.body, store=store, limit=limit_val if limit_val is not None else (cfg.val_clips or None),
-                     cache_root=cache_root, progress=prog)
-    console.print(f"train: {len(tr.clip_ids)} clips, {tr.num_frames} frames; val: {len(va.clip_ids)} clips, "
-                  f"{va.num_frames} frames; fingerprint {tr.fingerprint[:16]}")
-    est.data_fingerprint = tr.fingerprint
-    last = Path(out_dir) / "last.pt"
-    if resume and last.is_file():
-        from wearpose.estimators.checkpoint import load_checkpoint
-
-        prev = load_checkpoint(last)
-        prev.check(method=est.name, kit=est.kit_name, body_asset=est.body_asset_id, path=last)
-        if prev.config != cfg.to_dict():
-            console.print(f"[yellow]warning[/]: resuming {last} with a different config than it was trained with")
-        est.train_command = prev.train_command
-        est.meta["resumed_with"] = train_command
-    elif train_command:
-        est.train_command = train_command
-    est.meta.update({"train_clips": len(tr.clip_ids), "train_frames": tr.num_frames, "val_clips": len(va.clip_ids)})
-    est.to(resolve_device(device))
-    task = PipTask(est, tr, va)
-    s = TrainSettings(out_dir=Path(out_dir), epochs=epochs or cfg.epochs, lr=cfg.lr, lr_schedule=cfg.lr_schedule,
-                      lr_min_factor=cfg.lr_min_factor, grad_clip=cfg.grad_clip, resume=resume, threads=threads,
-                      device=device, checkpoint_every=checkpoint_every, max_steps=max_steps, quiet=quiet)
-    return train(task, s, console)
+    return train_estimator(est, out_dir, lambda split, **kw: build_split(split, cfg, est.body, **kw),
+                           lambda tr, va: PipTask(est, tr, va), label="PIP",
+                           limit_train=limit_train or cfg.max_train_clips or None, progress_every=100, **run)
