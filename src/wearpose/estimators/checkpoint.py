@@ -110,3 +110,55 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     return Checkpoint(method=d["method"], config=d["config"], kit=d["kit"], sensors=list(d["sensors"]),
                       body_asset=d["body_asset"], weights=d["weights"], data_fingerprint=d.get("data_fingerprint", ""),
                       train_command=d.get("train_command", ""), meta=d.get("meta") or {}, train_state=d.get("train_state"))
+
+
+class NetworkCheckpointing:
+    """Mixin of an estimator whose trained state is one network ``self.model``: :meth:`to`,
+    :meth:`checkpoint`, :meth:`save`, and for ``load``: :meth:`check_checkpoint` and :meth:`restore`.
+
+    Uses the estimator's ``name``, ``config`` (``to_dict()``), ``kit_name``, ``sensor_names``,
+    ``body_asset_id``, ``model``, ``body`` (moved by :meth:`to` with the network),
+    ``data_fingerprint``, ``train_command`` and ``meta``.
+    """
+
+    def to(self, device: str | torch.device) -> Any:
+        """Move the network and the body model to ``device``; returns the estimator."""
+        self.device = torch.device(device)
+        self.model.to(self.device)
+        self.body.to(self.device)
+        return self
+
+    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
+        """The estimator as a :class:`Checkpoint` (weights on the CPU); ``meta`` is added to ``self.meta``."""
+        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name,
+                          sensors=list(self.sensor_names), body_asset=self.body_asset_id,
+                          weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
+                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
+                          meta={**self.meta, **(meta or {})}, train_state=train_state)
+
+    def save(self, path: str | Path) -> Path:
+        return save_checkpoint(self.checkpoint(), path)
+
+    @classmethod
+    def check_checkpoint(cls, ckpt: Checkpoint, *, kit: str | None, body: Any, path: str | Path) -> Any:
+        """Check that ``ckpt`` is this method's, for ``kit`` (if given) and ``body``'s asset.
+
+        Returns:
+            ``body``, or when None the embedded :class:`~wearpose.body.BodyModel` (checked too).
+
+        Raises:
+            CheckpointMismatchError: naming the checkpoint's and the requested method / kit / asset.
+        """
+        ckpt.check(method=cls.name, kit=kit, body_asset=getattr(body, "asset_id", None), path=path)
+        if body is None:
+            from wearpose.body import BodyModel
+
+            body = BodyModel()
+            ckpt.check(body_asset=body.asset_id, path=path)
+        return body
+
+    def restore(self, ckpt: Checkpoint) -> Any:
+        """Load ``ckpt``'s weights and provenance (data fingerprint, train command, meta); returns the estimator."""
+        self.model.load_state_dict(ckpt.weights)
+        self.data_fingerprint, self.train_command, self.meta = ckpt.data_fingerprint, ckpt.train_command, dict(ckpt.meta)
+        return self
