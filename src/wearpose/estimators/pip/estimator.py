@@ -43,7 +43,7 @@ import torch
 
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
-from wearpose.estimators.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from wearpose.estimators.checkpoint import NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.data import hold_invalid
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.data import LEAF_JOINTS, imu_features
@@ -62,7 +62,7 @@ def physics_available() -> bool:
 
 
 @register_estimator("pip")
-class PipEstimator(Estimator):
+class PipEstimator(NetworkCheckpointing, Estimator):
     """PIP (see module doc).
 
     Args:
@@ -114,39 +114,16 @@ class PipEstimator(Estimator):
         self._parents_np = np.array([max(p, 0) for p in PARENTS])
         self.reset()
 
-    def to(self, device: str | torch.device) -> PipEstimator:
-        self.device = torch.device(device)
-        self.model.to(self.device)
-        self.body.to(self.device)
-        return self
-
     # ------------------------------------------------------------------ checkpoints
-    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
-        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name,
-                          sensors=list(self.sensor_names), body_asset=self.body_asset_id,
-                          weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
-                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
-                          meta={**self.meta, **(meta or {})}, train_state=train_state)
-
-    def save(self, path: str | Path) -> Path:
-        return save_checkpoint(self.checkpoint(), path)
-
+    # to / checkpoint / save: NetworkCheckpointing
     @classmethod
     def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
              map_location: str | torch.device = "cpu", **options: Any) -> PipEstimator:
         """Read a checkpoint; ``options`` are the constructor's (``physics``, ``dual_pd``,
         ``learned_init``, ``betas``, ``calibration_window``)."""
         ck = load_checkpoint(path, map_location)
-        ck.check(method=cls.name, kit=kit, body_asset=getattr(body, "asset_id", None), path=path)
-        if body is None:
-            from wearpose.body import BodyModel
-
-            body = BodyModel()
-            ck.check(body_asset=body.asset_id, path=path)
-        est = cls(PipConfig.from_dict(ck.config), body=body, device=map_location, **options)
-        est.model.load_state_dict(ck.weights)
-        est.data_fingerprint, est.train_command, est.meta = ck.data_fingerprint, ck.train_command, dict(ck.meta)
-        return est
+        body = cls.check_checkpoint(ck, kit=kit, body=body, path=path)
+        return cls(PipConfig.from_dict(ck.config), body=body, device=map_location, **options).restore(ck)
 
     def fit(self, *args: Any, **kwargs: Any) -> Any:
         """Train (see :func:`wearpose.estimators.pip.train.train_pip`)."""
