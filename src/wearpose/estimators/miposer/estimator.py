@@ -38,7 +38,7 @@ import torch
 
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
-from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, load_checkpoint, save_checkpoint
+from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.miposer.config import MiposerConfig
 from wearpose.estimators.miposer.data import calibrated_inputs, kit_streams, raw_inputs, uncalibrated
 from wearpose.estimators.miposer.model import AvatarPoserNet, decode_pose, head_anchored_translation, window_features
@@ -120,7 +120,7 @@ def frames(recording: Any, kit: str = "miposer", rate: float = 60.0) -> Iterator
 
 
 @register_estimator("miposer")
-class MiposerEstimator(Estimator):
+class MiposerEstimator(NetworkCheckpointing, Estimator):
     """MI-Poser (module doc).
 
     Args:
@@ -160,39 +160,17 @@ class MiposerEstimator(Estimator):
         self._calibration: Any = None
         self.reset()
 
-    def to(self, device: str | torch.device) -> MiposerEstimator:
-        self.device = torch.device(device)
-        self.model.to(self.device)
-        self.body.to(self.device)
-        return self
-
     # ------------------------------------------------------------------ checkpoints
-    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
-        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name,
-                          sensors=list(self.sensor_names), body_asset=self.body_asset_id,
-                          weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
-                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
-                          meta={**self.meta, **(meta or {})}, train_state=train_state)
-
-    def save(self, path: str | Path) -> Path:
-        return save_checkpoint(self.checkpoint(), path)
-
+    # to / checkpoint / save: NetworkCheckpointing
     @classmethod
     def from_checkpoint(cls, ckpt: Checkpoint, *, kit: str | None = None, body: Any = None,
                         device: str | torch.device = "cpu", path: str | Path = "<checkpoint>", **kw: Any) -> MiposerEstimator:
-        ckpt.check(method=cls.name, kit=kit, body_asset=getattr(body, "asset_id", None), path=path)
-        if body is None:
-            from wearpose.body import BodyModel
-
-            body = BodyModel()
-            ckpt.check(body_asset=body.asset_id, path=path)
+        body = cls.check_checkpoint(ckpt, kit=kit, body=body, path=path)
         est = cls(MiposerConfig.from_dict(ckpt.config), body=body, device=device, **kw)
         if list(est.sensor_names) != list(ckpt.sensors):
             raise CheckpointMismatchError(f"{path}: checkpoint expects sensors {ckpt.sensors}, kit {est.kit_name!r} "
                                           f"has {list(est.sensor_names)}")
-        est.model.load_state_dict(ckpt.weights)
-        est.data_fingerprint, est.train_command, est.meta = ckpt.data_fingerprint, ckpt.train_command, dict(ckpt.meta)
-        return est
+        return est.restore(ckpt)
 
     @classmethod
     def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
