@@ -52,6 +52,8 @@ class EmposeConfig(ConfigIO):
     ``"resnet"`` / ``"birnn"`` (:mod:`wearpose.estimators.empose.baselines`; ``width`` /
     ``mlp_layers`` are the ResNet's width / residual blocks, ``hidden`` / ``rnn_layers`` the
     BiRNN's).
+    Two-stage model only: ``ik`` its stage 2, ``"lgd"`` (the paper's LGD IK, default) or
+    ``"closed"`` (closed-form pose from the mapped orientations, :mod:`.twostage`).
     """
 
     sensors: int = 12
@@ -85,6 +87,7 @@ class EmposeConfig(ConfigIO):
     model: str = "lgd"
     inputs: str = "both"
     init: str = "rnn"
+    ik: str = "lgd"
 
     def __post_init__(self) -> None:
         if self.sensors not in (6, 12):
@@ -102,6 +105,8 @@ class EmposeConfig(ConfigIO):
             raise ConfigError(f"EmposeConfig.inputs: expected 'both', 'position' or 'orientation', got {self.inputs!r}")
         if self.init not in ("rnn", "mean"):
             raise ConfigError(f"EmposeConfig.init: expected 'rnn' or 'mean', got {self.init!r}")
+        if self.ik not in ("lgd", "closed"):
+            raise ConfigError(f"EmposeConfig.ik: expected 'lgd' or 'closed', got {self.ik!r}")
         if self.model not in ("lgd", "resnet", "birnn", "twostage"):
             raise ConfigError(f"EmposeConfig.model: expected 'lgd', 'resnet', 'birnn' or 'twostage', got {self.model!r}")
 
