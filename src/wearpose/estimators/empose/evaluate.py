@@ -304,9 +304,30 @@ def drop_sensors(recording: Any, sensor_names: list[str], g: torch.Generator,
     return dataclasses.replace(recording, sensors=new), removed
 
 
+def zero_dropped(recording: Any, sensor_names: list[str]) -> Any:
+    """A copy of ``recording`` where every invalid sample of ``sensor_names`` is a *valid* zero
+    measurement (position 0, i.e. at the source, and identity orientation; a Recording only holds
+    proper rotations): what some EM SDKs deliver for a lost sensor, so an estimator cannot tell it
+    is missing (EM-POSE supp. Fig. 12)."""
+    import dataclasses
+
+    import numpy as np
+
+    new = []
+    for s in recording.sensors:
+        if s.name in sensor_names and not bool(np.all(s.valid)):
+            bad = ~s.valid
+            pos, ori = s.position.copy(), s.orientation.copy()
+            pos[bad] = 0.0
+            ori[bad] = np.eye(3, dtype=ori.dtype) if ori.shape[-2:] == (3, 3) else np.array([1, 0, 0, 0], ori.dtype)
+            s = dataclasses.replace(s, valid=np.ones_like(s.valid), position=pos, orientation=ori)
+        new.append(s)
+    return dataclasses.replace(recording, sensors=new)
+
+
 def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit: int | None = None, *,
                      noise: str = "default", seed: int = 0, store: Any = None, progress: Any = None,
-                     span: tuple[int, int] = DROP_SPAN) -> dict[str, Any]:
+                     span: tuple[int, int] = DROP_SPAN, zeros: Sequence[str] = ()) -> dict[str, Any]:
     """EM-POSE Table 10 on our data: models on recordings with dropped sensors.
 
     Each clip is simulated as in :func:`evaluate_models` (same subjects and noise), then
@@ -315,6 +336,8 @@ def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit:
     (a model's own ``valid`` flag is ignored: the LGD-RNN holds a dropped sensor at its last value,
     the two-stage model fills it in). Frame sets: ``all``; ``avail`` (every sensor valid);
     ``miss`` (at least one sensor missing), and ``miss1`` / ``miss2`` (exactly one / two missing).
+    Models named in ``zeros`` get every missing sample as a valid all-zero measurement instead
+    (:func:`zero_dropped`; the frame sets stay those of the dropped recording).
 
     Returns:
         ``{"split", "clips", "frame_counts": {set: n}, "models": {name: {set: {"mpjpe_mm", ...}}},
@@ -334,6 +357,9 @@ def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit:
         if (e.kit_name, e.fps, e.body_asset_id) != (first.kit_name, first.fps, first.body_asset_id):
             raise ConfigError(f"evaluate_dropped: {name!r} is for kit {e.kit_name} at {e.fps} Hz, the first model for "
                               f"kit {first.kit_name} at {first.fps} Hz; one table needs one setting")
+    unknown = sorted(set(zeros) - set(ests))
+    if unknown:
+        raise ConfigError(f"evaluate_dropped: zeros names {unknown}, which are not among the models {sorted(ests)}")
     store = store or CorpusStore()
     ids = store.clips(split=split)[: limit or None]
     names = list(first.sensor_names)
@@ -347,9 +373,10 @@ def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit:
         rec, _ = drop_sensors(recording_from_clip(r, first.config), names, g, span)
         grid = rec.on_common_grid(names)
         nmiss.append((~torch.as_tensor(grid.valid)).sum(1))
+        rec0 = zero_dropped(rec, names) if zeros else None
         for name, est in ests.items():
             t0 = time.perf_counter()
-            track = est.estimate(rec)
+            track = est.estimate(rec0 if name in zeros else rec)
             secs[name] += time.perf_counter() - t0
             with torch.no_grad():
                 pj = est.body(track.local_rot, track.betas, None, return_vertices=False).joints
@@ -373,7 +400,8 @@ def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit:
         models[name] = {"sets": rows, "method": est.name, "checkpoint": str(src) if isinstance(src, (str, Path)) else None,
                         "epoch": est.meta.get("epoch"), "val_mpjpe_mm": est.meta.get("val_mpjpe_mm"),
                         "train_command": est.train_command, "config": est.config.to_dict(),
-                        "parameters": sum(p.numel() for p in est.model.parameters()), "seconds": secs[name]}
+                        "parameters": sum(p.numel() for p in est.model.parameters()), "seconds": secs[name],
+                        "dropped_input": "zeros" if name in zeros else "missing"}
     return {"split": split, "clips": len(ids), "noise": noise, "seed": seed, "kit": first.kit_name, "rate_hz": first.fps,
             "body_asset": first.body_asset_id, "joints": "15 major (DIP/EM-POSE)",
             "frame_counts": {k: int(v.sum()) for k, v in sets.items()},
@@ -391,17 +419,22 @@ PAPER_TABLE10_12 = {
 
 
 def table10_markdown(result: Mapping[str, Any], digits: int = 1) -> str:
-    """Markdown in the structure of EM-POSE Table 10: rows (frame set, model), best mean per set in bold."""
+    """Markdown in the structure of EM-POSE Table 10: rows (frame set, model), best mean per set in
+    bold among the models that got the dropped samples as missing (a ``zeros`` row, a secondary
+    scenario, is shown in italics and never bold)."""
     cols = [("mpjpe_mm", "mpjpe_std_mm"), ("pa_mpjpe_mm", "pa_mpjpe_std_mm"), ("mpjae_deg", "mpjae_std_deg")]
     lines = ["| Frames | Model | frames | MPJPE [mm] | PA-MPJPE [mm] | MPJAE [°] |", "| --- | --- | --- | --- | --- | --- |"]
     counts = result["frame_counts"]
     for sname in ("all", "avail", "miss", "miss1", "miss2"):
         rows = {n: m["sets"][sname] for n, m in result["models"].items()}
-        best = {k: min((r[k] for r in rows.values() if not math.isnan(r[k])), default=math.nan) for k, _ in cols}
+        main = [n for n, m in result["models"].items() if m.get("dropped_input", "missing") != "zeros"]
+        best = {k: min((rows[n][k] for n in main if not math.isnan(rows[n][k])), default=math.nan) for k, _ in cols}
         for n, r in rows.items():
             cells = []
             for k, ks in cols:
                 s = f"{r[k]:.{digits}f} ± {r[ks]:.{digits}f}"
-                cells.append(f"**{s}**" if r[k] == best[k] and len(rows) > 1 else s)
+                if n not in main:
+                    s = f"*{s}*"
+                cells.append(f"**{s}**" if n in main and r[k] == best[k] and len(main) > 1 else s)
             lines.append(f"| {sname} | {n} | {counts[sname]} | " + " | ".join(cells) + " |")
     return "\n".join(lines)

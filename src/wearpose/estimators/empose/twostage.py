@@ -21,6 +21,18 @@ Both stages train in one loop on the same batches but independently (no gradient
 stage 2 into stage 1): loss = mapper loss + stage-2 LGD loss
 (:func:`~wearpose.estimators.empose.model.lgd_loss`).
 
+Stage 2 alternative, ``EmposeConfig.ik = "closed"`` (ours, not in the paper): the mapper's 20
+global orientations already fix the pose, so the local rotations follow in closed form
+(:func:`closed_form_pose`: ``R_j = G_parent^T G_j``; feet and hands, not mapped, get identity),
+the shape is a ridge least-squares fit of the betas to the mapped joint positions over the whole
+sequence (:func:`fit_betas`; joints are linear in the betas for fixed rotations), and a short
+L-BFGS polish (:func:`polish_pose`) moves the rotations towards the mapped joint positions. No
+network in stage 2; the mapper is trained with an extra loss on the joints that forward
+kinematics of its orientations gives (:data:`FK_JOINT_WEIGHT`). Why: on val the paper's LGD IK,
+fed the *ground-truth* joints and orientations, still erred 11 mm MPJPE (it was trained on
+inputs perturbed by 15 mm, so it smooths), more than the LGD-RNN's whole error; the closed form
+is exact on exact inputs.
+
 :class:`TwoStageEstimator` (registry ``empose-twostage``) is offline (bidirectional mapper) and
 returns a pose for every frame, including those with missing sensors (``valid`` is all True;
 ``extras["sensors_valid"]`` keeps the input mask).
@@ -34,7 +46,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from wearpose.body.skeleton import NUM_JOINTS
+from wearpose.body.kinematics import forward_kinematics, global_to_local
+from wearpose.body.skeleton import NUM_JOINTS, PARENTS
 from wearpose.errors import ConfigError
 from wearpose.estimators.base import PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.empose.config import EmposeConfig
@@ -52,6 +65,20 @@ ROT_NOISE_RAD = 0.05  #: std per axis of the orientation perturbation of stage-2
 MAP_JOINT_WEIGHT = 20.0  #: weight of the mapper's joint MSE (m^2) against its 6D orientation MSE
 MAX_REMOVED = 3  #: sensors removed per training window: 1..MAX_REMOVED
 P_REMOVE = 0.8  #: fraction of training windows with removed sensors
+#: ``ik="closed"``: weight of the MSE (m^2) of the joints that forward kinematics of the mapped
+#: orientations gives (mean shape of the window), added to the mapper loss; at 100 it is of the
+#: order of the 6D orientation term (the metric is on these joints, the 6D MSE is only a proxy).
+FK_JOINT_WEIGHT = 100.0
+#: ``ik="closed"``: ridge weight of the betas fit (m^2 per frame against |beta|^2, i.e. a N(0, I)
+#: shape prior against a per-frame joint error of ~1 cm per coordinate).
+SHAPE_PRIOR = 1e-4
+#: ``ik="closed"``: L-BFGS iterations of the pose polish (0 = closed form only), and the weight
+#: of the orientation term (squared Frobenius) against the joint term (m^2).
+POLISH_ITERS = 15
+POLISH_ROT_WEIGHT = 1e-2
+#: Mapped joint (index into PRED_JOINTS) whose global orientation each of the 24 joints takes in
+#: the closed form: itself, or for the unmapped feet / hands their parent (local identity).
+_FULL = tuple(PRED_JOINTS.index(j if j in PRED_JOINTS else PARENTS[j]) for j in range(NUM_JOINTS))
 
 
 def twostage_config(preset: str, sensors: int) -> EmposeConfig:
@@ -63,6 +90,80 @@ def twostage_config(preset: str, sensors: int) -> EmposeConfig:
     if preset == "cpu":
         kw.update(iterations=2)
     return replace(base, **kw)
+
+
+def closed_form_pose(rots: torch.Tensor) -> torch.Tensor:
+    """Stage 2 in closed form, rotations: mapped global orientations ``(..., 20, 3, 3)`` (source
+    frame, :data:`PRED_JOINTS`) -> local rotations ``(..., 24, 3, 3)`` (root in the source frame;
+    feet and hands identity). Differentiable."""
+    return global_to_local(rots[..., list(_FULL), :, :])
+
+
+def fit_betas(body: Any, local_rot: torch.Tensor, joints: torch.Tensor, prior: float = SHAPE_PRIOR) -> torch.Tensor:
+    """One shape for a sequence: ridge least squares of the betas to mapped joint positions.
+
+    For fixed rotations, forward kinematics is linear in the rest skeleton, which is linear in
+    the betas (``J_template + J_shapedirs beta``), so
+    ``min_b mean_t sum_j ||FK(R_t, rest(b))_j - joints_tj||^2 + prior ||b||^2`` is a 10x10 solve.
+
+    Args:
+        body: the :class:`~wearpose.body.BodyModel`.
+        local_rot: ``(T, 24, 3, 3)``; joints: ``(T, 20, 3)`` m (:data:`PRED_JOINTS`, source frame).
+        prior: ridge weight (:data:`SHAPE_PRIOR`).
+
+    Returns:
+        betas ``(NUM_BETAS,)``.
+    """
+    pj = list(PRED_JOINTS)
+    T = local_rot.shape[0]
+    D = body.J_shapedirs[..., :NUM_BETAS].to(local_rot)  # (24, 3, 10)
+    _, base = forward_kinematics(local_rot, body.J_template.to(local_rot))
+    basis = torch.stack([forward_kinematics(local_rot, D[..., k])[1][:, pj] for k in range(D.shape[-1])], -1)
+    A = basis.reshape(-1, D.shape[-1]).double()
+    y = (joints - base[:, pj]).reshape(-1).double()
+    lhs = A.T @ A / max(T, 1) + prior * torch.eye(D.shape[-1], dtype=A.dtype, device=A.device)
+    return torch.linalg.solve(lhs, A.T @ y / max(T, 1)).to(local_rot)
+
+
+def polish_pose(body: Any, local_rot: torch.Tensor, betas: torch.Tensor, joints: torch.Tensor, rots: torch.Tensor,
+                iters: int = POLISH_ITERS, rot_weight: float = POLISH_ROT_WEIGHT) -> tuple[torch.Tensor, torch.Tensor]:
+    """L-BFGS (strong Wolfe) on the local rotations (6D) of a whole sequence towards the mapped
+    joints and orientations: ``sum_j ||J_j - joints_j||^2 + rot_weight ||G_j - rots_j||_F^2``.
+
+    Args:
+        local_rot ``(T, 24, 3, 3)`` start; betas ``(10,)``; joints ``(T, 20, 3)`` m and rots
+        ``(T, 20, 3, 3)`` (mapper output, :data:`PRED_JOINTS`).
+
+    Returns:
+        local rotations ``(T, 24, 3, 3)`` and the per-frame joint residual ``(T,)`` m^2.
+    """
+    from wearpose.geometry import matrix_to_rot6d
+
+    pj = list(PRED_JOINTS)
+    rest = body.rest_joints(betas.to(body.J_template)).to(local_rot)
+
+    def terms(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        G, J = forward_kinematics(rot6d_to_matrix(x), rest)
+        return ((J[:, pj] - joints) ** 2).sum((-1, -2)), ((G[:, pj] - rots) ** 2).sum((-1, -2, -3))
+
+    x = matrix_to_rot6d(local_rot).detach().clone()
+    if iters > 0:
+        x.requires_grad_(True)
+        opt = torch.optim.LBFGS([x], lr=1.0, max_iter=iters, line_search_fn="strong_wolfe")
+
+        def closure() -> torch.Tensor:
+            opt.zero_grad()
+            pe, re = terms(x)
+            loss = pe.sum() + rot_weight * re.sum()
+            loss.backward()
+            return loss
+
+        with torch.enable_grad():
+            opt.step(closure)
+        x = x.detach()
+    with torch.no_grad():
+        pe, _ = terms(x)
+    return rot6d_to_matrix(x), pe
 
 
 class JointSensors:
@@ -114,8 +215,10 @@ class TwoStageNet(nn.Module):
         self.cfg = cfg
         self.rep = cfg.rep
         self.mapper = JointMapper(cfg, num_sensors, rest_joints)
-        self.ik = LGDRNN(cfg, NUM_MAPPED)
-        self.ik.lean_inference = False  # the closed-form kernel is for skin sites; IK is FK only
+        self.ik: LGDRNN | None = None  # ik="closed": no stage-2 network
+        if cfg.ik == "lgd":
+            self.ik = LGDRNN(cfg, NUM_MAPPED)
+            self.ik.lean_inference = False  # the closed-form kernel is for skin sites; IK is FK only
 
 
 def _offset_features(off_R: torch.Tensor, off_t: torch.Tensor) -> torch.Tensor:
@@ -179,6 +282,10 @@ def _make_task(est: TwoStageEstimator, train_data: EmposeData, val_data: EmposeD
                                      return_vertices=False)
                 gj = body.joints.reshape(B, T, NUM_JOINTS, 3)[:, :, list(PRED_JOINTS)]
                 gR = body.global_rot.reshape(B, T, NUM_JOINTS, 3, 3)[:, :, list(PRED_JOINTS)]
+            if net.ik is None:  # closed form: joints of the mapped orientations on the window's shape
+                rest = self.est.body.rest_joints(b["betas"] if train else None)
+                _, fj = forward_kinematics(closed_form_pose(mR), rest[:, None] if train else rest)
+                return mj, m6, gj, gR, fj, b
             if train:
                 ij, iR = _perturb(gj, gR, g)  # stage 2 learns from perturbed ground truth
             else:
@@ -190,6 +297,11 @@ def _make_task(est: TwoStageEstimator, train_data: EmposeData, val_data: EmposeD
             mj, m6, gj, gR, outs, b = self._outputs(batch, device, True, self.gen)
             l_map_j = ((mj - gj) ** 2).mean()
             l_map_r = ((m6 - matrix_to_rot6d(gR)) ** 2).mean()
+            if self.model.ik is None:
+                l_fk = ((outs[..., list(PRED_JOINTS), :] - gj) ** 2).mean()
+                parts = {"map_joints": float(l_map_j.detach()), "map_rot": float(l_map_r.detach()),
+                         "fk_joints": float(l_fk.detach())}
+                return MAP_JOINT_WEIGHT * l_map_j + l_map_r + FK_JOINT_WEIGHT * l_fk, parts
             l_ik, parts = lgd_loss(outs, b["pose"], b["betas"], b["joints"], self.cfg)
             parts.update(map_joints=float(l_map_j.detach()), map_rot=float(l_map_r.detach()))
             return MAP_JOINT_WEIGHT * l_map_j + l_map_r + l_ik, parts
@@ -204,7 +316,9 @@ def _make_task(est: TwoStageEstimator, train_data: EmposeData, val_data: EmposeD
             for b in self.val_data.iter_batches(self.cfg.seq_len, self.cfg.seq_len, max(self.cfg.batch_size, 32),
                                                 shuffle=False):
                 mj, _, gj, _, outs, b = self._outputs(b, device, False, g)
-                pe.append(mpjpe(outs[-1]["joints"], b["joints"], MAJOR_JOINTS).flatten())
+                # ik="closed": the closed form on the mean shape (no betas fit / polish: cheap, per window)
+                final = outs if self.model.ik is None else outs[-1]["joints"]
+                pe.append(mpjpe(final, b["joints"], MAJOR_JOINTS).flatten())
                 pm.append(((mj - gj).norm(dim=-1).mean(-1)).flatten())
             self.model.train()
             cat = lambda xs: torch.cat(xs) if xs else torch.zeros(0)  # noqa: E731
@@ -251,9 +365,10 @@ class TwoStageEstimator(EmposeEstimator):
         """Offline estimate; every frame gets a pose, missing sensors included.
 
         Returns a :class:`PoseTrack`: ``local_rot`` ``(T, 24, 3, 3)`` (root in the EM source
-        frame), ``betas`` ``(10,)`` (mean over frames), ``trans=None``, ``valid`` all True;
-        ``extras``: ``frame="em_source"``, ``method``, ``sensors_valid`` ``(T, S)``,
-        ``mapper_joints`` ``(T, 20, 3)``, ``rec_loss`` ``(T,)`` (stage-2 L_r).
+        frame), ``betas`` ``(10,)`` (mean over frames; ``ik="closed"``: the sequence fit),
+        ``trans=None``, ``valid`` all True; ``extras``: ``frame="em_source"``, ``method``,
+        ``sensors_valid`` ``(T, S)``, ``mapper_joints`` ``(T, 20, 3)``, ``rec_loss`` ``(T,)``
+        (stage-2 L_r; ``ik="closed"``: squared joint residual to the mapper, m^2), ``ik``.
         """
         p, R, valid = self._measurements(recording, hold=False)
         offR, offt = self._offsets_from(recording)
@@ -262,6 +377,14 @@ class TwoStageEstimator(EmposeEstimator):
         feats = masked_features(p, R, valid).to(dev)
         mj, _, mR = self.model.mapper(feats[None], valid.float()[None].to(dev), _offset_features(offR[None], offt[None]).to(dev))
         T = p.shape[0]
+        extras = {"frame": "em_source", "method": self.name, "sensors_valid": valid, "mapper_joints": mj[0].cpu(),
+                  "ik": self.config.ik}
+        if self.model.ik is None:
+            local = closed_form_pose(mR[0])
+            beta = fit_betas(self.body, local, mj[0], SHAPE_PRIOR)
+            local, res = polish_pose(self.body, local, beta, mj[0], mR[0], POLISH_ITERS, POLISH_ROT_WEIGHT)
+            return PoseTrack(local.cpu(), beta.cpu(), None, torch.ones(T, dtype=torch.bool), self.fps,
+                             extras={**extras, "rec_loss": res.cpu(), "betas_per_frame": beta.cpu().expand(T, -1)})
         x = sensor_features(mj, mR)
         omega0, _ = self.model.ik.initial(x)
         rots, betas, rec = [], [], []
@@ -276,12 +399,110 @@ class TwoStageEstimator(EmposeEstimator):
             rec.append(outs[-1]["rec"].detach())
         local_rot, b_all = torch.cat(rots).cpu(), torch.cat(betas).cpu()
         return PoseTrack(local_rot, b_all.mean(0), None, torch.ones(T, dtype=torch.bool), self.fps,
-                         extras={"frame": "em_source", "method": self.name, "sensors_valid": valid,
-                                 "mapper_joints": mj[0].cpu(), "rec_loss": torch.cat(rec).cpu(),
-                                 "betas_per_frame": b_all})
+                         extras={**extras, "rec_loss": torch.cat(rec).cpu(), "betas_per_frame": b_all})
 
     def step(self, frame: SensorFrame) -> PoseFrame:
         from wearpose.estimators.empose.baselines import OfflineOnlyError
 
         raise OfflineOnlyError("empose-twostage has a bidirectional joint mapper (non-causal): use "
                                "estimate(recording) on a whole sequence; for streaming use empose (LGD-RNN)")
+
+
+def warm_start(est: TwoStageEstimator, path: Any) -> dict[str, Any] | None:
+    """Initialise ``est`` from another two-stage checkpoint (e.g. an ``ik="lgd"`` run warm-starting
+    an ``ik="closed"`` one): every tensor whose name and shape match is copied (the mapper; the LGD
+    IK when both have one). Kit and body asset must match.
+
+    Returns the checkpoint's Adam state restricted to ``est``'s parameters when it has one for all
+    of them (a ``last.pt``), else None. Why: a fresh Adam's first step moves *every* weight by
+    ``lr`` (m / sqrt(v) = +-1), which on val took the warm mapper from 12 to 45 mm in one step at
+    lr 2e-4; the old moments keep the steps the size they were.
+    """
+    from wearpose.estimators.checkpoint import CheckpointMismatchError, load_checkpoint
+
+    ck = load_checkpoint(path)
+    ck.check(method=est.name, kit=est.kit_name, body_asset=est.body_asset_id, path=path)
+    own = est.model.state_dict()
+    copied = [k for k, v in ck.weights.items() if k in own and own[k].shape == v.shape]
+    lacking = sorted(k for k in own if k.startswith("mapper.") and k not in copied)
+    if lacking:
+        raise CheckpointMismatchError(f"{path}: joint-mapper tensors {lacking} missing or of another shape "
+                                      f"(hidden there {ck.config.get('hidden')}, here {est.config.hidden})")
+    est.model.load_state_dict({**own, **{k: ck.weights[k] for k in copied}})
+    est.meta["warm_start"] = {"checkpoint": str(path), "tensors": len(copied), "epoch": ck.meta.get("epoch"),
+                              "val_mpjpe_mm": ck.meta.get("val_mpjpe_mm")}
+    opt = (ck.train_state or {}).get("optimizer")
+    if not opt:
+        return None
+    # Rebuild the source model to map its optimizer indices (parameters() order) to names.
+    src = TwoStageNet(EmposeConfig.from_dict(ck.config), len(est.sensor_names), est.body.rest_joints().cpu())
+    src_idx = {n: i for i, (n, _) in enumerate(src.named_parameters())}
+    state = {}
+    for i, (n, prm) in enumerate(est.model.named_parameters()):
+        st = opt["state"].get(src_idx.get(n, -1))
+        if st is None or st["exp_avg"].shape != prm.shape:
+            return None
+        state[i] = st
+    group = {**opt["param_groups"][0], "params": list(range(len(state)))}
+    est.meta["warm_start"]["optimizer"] = True
+    return {"state": state, "param_groups": [group]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Train a two-stage model, optionally warm-started (``python -m wearpose.estimators.empose.twostage
+    --help``); ``wearpose train empose --model twostage`` trains the default (``ik="lgd"``) from scratch."""
+    import argparse
+    import math
+    import shlex
+    import sys
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(description="Train the EM-POSE two-stage model (supp. Sec. 9), optionally warm-started.",
+                                 epilog="Example: python -m wearpose.estimators.empose.twostage --ik closed --init "
+                                        "runs/twostage12_long/best.pt --epochs 8 --lr 2e-4 --threads 1 --out runs/twostage12_closed")
+    ap.add_argument("--sensors", type=int, default=12)
+    ap.add_argument("--config", default="cpu", help="preset: tiny, cpu, paper")
+    ap.add_argument("--ik", default="lgd", choices=("lgd", "closed"), help="stage 2 (EmposeConfig.ik)")
+    ap.add_argument("--init", default=None, help="two-stage checkpoint to warm-start from (matching tensors)")
+    ap.add_argument("--epochs", type=int, default=None)
+    ap.add_argument("--lr", type=float, default=None)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--resume", action="store_true", help="continue <out>/last.pt (--init is then ignored)")
+    ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--limit", type=int, default=None, help="first N training clips")
+    ap.add_argument("--limit-val", type=int, default=None)
+    ap.add_argument("--max-steps", type=int, default=None)
+    ap.add_argument("--fk-weight", type=float, default=None, help=f"ik=closed: FK_JOINT_WEIGHT (default {FK_JOINT_WEIGHT:g})")
+    a = ap.parse_args(argv)
+    from wearpose.estimators.empose import twostage as mod
+    from wearpose.estimators.empose.twostage import TwoStageEstimator as Est, twostage_config as tcfg, warm_start as ws
+
+    if a.fk_weight is not None:
+        mod.FK_JOINT_WEIGHT = a.fk_weight  # read by the task's loss at every step
+    from wearpose.estimators.empose.train import train_empose
+
+    cfg = tcfg(a.config, a.sensors).override(ik=a.ik, lr=a.lr, epochs=a.epochs)
+    est = Est(cfg)
+    est.meta["fk_joint_weight"] = mod.FK_JOINT_WEIGHT
+    command = "python -m wearpose.estimators.empose.twostage " + shlex.join(argv if argv is not None else sys.argv[1:])
+    resume = a.resume
+    if a.init and not (a.resume and (Path(a.out) / "last.pt").is_file()):
+        opt = ws(est, a.init)
+        print(f"warm start from {a.init}: {est.meta['warm_start']}")
+        if opt is not None:
+            # Start the run as a resume at step 0 carrying the old Adam moments (warm_start doc).
+            from wearpose.estimators.checkpoint import save_checkpoint
+
+            est.train_command = command
+            Path(a.out).mkdir(parents=True, exist_ok=True)
+            save_checkpoint(est.checkpoint({}, {"epoch": 0, "step_in_epoch": 0, "global_step": 0, "optimizer": opt,
+                                                "best": math.inf, "history": []}), Path(a.out) / "last.pt")
+            resume = True
+    res = train_empose(est, a.out, epochs=a.epochs, resume=resume, threads=a.threads, limit_train=a.limit,
+                       limit_val=a.limit_val, max_steps=a.max_steps, train_command=command)
+    print({k: v for k, v in res.items() if isinstance(v, (int, float, str))})
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
