@@ -53,7 +53,9 @@ class EmposeConfig(ConfigIO):
     ``mlp_layers`` are the ResNet's width / residual blocks, ``hidden`` / ``rnn_layers`` the
     BiRNN's).
     Two-stage model only: ``ik`` its stage 2, ``"lgd"`` (the paper's LGD IK, default) or
-    ``"closed"`` (closed-form pose from the mapped orientations, :mod:`.twostage`).
+    ``"closed"`` (closed-form pose from the mapped orientations, :mod:`.twostage`);
+    ``mapper_input`` what its joint mapper sees per sensor, ``"raw"`` (the measurement, default)
+    or ``"site"`` (the skin-site pose the measurement and the subject offsets imply).
     """
 
     sensors: int = 12
@@ -88,6 +90,7 @@ class EmposeConfig(ConfigIO):
     inputs: str = "both"
     init: str = "rnn"
     ik: str = "lgd"
+    mapper_input: str = "raw"
 
     def __post_init__(self) -> None:
         if self.sensors not in (6, 12):
@@ -107,6 +110,8 @@ class EmposeConfig(ConfigIO):
             raise ConfigError(f"EmposeConfig.init: expected 'rnn' or 'mean', got {self.init!r}")
         if self.ik not in ("lgd", "closed"):
             raise ConfigError(f"EmposeConfig.ik: expected 'lgd' or 'closed', got {self.ik!r}")
+        if self.mapper_input not in ("raw", "site"):
+            raise ConfigError(f"EmposeConfig.mapper_input: expected 'raw' or 'site', got {self.mapper_input!r}")
         if self.model not in ("lgd", "resnet", "birnn", "twostage"):
             raise ConfigError(f"EmposeConfig.model: expected 'lgd', 'resnet', 'birnn' or 'twostage', got {self.model!r}")
 
