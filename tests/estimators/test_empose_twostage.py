@@ -17,11 +17,11 @@ from wearpose.estimators import get_estimator
 from wearpose.estimators.empose.baselines import OfflineOnlyError, load_any
 from wearpose.estimators.empose.data import build_split, recording_from_clip, simulate_clip
 from wearpose.estimators.empose.model import PRED_JOINTS
-from wearpose.estimators.empose.train import train_empose
 from wearpose.estimators.checkpoint import CheckpointMismatchError, load_checkpoint, save_checkpoint
+from wearpose.estimators.empose.train import train_empose
 from wearpose.estimators.empose.twostage import (
-    FK_JOINT_WEIGHT, MAP_JOINT_WEIGHT, MAX_REMOVED, JointSensors, TwoStageEstimator, closed_form_pose, fit_betas, masked_features, polish_pose,
-    removal_mask, twostage_config, warm_start,
+    FK_JOINT_WEIGHT, MAP_JOINT_WEIGHT, MAX_REMOVED, JointSensors, TwoStageEstimator, closed_form_pose, fit_betas,
+    masked_features, polish_pose, removal_mask, site_poses, twostage_config, warm_start,
 )
 
 
@@ -174,7 +174,7 @@ def test_tiny_training_closed_ik_and_warm_start(tmp_path: Path, body: BodyModel)
     store = FakeStore(tmp_path, {"train": 3, "val": 1})
     lgd = TwoStageEstimator(cfg, body=body)
     train_empose(lgd, tmp_path / "lgd", epochs=1, max_steps=2, store=store, cache_root=tmp_path / "cache", quiet=True)
-    est = TwoStageEstimator(cfg.override(ik="closed"), body=body)
+    est = TwoStageEstimator(cfg.override(ik="closed", mapper_input="site"), body=body)
     assert est.model.ik is None
     opt = warm_start(est, tmp_path / "lgd" / "last.pt")
     assert opt is not None and len(opt["state"]) == len(list(est.model.parameters()))
@@ -195,7 +195,7 @@ def test_tiny_training_closed_ik_and_warm_start(tmp_path: Path, body: BodyModel)
     assert track.local_rot.shape == (20, 24, 3, 3) and bool(track.valid.all()) and track.extras["ik"] == "closed"
     assert torch.isfinite(track.local_rot).all() and track.betas.shape == (10,)
     loaded = load_any(tmp_path / "closed" / "last.pt")
-    assert loaded.config.ik == "closed" and loaded.model.ik is None
+    assert loaded.config.ik == "closed" and loaded.config.mapper_input == "site" and loaded.model.ik is None
     assert torch.allclose(loaded.estimate(rec).local_rot, track.local_rot, atol=1e-5)
     with pytest.raises(CheckpointMismatchError):
         warm_start(TwoStageEstimator(cfg.override(hidden=48), body=body), tmp_path / "lgd" / "last.pt")
@@ -206,10 +206,11 @@ def test_checkpoint_without_ik_field_loads_as_the_lgd_ik(tmp_path: Path, body: B
     est = TwoStageEstimator(twostage_config("tiny", 12), body=body)
     ck = est.checkpoint()
     ck.config.pop("ik")
+    ck.config.pop("mapper_input")
     save_checkpoint(ck, tmp_path / "old.pt")
     assert "ik" not in load_checkpoint(tmp_path / "old.pt").config
     old = load_any(tmp_path / "old.pt")
-    assert old.config.ik == "lgd" and old.model.ik is not None
+    assert old.config.ik == "lgd" and old.config.mapper_input == "raw" and old.model.ik is not None
     rec = _dropped_recording(est.config, body)
     assert torch.allclose(old.estimate(rec).local_rot, est.estimate(rec).local_rot, atol=1e-6)
 
@@ -236,3 +237,19 @@ def test_zero_dropped_and_the_zeros_rows(tmp_path: Path, body: BodyModel) -> Non
     assert "**" not in zrow and "*" in zrow
     with pytest.raises(ConfigError):
         evaluate_dropped({"LGD-RNN": lgd}, store=store, zeros=["nope"])
+
+
+def test_site_poses_undo_the_subject_offsets(body: BodyModel) -> None:
+    """Noise-free simulated measurements + the recording's offsets -> the skin sites the body model
+    puts there (source frame), i.e. what the LGD-RNN's sensors give with identity offsets."""
+    from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
+
+    cfg = EmposeConfig.preset("tiny", 12)
+    r = simulate_clip(synthetic_motion(5, T=6), cfg, body, seed=3, noise="none")
+    lgd = EmposeEstimator(cfg, body=body)
+    S = len(lgd.sensor_names)
+    ps, Rs = site_poses(r["position"], r["orientation"], r["off_R"], r["off_t"])
+    p0, R0, _ = lgd.sensors(r["pose"], r["betas"].expand(6, 10), torch.eye(3).expand(6, S, 3, 3), torch.zeros(6, S, 3))
+    assert torch.allclose(ps, p0, atol=2e-3) and torch.allclose(Rs, R0, atol=2e-3)
+    # The offsets are not negligible: the raw measurements are farther from the sites.
+    assert float((r["position"] - p0).norm(dim=-1).max()) > 5e-3

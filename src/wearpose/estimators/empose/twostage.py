@@ -226,6 +226,36 @@ def _offset_features(off_R: torch.Tensor, off_t: torch.Tensor) -> torch.Tensor:
     return sensor_features(off_t, off_R)
 
 
+def site_poses(p: torch.Tensor, R: torch.Tensor, off_R: torch.Tensor, off_t: torch.Tensor
+               ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Skin-site poses (source frame) implied by measurements and subject offsets, inverting
+    EM-POSE Eq. 4 (``R = R_site R_off``, ``p = p_site + R_site t_off``).
+
+    Args:
+        p ``(..., S, 3)`` m, R ``(..., S, 3, 3)``: measurements; off_R ``(..., S, 3, 3)``, off_t
+        ``(..., S, 3)`` m: offsets, broadcastable against them (e.g. ``(B, 1, S, ...)`` per window).
+
+    Returns:
+        ``p_site`` ``(..., S, 3)``, ``R_site`` ``(..., S, 3, 3)``.
+
+    Why (``mapper_input="site"``): the offsets enter the measurement bilinearly (rotation times
+    offset), which an LSTM fed measurement and offsets side by side has to learn; the site pose is
+    rigid with its bone up to skin sliding, so bone orientations are (nearly) a fixed linear map of it.
+    """
+    Rs = R @ off_R.transpose(-1, -2)
+    return p - (Rs @ off_t.unsqueeze(-1)).squeeze(-1), Rs
+
+
+def mapper_inputs(cfg: EmposeConfig, p: torch.Tensor, R: torch.Tensor, avail: torch.Tensor, off_R: torch.Tensor,
+                  off_t: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The joint mapper's three inputs for ``cfg.mapper_input``: p ``(B, T, S, 3)``, R
+    ``(B, T, S, 3, 3)``, avail ``(B, T, S)`` bool, offsets ``(B, S, 3, 3)`` / ``(B, S, 3)`` ->
+    masked features ``(B, T, S * 12)``, availability ``(B, T, S)`` float, offset features ``(B, S * 12)``."""
+    if cfg.mapper_input == "site":
+        p, R = site_poses(p, R, off_R[:, None], off_t[:, None])
+    return masked_features(p, R, avail), avail.to(p.dtype), _offset_features(off_R, off_t)
+
+
 def masked_features(p: torch.Tensor, R: torch.Tensor, avail: torch.Tensor) -> torch.Tensor:
     """Sensor features with unavailable samples zeroed: p ``(..., S, 3)``, R ``(..., S, 3, 3)``,
     avail ``(..., S)`` bool -> ``(..., S * 12)``."""
@@ -274,8 +304,8 @@ def _make_task(est: TwoStageEstimator, train_data: EmposeData, val_data: EmposeD
             net: TwoStageNet = self.model
             B, T, S = b["valid"].shape
             avail = b["valid"] & removal_mask(B, T, S, g).to(device)
-            feats = masked_features(b["position"], b["orientation"], avail)
-            mj, m6, mR = net.mapper(feats, avail.float(), _offset_features(b["off_R"], b["off_t"]))
+            mj, m6, mR = net.mapper(*mapper_inputs(self.cfg, b["position"], b["orientation"], avail, b["off_R"],
+                                                   b["off_t"]))
             with torch.no_grad():
                 body = self.est.body(b["pose"].reshape(B * T, NUM_JOINTS, 3, 3),
                                      b["betas"][:, None].expand(B, T, NUM_BETAS).reshape(B * T, -1), None,
@@ -374,8 +404,8 @@ class TwoStageEstimator(EmposeEstimator):
         offR, offt = self._offsets_from(recording)
         dev = self.device
         self.model.eval()
-        feats = masked_features(p, R, valid).to(dev)
-        mj, _, mR = self.model.mapper(feats[None], valid.float()[None].to(dev), _offset_features(offR[None], offt[None]).to(dev))
+        mj, _, mR = self.model.mapper(*mapper_inputs(self.config, p[None].to(dev), R[None].to(dev), valid[None].to(dev),
+                                                     offR[None].to(dev), offt[None].to(dev)))
         T = p.shape[0]
         extras = {"frame": "em_source", "method": self.name, "sensors_valid": valid, "mapper_joints": mj[0].cpu(),
                   "ik": self.config.ik}
@@ -463,6 +493,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sensors", type=int, default=12)
     ap.add_argument("--config", default="cpu", help="preset: tiny, cpu, paper")
     ap.add_argument("--ik", default="lgd", choices=("lgd", "closed"), help="stage 2 (EmposeConfig.ik)")
+    ap.add_argument("--mapper-input", default="raw", choices=("raw", "site"), help="EmposeConfig.mapper_input")
     ap.add_argument("--init", default=None, help="two-stage checkpoint to warm-start from (matching tensors)")
     ap.add_argument("--epochs", type=int, default=None)
     ap.add_argument("--lr", type=float, default=None)
@@ -481,7 +512,7 @@ def main(argv: list[str] | None = None) -> int:
         mod.FK_JOINT_WEIGHT = a.fk_weight  # read by the task's loss at every step
     from wearpose.estimators.empose.train import train_empose
 
-    cfg = tcfg(a.config, a.sensors).override(ik=a.ik, lr=a.lr, epochs=a.epochs)
+    cfg = tcfg(a.config, a.sensors).override(ik=a.ik, mapper_input=a.mapper_input, lr=a.lr, epochs=a.epochs)
     est = Est(cfg)
     est.meta["fk_joint_weight"] = mod.FK_JOINT_WEIGHT
     command = "python -m wearpose.estimators.empose.twostage " + shlex.join(argv if argv is not None else sys.argv[1:])
