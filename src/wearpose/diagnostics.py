@@ -143,11 +143,18 @@ def check_weights() -> list[Check]:
         return [Check("weights", "shipped weights", "warn", "none found", "train one: wearpose train --help")]
     for name in names:
         try:
-            ck = load_checkpoint(weight_path(name))
             c = card(name)
             size = weight_path(name).stat().st_size / 1e6
-            out.append(Check("weights", name, "ok", f"{ck.method}, kit {ck.kit}, {size:.1f} MB, "
-                                                    f"licence: {c.get('licence', '?')}"))
+            if str(c.get("method", "")).startswith("nbeats"):
+                # Not an estimator checkpoint: the N-BEATS forecaster of MI-Poser's interference correction.
+                from wearpose.interference.nbeats import load_forecaster
+
+                load_forecaster(weight_path(name))
+                what = f"{c['method']}, {size:.1f} MB"
+            else:
+                ck = load_checkpoint(weight_path(name))
+                what = f"{ck.method}, kit {ck.kit}, {size:.1f} MB"
+            out.append(Check("weights", name, "ok", f"{what}, licence: {c.get('licence', '?')}"))
         except Exception as exc:  # noqa: BLE001
             out.append(Check("weights", name, "fail", str(exc), "re-install wearpose (the file is damaged)"))
     return out
