@@ -48,3 +48,21 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically."""
     return _atomic(path, ".tmp", lambda tmp: Path(tmp).write_bytes(data))
+
+
+def npz_problem(path: str | Path, exc: BaseException) -> str:
+    """Why ``np.load(path)`` could not read ``path`` as an ``.npz``, in a user's words: another
+    kind of file, a damaged/truncated archive (e.g. an interrupted copy), or numpy's own reason.
+    For error messages (:class:`wearpose.errors.InputFileError` ``problem``)."""
+    import zipfile
+
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError:
+        head = b""
+    if head[:2] != b"PK":  # every zip (hence every npz) starts with the local-file signature 'PK'
+        return "not an npz (zip) archive: the file is of another type or its start is damaged"
+    if isinstance(exc, (zipfile.BadZipFile, EOFError)):
+        return f"a damaged or truncated npz (zip) archive, e.g. an interrupted copy ({exc})"
+    return f"not a readable npz file ({type(exc).__name__}: {exc})"

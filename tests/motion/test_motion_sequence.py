@@ -108,6 +108,6 @@ def test_reader_missing_and_garbage_file(tmp_path: Path) -> None:
         MotionSequence.load(tmp_path / "nope.npz")
     bad = tmp_path / "garbage.npz"
     bad.write_bytes(b"not a zip")
-    with pytest.raises(InputFileError, match="readable"):
+    with pytest.raises(InputFileError, match=r"not an npz \(zip\) archive"):
         MotionSequence.load(bad)
     assert MotionSequence.load(_write_npz(tmp_path / "ok.npz", **_good_arrays())).num_frames == 3

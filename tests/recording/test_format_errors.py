@@ -54,7 +54,7 @@ def test_missing_file(tmp_path):
 def test_not_an_npz(tmp_path):
     p = tmp_path / "junk.npz"
     p.write_bytes(b"hello, not a zip")
-    with pytest.raises(InputFileError, match="not a readable npz"):
+    with pytest.raises(InputFileError, match=r"not an npz \(zip\) archive"):
         load_recording(p)
 
 

@@ -28,6 +28,7 @@ import numpy as np
 import torch
 
 from wearpose.errors import InputFileError, ShapeError
+from wearpose.fileio import npz_problem
 from wearpose.geometry import Z_UP_TO_Y_UP, axis_angle_to_matrix, matrix_to_axis_angle
 from wearpose.motion.sequence import NUM_BETAS, MotionSequence
 from wearpose.motion.template import default_rest_joints
@@ -46,6 +47,12 @@ def _pelvis(rest_joints: torch.Tensor | None, betas: torch.Tensor) -> tuple[torc
     if rj.dim() != 2 or rj.shape[1] != 3:
         raise ShapeError(f"rest_joints: expected (24, 3) or the pelvis (3,), metres; got {tuple(rj.shape)}")
     return rj[0], src
+
+
+#: Largest plausible |trans| (m) and joint axis-angle (rad) in an AMASS file: beyond these the
+#: file is almost surely in centimetres/millimetres or degrees (checked on read).
+MAX_TRANS_M = 50.0
+MAX_AXIS_ANGLE_RAD = 4 * np.pi
 
 
 def read_amass(path: str | Path, rest_joints: torch.Tensor | None = None) -> MotionSequence:
@@ -71,7 +78,7 @@ def read_amass(path: str | Path, rest_joints: torch.Tensor | None = None) -> Mot
         with np.load(path, allow_pickle=False) as data:
             d = {k: data[k] for k in data.files}
     except Exception as exc:  # noqa: BLE001 - zip/npy/pickle errors of any kind
-        raise InputFileError(path, f"not a readable npz file without pickled objects ({exc})",
+        raise InputFileError(path, npz_problem(path, exc),
                              "an AMASS .npz with poses, trans, betas, mocap_framerate") from exc
 
     def need(key: str, expected: str) -> np.ndarray:
@@ -101,6 +108,18 @@ def read_amass(path: str | Path, rest_joints: torch.Tensor | None = None) -> Mot
     for key, arr in (("poses", poses), ("trans", trans), ("betas", betas)):
         if not np.all(np.isfinite(arr)):
             raise InputFileError(path, "contains NaN or infinite values", "finite numbers", field=key)
+    # Plausible units (a capture volume is metres, not kilometres; an axis-angle is at most a
+    # few radians): the usual mistakes are centimetres/millimetres and degrees.
+    reach = float(np.abs(trans).max()) if T else 0.0
+    if reach > MAX_TRANS_M:
+        unit = "millimetres" if reach > 100 * MAX_TRANS_M else "centimetres or millimetres"
+        raise InputFileError(path, f"|trans| reaches {reach:.4g}, implausible in metres; looks like {unit}",
+                             f"(T, 3) metres (|trans| <= {MAX_TRANS_M:g} m): convert before saving", field="trans")
+    angle = float(np.linalg.norm(poses[:, :66].reshape(T, 22, 3), axis=-1).max()) if T else 0.0
+    if angle > MAX_AXIS_ANGLE_RAD:
+        raise InputFileError(path, f"a joint rotation of {angle:.4g} rad; looks like degrees",
+                             "axis-angle in radians (each joint's |angle| <= pi, a few radians at most)",
+                             field="poses")
     gender = str(np.asarray(d["gender"]).reshape(-1)[0]) if "gender" in d and np.asarray(d["gender"]).size else "unknown"
     if gender.startswith("b'"):
         gender = gender[2:-1]

@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 from wearpose.errors import InputFileError
+from wearpose.fileio import npz_problem
 from wearpose.motion.amass import read_amass
 from wearpose.motion.importer import MOTION_SUFFIXES, import_motion
 from wearpose.motion.paths import cache_dir, data_dir
@@ -41,9 +42,14 @@ def load_motion(spec: str | Path, cache: str | Path | None = None, rest_joints: 
         if path.suffix == ".npz":
             try:
                 with np.load(path, allow_pickle=False) as data:
-                    ours = "format" in data.files and str(data["format"]) == FORMAT_NAME
+                    fmt = str(data["format"]) if "format" in data.files else ""
             except Exception as exc:
-                raise InputFileError(path, f"cannot be read as npz ({exc})", "a MotionSequence or AMASS .npz") from exc
+                raise InputFileError(path, npz_problem(path, exc), "a MotionSequence or AMASS .npz") from exc
+            if fmt == "wearpose.recording":  # sensor data, a common mix-up with a motion file
+                raise InputFileError(path, "this is a wearpose recording (sensor data), not a motion",
+                                     "a MotionSequence or AMASS .npz; to see a recording: wearpose view-recording "
+                                     f"{path} [--model WEIGHTS]")
+            ours = fmt == FORMAT_NAME
             return MotionSequence.load(path) if ours else read_amass(path, rest_joints=rest_joints)
         raise InputFileError(path, f"unsupported extension {path.suffix!r}", ".bvh, .bvh.gz, .amc (with its .asf), .npz")
     tried = [f"file {path}"]

@@ -19,7 +19,7 @@ import torch
 
 from wearpose.body.skeleton import NUM_JOINTS
 from wearpose.errors import InputFileError, ShapeError
-from wearpose.fileio import atomic_savez
+from wearpose.fileio import atomic_savez, npz_problem
 from wearpose.geometry import axis_angle_to_matrix, matrix_to_axis_angle
 
 #: Identifies our motion files; bump :data:`FORMAT_VERSION` on any incompatible change.
@@ -158,7 +158,7 @@ class MotionSequence:
             with np.load(path, allow_pickle=False) as data:
                 d = {k: data[k] for k in data.files}
         except Exception as exc:  # noqa: BLE001 - zip/npy errors of any kind
-            raise InputFileError(path, f"not a readable npz file ({exc})", expected_file) from exc
+            raise InputFileError(path, npz_problem(path, exc), expected_file) from exc
 
         def need(key: str, expected: str) -> np.ndarray:
             if key not in d:

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from wearpose.errors import InputFileError, ShapeError
+from wearpose.fileio import npz_problem
 from wearpose.geometry import axis_angle_to_matrix
 from wearpose.recording.types import Recording, SensorInfo, SensorStream, _Problem, quaternions_to_matrices
 
@@ -390,7 +391,7 @@ def from_empose(path: str | Path, sensors: str | Sequence[int] = "all", fps: flo
         with np.load(path, allow_pickle=False) as z:
             d = {k: z[k] for k in z.files}
     except Exception as exc:  # noqa: BLE001
-        raise InputFileError(path, f"not a readable npz file ({type(exc).__name__}: {exc})", expected) from exc
+        raise InputFileError(path, npz_problem(path, exc), expected) from exc
     pos = _array(path, d, "sensor_pos", lambda s: len(s) in (2, 3) and s[0] > 0, "(F, 36) or (F, 12, 3) metres")
     F = pos.shape[0]
     pos = pos.reshape(F, -1)

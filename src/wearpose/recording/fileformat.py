@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from wearpose.fileio import atomic_savez
+from wearpose.fileio import atomic_savez, npz_problem
 from wearpose.errors import InputFileError, ShapeError
 from wearpose.geometry import matrix_to_quat
 from wearpose.recording.checks import check_stream
@@ -148,7 +148,7 @@ def _load(path: Path, check_conventions: bool) -> Recording:
             for k in names:
                 d[k] = npz[k]
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, NotImplementedError, zipfile.LargeZipFile) as exc:
-        raise InputFileError(path, f"not a readable npz file ({type(exc).__name__}: {exc})", _EXPECTED_FILE) from exc
+        raise InputFileError(path, npz_problem(path, exc), _EXPECTED_FILE) from exc
 
     def need(key: str, expected: str) -> np.ndarray:
         if key not in d:
