@@ -88,3 +88,21 @@ def test_sensor_demo_with_shipped_weights(tmp_path: Path) -> None:
     assert r["metrics"]["mpjae_deg"] < 15.0, r["metrics"]
     assert "non-commercial" in card("empose12_cpu")["licence"]
     assert (tmp_path / "recording.npz").is_file() and Path(r["html"]).stat().st_size > 100_000
+
+
+def test_every_command_and_group_has_an_example() -> None:
+    """Walks the whole command tree, so a new command without an example fails here."""
+    import typer
+
+    def walk(cmd, path):
+        yield path, cmd
+        for name, sub in getattr(cmd, "commands", {}).items():
+            yield from walk(sub, [*path, name])
+
+    missing = []
+    for path, cmd in walk(typer.main.get_command(app), []):
+        res = runner.invoke(app, [*path, "--help"])
+        assert res.exit_code == 0, (path, res.output)
+        if "Example: wearpose" not in " ".join(res.output.replace("│", " ").split()):
+            missing.append(" ".join(path) or "(root)")
+    assert not missing, f"no 'Example: wearpose ...' in the help of: {missing}"

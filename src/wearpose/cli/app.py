@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any, Optional
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from wearpose.errors import WearposeError
@@ -38,7 +40,7 @@ def _emit(obj: dict[str, Any], as_json: bool, render: Any) -> None:
 def _kv_table(title: str, rows: dict[str, Any]) -> Table:
     t = Table(title=title, show_header=False)
     for k, v in rows.items():
-        t.add_row(str(k), str(v))
+        t.add_row(escape(str(k)), escape(str(v)))
     return t
 
 
@@ -96,8 +98,8 @@ def data_prepare(
     folders: Optional[list[Path]] = typer.Argument(None, help="Corpus folder (with manifest.csv) or your own folders of BVH, ASF/AMC or AMASS files (any skeleton, see docs/motion-import.md); default $WEARPOSE_DATA or ../shared/data."),
     cache: Optional[Path] = typer.Option(None, help="Output store; default $WEARPOSE_CACHE or ~/.cache/wearpose."),
     fps: Optional[float] = typer.Option(None, help="Resample every clip to this rate (default: keep each clip's rate)."),
-    workers: Optional[int] = typer.Option(None, help="Worker processes (default: up to 2)."),
-    limit: Optional[int] = typer.Option(None, help="Convert only the first N clips (quick check)."),
+    workers: Optional[int] = typer.Option(None, min=1, help="Worker processes (default: up to 2)."),
+    limit: Optional[int] = typer.Option(None, min=1, help="Convert only the first N clips (quick check)."),
     joint_map: Optional[Path] = typer.Option(None, "--joint-map", help="YAML joint map for the BVH/AMC of your own folders (see wearpose motion import)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
@@ -111,8 +113,11 @@ def data_prepare(
     src = [data_dir(f) for f in folders] if folders else data_dir()
     res = prepare_corpus(src, cache_dir(cache), fps=fps, progress=not as_json, workers=workers, limit=limit,
                          joint_map=joint_map)
-    _emit(res, as_json, lambda r: console.print(_kv_table("prepared", {k: v for k, v in r.items() if k != "failures"}))
-          or [err_console.print(f"[red]failed[/] {k}: {v}") for k, v in r.get("failures", {}).items()])
+    shown = {k: (round(v, 1) if k == "seconds" else v) for k, v in res.items() if k != "failures"}
+    _emit(res, as_json, lambda r: console.print(_kv_table("prepared", shown))
+          or [err_console.print(f"[red]failed[/] {escape(f'{k}: {v}')}") for k, v in r.get("failures", {}).items()])
+    if res.get("failed") and not res.get("converted") and not res.get("skipped"):
+        raise typer.Exit(code=1)  # nothing usable came out: a script must not go on with an empty store
 
 
 @data_app.command("info")
@@ -212,10 +217,26 @@ def demo(
     _emit(result, as_json, render)
 
 
+def error_text(exc: BaseException) -> str:
+    """The one line ``main`` prints for a user mistake: a library error as written (it names the
+    file, the field in [brackets], the problem and the expected form), or an operating-system
+    error as 'path: reason' (a folder that does not exist, no permission, a full disk)."""
+    if isinstance(exc, OSError) and exc.strerror:
+        if isinstance(exc, (FileExistsError, NotADirectoryError)) and exc.filename and Path(exc.filename).is_file():
+            return f"{exc.filename}: is a file, but the output path needs a folder there"
+        where = " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
+        return f"{where}: {exc.strerror}" if where else exc.strerror
+    return str(exc)
+
+
 def main() -> None:
-    """Console entry point: turns library errors into one clear line and exit code 1."""
+    """Console entry point: turns library errors and file-system errors into one clear line and
+    exit code 1 (no traceback; set WEARPOSE_DEBUG=1 to get one)."""
     try:
         app()
-    except WearposeError as exc:
-        err_console.print(f"[bold red]error:[/] {exc}")
+    except (WearposeError, OSError) as exc:
+        if os.environ.get("WEARPOSE_DEBUG"):
+            raise
+        # escape(): messages carry [field] names, which rich would otherwise eat as markup.
+        err_console.print(f"[bold red]error:[/] {escape(error_text(exc))}")
         raise SystemExit(1) from None

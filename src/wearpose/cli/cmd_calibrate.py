@@ -54,7 +54,14 @@ def calibrate(
 
     if method not in METHODS:
         raise CalibrationError(f"--method {method!r} is not a calibration method; expected one of {list(METHODS)}")
+    if window is not None and not 0 <= window[0] < window[1]:
+        raise typer.BadParameter(f"{window[0]:g} {window[1]:g}: expected START STOP in seconds with "
+                                 f"0 <= START < STOP", param_hint="--window")
     rec = load_recording(recording)
+    unknown = [n for n in sensor or [] if n not in rec.names]
+    if unknown:
+        raise typer.BadParameter(f"{recording} has no sensor {', '.join(map(repr, unknown))}; its sensors: "
+                                 f"{', '.join(rec.names)}", param_hint="--sensor")
     kw: dict[str, Any] = {}
     if window is not None:
         kw["window"] = window

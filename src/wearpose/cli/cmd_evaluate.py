@@ -43,6 +43,9 @@ def resolve_model(spec: str) -> tuple[str, Path]:
         raise typer.BadParameter(f"{spec!r}: expected NAME=PATH, PATH or a shipped weight name", param_hint="MODELS")
     path = Path(target)
     if not path.is_file():
+        from wearpose.cli.models import check_pose_weights
+
+        check_pose_weights(target, param_hint="MODELS")
         try:
             path = weight_path(target)
         except ConfigError as exc:
@@ -84,13 +87,13 @@ def evaluate(
     models: list[str] = typer.Argument(..., help="Models: NAME=PATH, a checkpoint path, or shipped weights "
                                                  "(empose12_cpu, empose6_cpu); all for one kit."),
     split: str = typer.Option("test", help="Corpus split: test (held-out numbers) or val."),
-    clips: Optional[int] = typer.Option(None, "--clips", help="Only the first N clips of the split (sorted ids)."),
+    clips: Optional[int] = typer.Option(None, "--clips", min=1, help="Only the first N clips of the split (sorted ids)."),
     offsets: str = typer.Option("random", help="Evaluation subjects: random (synthetic subjects from the training "
                                                "prior, unseen seeds) or unseen (a wider distribution, EM-POSE Table 4)."),
     spread: float = typer.Option(2.0, help="--offsets unseen: size factor on every offset parameter of the prior."),
     noise: str = typer.Option("default", help="EM error model of the simulation: default or none."),
     seed: int = typer.Option(0, help="Base seed of the evaluation subjects and noise."),
-    threads: int = typer.Option(1, help="torch CPU threads."),
+    threads: int = typer.Option(1, min=1, help="torch CPU threads."),
     out: Optional[Path] = typer.Option(None, help="Write OUT.md and OUT.json (table, models, setting)."),
     title: Optional[str] = typer.Option(None, help="Title of the markdown file."),
     note: Optional[str] = typer.Option(None, help="A sentence appended to the markdown."),

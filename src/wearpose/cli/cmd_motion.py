@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
@@ -49,6 +50,24 @@ def _report_table(res: dict[str, Any]) -> Table:
     return t
 
 
+def _check_options(units: str | None, up: str | None, joint_map: Path | None) -> None:
+    """Options that apply to every file are checked once, before any file is read (a typo in
+    --units would otherwise fail every file with the same message)."""
+    from wearpose.errors import WearposeError
+    from wearpose.motion.importer import UP_AXES, parse_units
+    from wearpose.motion.mapping import load_joint_map
+
+    if units is not None:
+        try:
+            parse_units(units)
+        except WearposeError as exc:
+            raise typer.BadParameter(str(exc), param_hint="--units") from None
+    if up is not None and up.lower() not in UP_AXES:
+        raise typer.BadParameter(f"{up!r}; expected one of {', '.join(UP_AXES)}", param_hint="--up")
+    if joint_map is not None:
+        load_joint_map(joint_map)  # InputFileError naming the map file, the key and the expected form
+
+
 @motion_app.command("import")
 def motion_import(
     paths: list[Path] = typer.Argument(..., help="Motion files (.bvh, .bvh.gz, .amc with its .asf beside it) or folders of them (searched recursively; formats may be mixed)."),
@@ -76,9 +95,14 @@ def motion_import(
     from wearpose.body import BodyModel
     from wearpose.motion import collect_motion_files, import_paths
 
+    _check_options(units, up, joint_map)
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        raise typer.BadParameter(f"no such file or folder: {', '.join(missing)}", param_hint="PATHS")
     n = len(collect_motion_files(paths))
     if n == 0:
-        err_console.print(f"[red]error:[/] no motion files (.bvh, .bvh.gz, .amc, .amc.gz) in {', '.join(map(str, paths))}")
+        where = ", ".join(map(str, paths))
+        err_console.print(f"[red]error:[/] no motion files (.bvh, .bvh.gz, .amc, .amc.gz) in {escape(where)}")
         raise typer.Exit(code=1)
     rest = BodyModel(body).rest_joints().detach().double()
     columns = (TextColumn("[bold]importing motion"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -97,11 +121,12 @@ def motion_import(
                     shown.add(key)
                     console.print(_mapping_table(row))
             for note in row.get("map_notes", []) if row["ok"] else []:
-                err_console.print(f"[yellow]note[/] {Path(row['file']).name}: {note}")
+                err_console.print(f"[yellow]note[/] {escape(Path(row['file']).name)}: {escape(str(note))}")
         console.print(_report_table(r))
         for row in r["files"]:
             if not row["ok"]:
-                err_console.print(f"[red]failed[/] {row['file']}: {row['error']}")
+                err, f = str(row["error"]), str(row["file"])
+                err_console.print(f"[red]failed[/] {escape(err if f in err else f'{f}: {err}')}")
 
     _emit(res, as_json, render)
     if res["failed"]:

@@ -45,10 +45,10 @@ def serve(
     stride: str = typer.Option("1", help="Estimate every N-th frame: 1 (every frame), N, or auto (stream rate / "
                                          "the estimator's trained rate)."),
     udp_port: Optional[int] = typer.Option(None, help="Also accept the same packets over UDP on this port."),
-    workers: int = typer.Option(2, help="Estimator steps running at once (each subject has its own estimator thread; "
+    workers: int = typer.Option(2, min=1, help="Estimator steps running at once (each subject has its own estimator thread; "
                                         "subjects step in parallel up to this)."),
-    threads: int = typer.Option(1, help="torch CPU threads per step."),
-    warmup: int = typer.Option(30, help="Synthetic steps run on each new subject's estimator before it is ready "
+    threads: int = typer.Option(1, min=1, help="torch CPU threads per step."),
+    warmup: int = typer.Option(30, min=0, help="Synthetic steps run on each new subject's estimator before it is ready "
                                         "(pays tracing / first-call costs before real frames; 0: none)."),
     log_level: str = typer.Option("INFO", help="Python logging level."),
     as_json: bool = typer.Option(False, "--json", help="Print the final stats as JSON at shutdown."),
@@ -60,10 +60,13 @@ def serve(
 
     Example: wearpose serve --model empose12_cpu --port 8765
     """
+    from wearpose.cli.models import check_pose_weights
     from wearpose.stream import estimator_factory, run_server
 
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    check_pose_weights(model)
     factory = estimator_factory(model, method, threads)
+    factory()  # load once now: a checkpoint that does not fit --method fails here, not at the first subject
 
     def started(server: Any) -> None:
         # One line a script can wait for (benchmarks/stream.py does).
@@ -96,17 +99,25 @@ def stream_replay(
     """
     from rich.progress import Progress
 
+    from wearpose.errors import ConfigError
     from wearpose.recording import load_recording
     from wearpose.stream import Faults, replay
 
     if fmt not in ("binary", "json"):
         raise typer.BadParameter(f"expected binary or json, got {fmt!r}", param_hint="--format")
+    if not url.startswith(("ws://", "wss://")):
+        raise typer.BadParameter(f"{url!r}: expected a WebSocket URL ws://HOST:PORT (what wearpose serve prints)",
+                                 param_hint="--url")
     rec = load_recording(recording)
     faults = Faults(malformed=malformed, dropout=dropout, reorder=reorder, seed=seed)
-    with Progress(console=err_console, disable=as_json) as prog:
+    with Progress(console=err_console, disable=as_json, transient=True) as prog:
         task = prog.add_task("streaming", total=None)
-        res = asyncio.run(replay(rec, url, subject=subject, fmt=fmt, speed=speed, duration=duration, faults=faults,
-                                 progress=lambda k, n: prog.update(task, completed=k, total=n)))
+        try:
+            res = asyncio.run(replay(rec, url, subject=subject, fmt=fmt, speed=speed, duration=duration,
+                                     faults=faults, progress=lambda k, n: prog.update(task, completed=k, total=n)))
+        except OSError as exc:  # nothing listening, wrong host/port, network down
+            raise ConfigError(f"--url {url}: cannot connect ({exc.strerror or exc}); is a server running there? "
+                              f"start one with: wearpose serve --model <weights>") from None
 
     def render(r: dict[str, Any]) -> None:
         t = Table(title=f"{recording.name} -> {url} (subject {subject}, {r['rate_hz']:.0f} Hz, {r['format']})")
@@ -157,6 +168,15 @@ def view_recording(
 
     Example: wearpose view-recording out/demo/recording.npz --model empose12_cpu
     """
+    from wearpose.cli.models import check_pose_weights, recording_mismatch
+    from wearpose.errors import ShapeError
     from wearpose.viewer.live import run_recording_viewer
 
-    run_recording_viewer(recording, model=model, host=host, port=port, body=body)
+    if model is not None:
+        check_pose_weights(model)
+    try:
+        run_recording_viewer(recording, model=model, host=host, port=port, body=body)
+    except ShapeError as exc:  # the estimator's check of the recording: missing sensors, another rate
+        if model is None:
+            raise
+        raise recording_mismatch(recording, model, str(exc)) from None

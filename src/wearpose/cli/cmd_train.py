@@ -18,7 +18,8 @@ import typer
 from wearpose.cli.app import _emit, app, console
 
 train_app = typer.Typer(help="Train an estimator on simulated sensors from the prepared corpus "
-                             "(one command per method; each runs unchanged under torchrun).",
+                             "(one command per method; each runs unchanged under torchrun).\n\n"
+                             "Example: wearpose train empose --config tiny --threads 1 --out runs/empose_tiny",
                         no_args_is_help=True)
 app.add_typer(train_app, name="train")
 
@@ -32,18 +33,18 @@ def train_empose_cmd(
     epochs: Optional[int] = typer.Option(None, help="Override the preset's number of epochs."),
     out: Optional[Path] = typer.Option(None, help="Run directory (default runs/<method><sensors>_<config>)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from <out>/last.pt."),
-    threads: Optional[int] = typer.Option(None, help="torch CPU threads (default: torch's choice)."),
+    threads: Optional[int] = typer.Option(None, min=1, help="torch CPU threads (default: torch's choice)."),
     device: str = typer.Option("auto", help="auto (CUDA when available), cpu or cuda[:i]."),
-    hidden: Optional[int] = typer.Option(None, help="Override LSTM width."),
+    hidden: Optional[int] = typer.Option(None, min=1, help="Override LSTM width."),
     width: Optional[int] = typer.Option(None, help="Override the update-MLP width."),
     iterations: Optional[int] = typer.Option(None, help="Override N, the LGD iterations."),
-    batch_size: Optional[int] = typer.Option(None, help="Override the batch size."),
+    batch_size: Optional[int] = typer.Option(None, min=1, help="Override the batch size."),
     offsets: Optional[str] = typer.Option(None, help="Subject offsets in training data: random (default) or none "
                                                      "(EM-POSE's 'no [R|t]' ablation)."),
     ablation: Optional[str] = typer.Option(None, help="An EM-POSE Table 3 ablation of the LGD-RNN: noRt, no_t, "
                                                        "ori_only, pos_only, no_rnn (or full)."),
-    limit: Optional[int] = typer.Option(None, help="Use only the first N training clips (quick runs)."),
-    checkpoint_every: int = typer.Option(100, help="Save last.pt every N optimiser steps (and every epoch)."),
+    limit: Optional[int] = typer.Option(None, min=1, help="Use only the first N training clips (quick runs)."),
+    checkpoint_every: int = typer.Option(100, min=1, help="Save last.pt every N optimiser steps (and every epoch)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Train EM-POSE (LGD-RNN or a Table 2 baseline) on virtual EM sensors.

@@ -22,11 +22,11 @@ def train_miposer_cmd(
     epochs: Optional[int] = typer.Option(None, help="Override the preset's number of epochs."),
     out: Optional[Path] = typer.Option(None, help="Run directory (default runs/miposer<wrists>_<config> or runs/imuposer_<config>)."),
     resume: bool = typer.Option(False, "--resume", help="Continue from <out>/last.pt."),
-    threads: Optional[int] = typer.Option(None, help="torch CPU threads (default: torch's choice)."),
+    threads: Optional[int] = typer.Option(None, min=1, help="torch CPU threads (default: torch's choice)."),
     device: str = typer.Option("auto", help="auto (CUDA when available), cpu or cuda[:i]."),
-    batch_size: Optional[int] = typer.Option(None, help="Override the batch size."),
-    limit: Optional[int] = typer.Option(None, help="Use only the first N training clips (quick runs)."),
-    checkpoint_every: int = typer.Option(100, help="Save last.pt every N optimiser steps (and every epoch)."),
+    batch_size: Optional[int] = typer.Option(None, min=1, help="Override the batch size."),
+    limit: Optional[int] = typer.Option(None, min=1, help="Use only the first N training clips (quick runs)."),
+    checkpoint_every: int = typer.Option(100, min=1, help="Save last.pt every N optimiser steps (and every epoch)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Train MI-Poser (AvatarPoser-style IK from head + wrist 6-DoF) or the IMUPoser baseline.

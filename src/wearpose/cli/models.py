@@ -1,0 +1,61 @@
+"""Model arguments shared by the commands that run an estimator (``serve``, ``view-recording``,
+``evaluate``): clear errors for names that are not pose-estimator weights, and for recordings
+that do not fit the weights (kit, rate)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import typer
+
+
+def pose_weights() -> list[str]:
+    """Shipped weights whose card names a registered pose estimator (the others, e.g. the N-BEATS
+    forecaster of MI-Poser's interference correction, are parts of a method, not estimators)."""
+    from wearpose.estimators.registry import list_estimators
+    from wearpose.weights import card, list_weights
+
+    known = set(list_estimators())
+    return [n for n in list_weights() if card(n).get("method") in known]
+
+
+def check_pose_weights(model: str, param_hint: str = "--model") -> None:
+    """Refuse shipped weights ``model`` that are not a pose estimator, naming what they are and
+    which shipped weights are estimators. Anything else (a checkpoint file, an unknown name) is
+    left to the loader, whose errors already say what is wrong."""
+    from wearpose.weights import card, list_weights
+
+    if model not in list_weights() or model in pose_weights():
+        return
+    what = card(model).get("method", "?")
+    raise typer.BadParameter(f"{model!r} is not a pose estimator (its card says: {what}); pose-estimator weights: "
+                             f"{', '.join(pose_weights())}", param_hint=param_hint)
+
+
+def weights_setting(model: str) -> dict[str, Any]:
+    """Kit, sensors and rate of shipped weights or a checkpoint file (for error messages), or ``{}``."""
+    from wearpose.estimators.checkpoint import load_checkpoint
+    from wearpose.weights import list_weights, weight_path
+
+    try:
+        ck = load_checkpoint(weight_path(model) if model in list_weights() else Path(model))
+    except Exception:  # noqa: BLE001 - only used to word an error; the loader reports its own problems
+        return {}
+    fps = ck.config.get("rate") if isinstance(ck.config, dict) else None  # Hz the network was trained at
+    return {"kit": ck.kit, "sensors": list(ck.sensors), "fps": fps, "method": ck.method}
+
+
+def recording_mismatch(recording: Path, model: str, problem: str) -> Exception:
+    """An :class:`~wearpose.errors.InputFileError` for a recording the weights cannot read: the
+    file, the estimator's complaint, and what a fitting recording looks like."""
+    from wearpose.errors import InputFileError
+
+    s = weights_setting(model)
+    if not s:
+        return InputFileError(recording, problem, f"a recording made for {model}")
+    rate = f" at {s['fps']:g} Hz" if s.get("fps") else ""
+    sim = f"`wearpose simulate --kit {s['kit']}" + (f" --rate {s['fps']:g}`" if s.get("fps") else "`")
+    return InputFileError(recording, f"does not fit {model} ({problem})",
+                          f"a recording of kit {s['kit']}{rate} with sensors {', '.join(s['sensors'])} "
+                          f"(e.g. {sim}), or weights for this recording's sensors")
