@@ -57,6 +57,7 @@ from wearpose.physics._blas import limit_blas_threads
 from wearpose.physics.character import DFS_ORDER, PhysicsCharacter
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_SOLVED = proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
 _NO_CONTACT = ("left_ankle", "right_ankle", "neck", "left_wrist", "right_wrist", "left_collar", "right_collar", "pelvis")
 
 
@@ -303,6 +304,8 @@ class PhysicsOptimizer:
         self._rot_diag = (np.arange(3, self.nv), np.arange(3, self.nv))
         self._pos_joints = np.array(c.position_joints if c.dual_pd else (0,))
         self._qps: dict[tuple[int, int], Any] = {}
+        #: solves repeated with a fresh proxsuite object after the reused one failed (diagnostics)
+        self.qp_rebuilds = 0
         self.q: np.ndarray | None = None
         self.v = np.zeros(self.nv)
         self.ground_y = 0.0
@@ -384,16 +387,24 @@ class PhysicsOptimizer:
         forces (up to 1 kN off) within the tolerance test, so it is not used."""
         key = (H.shape[0], C.shape[0])
         qp = self._qps.get(key)
-        if qp is None:
-            qp = proxsuite.proxqp.dense.QP(H.shape[0], 0, C.shape[0])
-            qp.settings.eps_abs = self.config.eps_abs
-            qp.settings.eps_rel = 0.0
-            qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
-            qp.init(H, g, None, None, C, l, u)
-            self._qps[key] = qp
-        else:
+        if qp is not None:
             qp.update(H, g, None, None, C, l, u)
+            qp.solve()
+            if qp.results.info.status == _SOLVED:
+                return qp.results
+            # A reused object keeps the proximal/penalty parameters its earlier solves adapted;
+            # from those it occasionally declares a feasible problem primal infeasible (or runs out
+            # of iterations) and returns an iterate that violates the contact rows -- a foot then
+            # sinks through the ground (4.2 cm on a test running clip). A fresh object solves
+            # these in ~15 iterations: rebuild it.
+            self.qp_rebuilds += 1
+        qp = proxsuite.proxqp.dense.QP(H.shape[0], 0, C.shape[0])
+        qp.settings.eps_abs = self.config.eps_abs
+        qp.settings.eps_rel = 0.0
+        qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
+        qp.init(H, g, None, None, C, l, u)
         qp.solve()
+        self._qps[key] = qp
         return qp.results
 
     # ------------------------------------------------------------------ step
