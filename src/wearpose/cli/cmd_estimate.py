@@ -1,0 +1,73 @@
+"""``wearpose estimate``: a recording (your sensors, or a simulated one) -> an estimated motion file.
+
+Thin: :func:`wearpose.recording.load_recording` -> the estimator of the weights
+(:func:`wearpose.stream.estimator_factory`) -> ``estimate`` -> :meth:`PoseTrack.to_motion` ->
+:func:`wearpose.export.export_motion`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Optional
+
+import typer
+
+from wearpose.cli.app import _emit, _kv_table, app, console, err_console
+
+
+@app.command()
+def estimate(
+    recording: Path = typer.Argument(..., help="A wearpose recording (.npz, docs/formats.md) with the sensors of the "
+                                               "weights' kit at their trained rate."),
+    model: str = typer.Option(..., help="Shipped weights (e.g. empose12_cpu, pip_cpu, birae6_cpu, miposer_cpu) or a "
+                                        "checkpoint file."),
+    out: Path = typer.Option(..., help="Output motion: .bvh (SMPL skeleton, cm), .npz (AMASS-style) or .glb."),
+    threads: int = typer.Option(1, min=1, help="torch CPU threads."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+) -> None:
+    """Estimate the full-body motion of a recording with shipped weights or a checkpoint, and
+    write it as a motion file (`wearpose view OUT` plays a .bvh or .npz; Blender opens .bvh and .glb).
+
+    The recording must hold the sensors of the weights' kit (names as in the card) at the rate
+    they were trained at; a recording that does not fit is refused with the kit, the rate and a
+    command that makes a fitting one. EM methods estimate relative to the EM source (the
+    result's `frame` says so).
+
+    Example: wearpose estimate out/demo/recording.npz --model empose12_cpu --out out/estimate.bvh
+    """
+    import torch
+
+    from wearpose.cli.models import check_pose_weights, recording_mismatch
+    from wearpose.calibration import CalibrationError
+    from wearpose.errors import InputFileError, ShapeError, WearposeError
+    from wearpose.export import export_motion
+    from wearpose.recording import load_recording
+    from wearpose.stream import estimator_factory
+
+    if out.suffix not in (".bvh", ".npz", ".glb"):
+        raise typer.BadParameter(f"{out}: expected a .bvh, .npz or .glb file name", param_hint="--out")
+    check_pose_weights(model)
+    torch.set_num_threads(threads)
+    rec = load_recording(recording)
+    est = estimator_factory(model)()
+    try:
+        # A spinner on stderr: an hour of IMU data through PIP's physics takes minutes.
+        with err_console.status(f"estimating {rec.duration:.0f} s of {recording.name} with {model}"):
+            track = est.estimate(rec)
+    except ShapeError as exc:  # the estimator's check of the recording: missing sensors, another rate
+        raise recording_mismatch(recording, model, str(exc)) from None
+    except CalibrationError as exc:  # IMU methods calibrate an uncalibrated recording from a T-pose
+        raise InputFileError(recording, f"{model} could not calibrate it ({exc})",
+                             "a recording that starts with about 1 s of T-pose, one calibrated with `wearpose "
+                             "calibrate REC --method tpose --window START STOP`, or one whose meta says "
+                             "orientation_frame='segment' (orientations already of the body segments)") from None
+    body = getattr(est, "body", None)
+    if body is None:
+        raise WearposeError(f"{model}: the estimator has no body model to export on")
+    path = export_motion(track.to_motion(), out, body)
+    valid = float(track.valid.float().mean()) * 100 if track.num_frames else 0.0
+    res: dict[str, Any] = {"recording": str(recording), "model": model, "frames": track.num_frames,
+                           "fps": track.fps, "valid_pct": round(valid, 2),
+                           "frame": track.extras.get("frame", "world"),
+                           "translation": track.trans is not None, "written": str(path)}
+    _emit(res, as_json, lambda r: console.print(_kv_table(f"estimate of {recording.name} by {model}", r)))

@@ -1,0 +1,60 @@
+"""``wearpose estimate``: a recording + shipped weights -> a motion file."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from tests.cli.test_errors import _simulated, flat, run_main
+from wearpose.cli import app
+from wearpose.motion import load_motion
+from wearpose.recording import save_recording
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def em12_30(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("est") / "em12.npz"
+    save_recording(_simulated("em12", T=30, rate=30.0), path)
+    return path
+
+
+def test_help_has_an_example() -> None:
+    res = runner.invoke(app, ["estimate", "--help"])
+    assert res.exit_code == 0 and "Example: wearpose estimate" in flat(res.output)
+
+
+def test_estimate_writes_a_motion_that_reads_back(em12_30: Path, tmp_path: Path) -> None:
+    out = tmp_path / "pose.npz"
+    res = runner.invoke(app, ["estimate", str(em12_30), "--model", "empose12_cpu", "--out", str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    r = json.loads(res.stdout)
+    assert r["frames"] == 30 and r["fps"] == 30.0 and r["frame"] == "em_source" and r["written"] == str(out)
+    seq = load_motion(str(out))  # AMASS-style npz, as `wearpose export` writes
+    assert seq.num_frames == 30 and seq.pose.shape == (30, 24, 3, 3)
+
+
+def test_estimate_refuses_a_recording_of_another_kit(tmp_path: Path, capsys, monkeypatch) -> None:
+    imu = tmp_path / "imu.npz"
+    save_recording(_simulated("imu6", T=30, fps=60.0, rate=60.0), imu)
+    code, err = run_main(["estimate", str(imu), "--model", "empose12_cpu", "--out", str(tmp_path / "p.bvh")],
+                         capsys, monkeypatch)
+    assert code == 1 and "imu.npz: does not fit empose12_cpu" in err and "kit em12 at 30 Hz" in err
+    assert not (tmp_path / "p.bvh").exists()
+
+
+def test_imu_recording_without_a_tpose_says_how_to_calibrate(tmp_path: Path, capsys, monkeypatch) -> None:
+    imu = tmp_path / "imu.npz"
+    save_recording(_simulated("imu6", T=90, fps=60.0, rate=60.0), imu)  # moving from the first frame on
+    code, err = run_main(["estimate", str(imu), "--model", "pip_cpu", "--out", str(tmp_path / "p.bvh")],
+                         capsys, monkeypatch)
+    assert code == 1 and "imu.npz: pip_cpu could not calibrate it" in err and "--method tpose --window" in err
+
+
+def test_estimate_output_format_is_checked_first(em12_30: Path, tmp_path: Path) -> None:
+    res = runner.invoke(app, ["estimate", str(em12_30), "--model", "empose12_cpu", "--out", str(tmp_path / "p.fbx")])
+    assert res.exit_code == 2 and ".bvh, .npz or .glb" in flat(res.output)
