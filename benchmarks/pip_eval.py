@@ -9,7 +9,8 @@ Run::
 Rows: ``PIP`` (learned init, physics, dual PD), ``w/o learned init`` (the model trained without
 I_PL / I_VA, physics + dual PD), ``single PD`` (physics with one PD controller), ``w/o physics``
 (kinematics only, translation by integrating the estimated root velocity), and
-``w/o learned init, w/o physics``. Physics rows are skipped (and say so) when
+``w/o learned init, w/o physics``; a ``ground truth`` line carries the ZMP distance of the
+real motion (validates the metric). Physics rows are skipped (and say so) when
 :mod:`wearpose.physics` is not available. Protocol: :mod:`wearpose.estimators.pip.evaluate`.
 Prints the table and writes ``benchmarks/results/pip_table2.md`` and ``.json``. One torch thread.
 """
@@ -28,6 +29,7 @@ import torch
 COLUMNS = (("sip_error_deg", "SIP err [deg]"), ("angular_error_deg", "Ang err [deg]"),
            ("positional_error_cm", "Pos err [cm]"), ("mesh_error_cm", "Mesh err [cm]"),
            ("jitter_abs_km_s3", "Jitter abs [km/s^3]"), ("jitter_rel_km_s3", "Jitter rel [km/s^3]"),
+           ("zmp_distance_m", "ZMP dist [m]"),
            ("translation_error_cm", "Trans err (mean) [cm]"), ("final_drift_pct", "Final trans err / travelled [%]"))
 
 
@@ -42,9 +44,18 @@ def markdown(res: dict) -> str:
              "|---" * (len(COLUMNS) + 2) + "|"]
     for name, row in res["rows"].items():
         lines.append(f"| {name} | " + " | ".join(_fmt(row.get(k)) for k, _ in COLUMNS) + f" | {row['ms_per_frame']:.2f} |")
+    gt = res.get("ground_truth") or {}
+    if gt.get("zmp_distance_m") is not None:
+        lines.append("| ground truth | " + " | ".join(_fmt(gt.get(k)) if k == "zmp_distance_m" else "-" for k, _ in COLUMNS)
+                     + " | - |")
     for name, why in res.get("skipped", {}).items():
         lines.append(f"| {name} | skipped: {why} |" + " |" * len(COLUMNS))
-    lines += ["", "Translation error (cm) vs travelled distance (Fig. 3; mean over clips reaching the distance):", "",
+    lines += ["", "ZMP distance: mean distance (m) of the fictitious zero-moment point of the motion (Pinocchio, "
+              "centroidal momentum rate) to the convex hull of the feet in contact (20 cm squares; foot within 5 cm "
+              "of the ground and slower than 0.48 m/s), over the frames with such a foot (share: "
+              + ", ".join(f"{n} {r.get('zmp_frames_pct', float('nan')):.0f} %" for n, r in res["rows"].items())
+              + (f", ground truth {gt['zmp_frames_pct']:.0f} %" if gt else "") + "); `wearpose.physics.zmp_distance`.",
+              "", "Translation error (cm) vs travelled distance (Fig. 3; mean over clips reaching the distance):", "",
               "| variant | " + " | ".join(next(iter(res["rows"].values()))["translation_error_vs_distance_cm"]) + " |",
               "|---" * (1 + len(next(iter(res["rows"].values()))["translation_error_vs_distance_cm"])) + "|"]
     for name, row in res["rows"].items():

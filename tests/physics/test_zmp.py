@@ -103,6 +103,10 @@ def test_cart_table_analytic(char):
     edge = 0.5 * (rest[JOINT_INDEX["right_foot"], 0] + rest[JOINT_INDEX["right_ankle"], 0]) - 0.1
     assert np.allclose(res.distance[1:-1], edge + trans[1:-1, 0].numpy() - res.zmp[1:-1, 0], atol=1e-6)
     assert np.all(res.distance[1:-1] > 0.03)
+    # a wider stencil gives the same exact answer on this quadratic trajectory
+    wide = zmp_distance(char, pose, trans, FPS, contact_speed=np.inf, stride=2)
+    assert wide.frames_defined == T - 4
+    assert np.allclose(wide.zmp[2:-2, 0], res.zmp[2:-2, 0], atol=1e-6)
     # the 2 m/s foot speed of the same motion at the end means no contact there with the speed rule
     assert not zmp_distance(char, pose, trans, FPS).contacts[-1].any()
 

@@ -104,6 +104,8 @@ class PipEstimator(NetworkCheckpointing, Estimator):
         self.meta: dict[str, Any] = {}
         self._init: dict[str, torch.Tensor] | None = None
         self._optimizer: Any = None
+        #: extra :class:`~wearpose.physics.PhysicsConfig` fields for the optimizer (experiments)
+        self.physics_options: dict[str, Any] = {}
         self._char: tuple[tuple[float, ...], Any] | None = None
         #: online steps run the LSTMs in numpy (:class:`NumpyStepper`; same arithmetic, ~10x less
         #: per-frame overhead than torch at batch 1); False = torch
@@ -241,8 +243,9 @@ class PipEstimator(NetworkCheckpointing, Estimator):
         if self._char is None or self._char[0] != shape:
             self._char = (shape, PhysicsCharacter.from_body(self.body, self.betas))
             self._optimizer = None
-        if self._optimizer is None or self._optimizer.config.dual_pd != self.dual_pd:
-            self._optimizer = PhysicsOptimizer(self._char[1], PhysicsConfig(fps=self.fps, dual_pd=self.dual_pd))
+        cfg = PhysicsConfig(fps=self.fps, dual_pd=self.dual_pd, **self.physics_options)
+        if self._optimizer is None or self._optimizer.config != cfg:
+            self._optimizer = PhysicsOptimizer(self._char[1], cfg)
         return self._optimizer
 
     def _use_physics(self) -> bool:
