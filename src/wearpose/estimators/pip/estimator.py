@@ -243,9 +243,11 @@ class PipEstimator(NetworkCheckpointing, Estimator):
         if self._char is None or self._char[0] != shape:
             self._char = (shape, PhysicsCharacter.from_body(self.body, self.betas))
             self._optimizer = None
-        cfg = PhysicsConfig(fps=self.fps, dual_pd=self.dual_pd, **self.physics_options)
-        if self._optimizer is None or self._optimizer.config != cfg:
+        key = (self.dual_pd, repr(sorted(self.physics_options.items())))  # cheap per frame: no config built
+        if self._optimizer is None or getattr(self._optimizer, "_pip_key", None) != key:
+            cfg = PhysicsConfig(fps=self.fps, dual_pd=self.dual_pd, **self.physics_options)
             self._optimizer = PhysicsOptimizer(self._char[1], cfg)
+            self._optimizer._pip_key = key
         return self._optimizer
 
     def _use_physics(self) -> bool:
