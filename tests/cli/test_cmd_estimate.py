@@ -58,3 +58,28 @@ def test_imu_recording_without_a_tpose_says_how_to_calibrate(tmp_path: Path, cap
 def test_estimate_output_format_is_checked_first(em12_30: Path, tmp_path: Path) -> None:
     res = runner.invoke(app, ["estimate", str(em12_30), "--model", "empose12_cpu", "--out", str(tmp_path / "p.fbx")])
     assert res.exit_code == 2 and ".bvh, .npz or .glb" in flat(res.output)
+
+
+def test_rotation_only_estimator_exports_on_the_default_body(tmp_path: Path) -> None:
+    """BiRAE keeps no body model of its own (it used to fail: 'no body model to export on')."""
+    mimu = tmp_path / "mimu.npz"
+    save_recording(_simulated("mimu6", T=30, fps=60.0, rate=60.0), mimu)
+    out = tmp_path / "b.bvh"
+    res = runner.invoke(app, ["estimate", str(mimu), "--model", "birae6_cpu", "--out", str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["frames"] == 30 and out.stat().st_size > 0
+
+
+def test_library_warnings_are_one_line(tmp_path: Path, capsys, monkeypatch) -> None:
+    import warnings
+
+    from wearpose.errors import ConfigError
+
+    def stop(*a, **k):
+        warnings.warn("MI-Poser: no calibration", UserWarning)
+        raise ConfigError("stop here")
+
+    monkeypatch.setattr("wearpose.recording.load_recording", stop)
+    code, err = run_main(["estimate", "x.npz", "--model", "empose12_cpu", "--out", str(tmp_path / "p.bvh")],
+                         capsys, monkeypatch)
+    assert code == 1 and "warning: MI-Poser: no calibration" in err and "UserWarning" not in err

@@ -31,6 +31,7 @@ def run_main(args: list[str], capsys, monkeypatch) -> tuple[int, str]:
     monkeypatch.setattr(sys, "argv", ["wearpose", *args])
     monkeypatch.setattr(app_module.err_console, "width", 10_000)  # one line per message, no wrapping
     monkeypatch.delenv("WEARPOSE_DEBUG", raising=False)
+    monkeypatch.setattr(warnings, "showwarning", warnings.showwarning)  # main() replaces it; restored after
     with pytest.raises(SystemExit) as ex:
         main()
     err = capsys.readouterr().err
@@ -261,3 +262,15 @@ def test_data_prepare_of_only_broken_files_fails(tmp_path: Path) -> None:
     res = runner.invoke(app, ["data", "prepare", str(tmp_path / "mocap"), "--cache", str(tmp_path / "store"),
                               "--workers", "1"])
     assert res.exit_code == 1 and "no MOTION section" in flat(res.output)
+
+
+def test_replay_passes_on_the_servers_rate_warning(em_file: Path, monkeypatch) -> None:
+    import wearpose.stream as stream
+
+    async def fake_replay(rec, url, **kw):
+        return {"ready": {"note": "the estimator was trained at 30 Hz but receives 120 Hz (stream 120 Hz, stride 1)"}}
+
+    monkeypatch.setattr(stream, "replay", fake_replay)
+    res = runner.invoke(app, ["stream", "replay", str(em_file), "--json"])
+    assert res.exit_code == 0, res.output
+    assert "trained at 30 Hz but receives 120 Hz" in flat(res.output) and "--stride auto" in flat(res.output)

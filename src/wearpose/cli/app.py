@@ -229,9 +229,18 @@ def error_text(exc: BaseException) -> str:
     return str(exc)
 
 
+def _show_warning(message: Any, category: Any, filename: str, lineno: int, file: Any = None, line: Any = None) -> None:
+    """Library warnings as one 'warning:' line (not Python's 'path:line: UserWarning' form)."""
+    err_console.print(f"[yellow]warning:[/] {escape(str(message))}")
+
+
 def main() -> None:
     """Console entry point: turns library errors and file-system errors into one clear line and
     exit code 1 (no traceback; set WEARPOSE_DEBUG=1 to get one)."""
+    import warnings
+
+    if not os.environ.get("WEARPOSE_DEBUG"):
+        warnings.showwarning = _show_warning
     try:
         app()
     except (WearposeError, OSError) as exc:

@@ -39,7 +39,7 @@ def estimate(
 
     from wearpose.cli.models import check_pose_weights, recording_mismatch
     from wearpose.calibration import CalibrationError
-    from wearpose.errors import InputFileError, ShapeError, WearposeError
+    from wearpose.errors import InputFileError, ShapeError
     from wearpose.export import export_motion
     from wearpose.recording import load_recording
     from wearpose.stream import estimator_factory
@@ -62,8 +62,10 @@ def estimate(
                              "calibrate REC --method tpose --window START STOP`, or one whose meta says "
                              "orientation_frame='segment' (orientations already of the body segments)") from None
     body = getattr(est, "body", None)
-    if body is None:
-        raise WearposeError(f"{model}: the estimator has no body model to export on")
+    if body is None:  # rotation-only estimators (BiRAE) keep no body model: export on the default asset
+        from wearpose.body import BodyModel
+
+        body = BodyModel()
     path = export_motion(track.to_motion(), out, body)
     valid = float(track.valid.float().mean()) * 100 if track.num_frames else 0.0
     res: dict[str, Any] = {"recording": str(recording), "model": model, "frames": track.num_frames,

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
@@ -132,6 +133,10 @@ def stream_replay(
         console.print(t)
 
     _emit(res, as_json, render)
+    note = (res.get("ready") or {}).get("note")
+    if note:  # e.g. a 120 Hz stream into weights trained at 30 Hz on a server started without --stride auto
+        err_console.print(f"[yellow]warning[/]: the server says: {escape(note)}. Start it with --stride auto "
+                          f"or stream at the estimator's rate.")
 
 
 @app.command("view-live")
