@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import shlex
 import sys
 import time
@@ -35,6 +36,43 @@ COLUMNS = (("sip_error_deg", "SIP err [deg]"), ("angular_error_deg", "Ang err [d
 
 def _fmt(v) -> str:
     return "-" if v is None else f"{v:.2f}"
+
+
+def motion_class(clip: str) -> str:
+    """Motion class of a corpus clip id: Bandai's motion label (``dataset-2_<motion>_<style>_<n>``),
+    else the source and its first folder (``cmu_daz martial``)."""
+    parts = clip.split("/")
+    if parts[0] == "bandai":
+        m = re.match(r"dataset-\d+_([a-z-]+)_", parts[-1])
+        return "bandai " + (m.group(1) if m else parts[-1])
+    return " ".join(parts[:2])
+
+
+def class_table(res: dict) -> list[str]:
+    """Per motion class: clips, frames, frame-weighted mean translation error [cm] and mean final
+    error / travelled [%] (clips travelling > 1 m) of every variant."""
+    rows = {n: r["per_clip"] for n, r in res["rows"].items() if r.get("per_clip")}
+    if not rows:
+        return []
+    agg: dict[str, dict[str, list[float]]] = {}
+    for n, pcs in rows.items():
+        for c in pcs:
+            a = agg.setdefault(motion_class(c["clip"]), {}).setdefault(n, [0.0, 0, 0, 0.0, 0])
+            a[0] += c["translation_error_cm"] * c["frames"]
+            a[1] += c["frames"]
+            a[2] += 1
+            if c["travelled_m"] > 1.0:
+                a[3] += c["final_error_m"] / c["travelled_m"] * 100
+                a[4] += 1
+    names = list(rows)
+    out = ["", "Translation error by motion class (mean [cm] / final error per travelled distance [%]):", "",
+           "| class | clips | frames | " + " | ".join(names) + " |", "|---" * (3 + len(names)) + "|"]
+    for k in sorted(agg, key=lambda k: -next(iter(agg[k].values()))[1]):
+        a = agg[k]
+        first = a[names[0]]
+        cells = [f"{a[n][0] / a[n][1]:.1f} / " + (f"{a[n][3] / a[n][4]:.0f}" if a[n][4] else "-") for n in names]
+        out.append(f"| {k} | {first[2]} | {first[1]} | " + " | ".join(cells) + " |")
+    return out
 
 
 def markdown(res: dict) -> str:
@@ -62,12 +100,17 @@ def markdown(res: dict) -> str:
         lines.append(f"| {name} | " + " | ".join(_fmt(v) for v in row["translation_error_vs_distance_cm"].values()) + " |")
     first = next(iter(res["rows"].values()))
     lines.append("| clips reaching | " + " | ".join(str(v) for v in first["clips_reaching_m"].values()) + " |")
+    lines += class_table(res)
     phys = {n: r for n, r in res["rows"].items() if "qp_ms" in r}
     if phys:
-        lines += ["", "Physics: QP solve time and penetration:", "", "| variant | QP median [ms] | QP p99 [ms] | max penetration [cm] |",
-                  "|---|---|---|---|"]
+        lines += ["", "Physics: QP solve time and penetration:", "",
+                  "| variant | QP median [ms] | QP p99 [ms] | max penetration [cm] | where (clip, frame, SMPL joint) |",
+                  "|---|---|---|---|---|"]
         for n, r in phys.items():
-            lines.append(f"| {n} | {r['qp_ms']['median']:.2f} | {r['qp_ms']['p99']:.2f} | {_fmt(r.get('max_penetration_cm'))} |")
+            deep = max(r.get("per_clip") or [{}], key=lambda c: c.get("max_penetration_m", -1.0))
+            at = deep.get("penetration_at") or {}
+            where = f"{deep['clip']}, {at.get('frame')}, {at.get('joint')}" if at else "-"
+            lines.append(f"| {n} | {r['qp_ms']['median']:.2f} | {r['qp_ms']['p99']:.2f} | {_fmt(r.get('max_penetration_cm'))} | {where} |")
     if res.get("sitting"):
         lines += ["", "Long sitting (Fig. 6 / Fig. 9; a sit-down, or starting seated, then still seated input, kinematics "
                   "only; angular error vs the seated pose, root-relative, all joints and upper legs; drift = mean joint "
