@@ -291,3 +291,20 @@ def test_reused_qp_matches_a_fresh_solve(char):
         ref = proxsuite.proxqp.dense.solve(H, g, None, None, C, l, u, eps_abs=1e-9, eps_rel=0.0).x
         np.testing.assert_allclose(x, ref, atol=1e-4)
     assert len(opt._qps) == 1
+
+
+def test_failed_reused_qp_is_solved_again_fresh(char):
+    # a reused proxsuite object that stops early (here: 1 iteration allowed) must not hand back
+    # its iterate: the frame is solved again with a fresh object
+    opt = PhysicsOptimizer(char, PhysicsConfig())
+    opt.reset(EYE, torch.zeros(3))
+    opt.step(EYE, torch.zeros(NUM_JOINTS, 3), torch.ones(2))
+    assert opt.qp_rebuilds == 0 and len(opt._qps) == 1
+    (qp,) = opt._qps.values()
+    qp.settings.max_iter = 1
+    st = opt.step(EYE, torch.zeros(NUM_JOINTS, 3), torch.ones(2))
+    assert opt.qp_rebuilds == 1
+    assert st.qp_status == "PROXQP_SOLVED"
+    assert next(iter(opt._qps.values())) is not qp
+    # standing: the fresh solve carries the body weight on the feet
+    assert abs(float(st.grf[:, 1].sum()) / (char.mass_kg * G) - 1.0) < 0.05

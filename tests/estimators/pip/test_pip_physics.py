@@ -75,3 +75,40 @@ def test_demo_on_a_test_clip(body, tmp_path) -> None:
     m = res["metrics"]
     assert {"sip_error_deg", "mesh_error_cm", "jitter_abs_km_s3"} <= set(m)
     assert all(k.endswith(("_deg", "_cm", "_km_s3", "_pct", "_nm", "_kg")) for k in m)
+
+
+def test_physics_options_reach_the_optimizer(est) -> None:
+    est.physics_options = {"contact_no_lift": False}
+    assert est._physics_optimizer().config.contact_no_lift is False
+    est.physics_options = {}
+    assert est._physics_optimizer().config.contact_no_lift is True
+
+
+def test_evaluate_variants_per_clip_and_zmp(body) -> None:
+    from wearpose.estimators.pip.evaluate import evaluate_variants
+    from wearpose.motion import MotionSequence
+
+    T = 40  # a person standing still, 4 frames trimmed at each end
+    still = MotionSequence(torch.eye(3).repeat(T, 24, 1, 1), torch.zeros(10), torch.zeros(T, 3) + torch.tensor([0, 0.9, 0]),
+                           60.0)
+
+    class Store:
+        def clips(self, split: str) -> list[str]:
+            return ["synthetic/still"]
+
+        def load(self, cid: str) -> MotionSequence:
+            return still
+
+    torch.manual_seed(0)
+    v = {"phys": PipEstimator(PipConfig.preset("tiny"), body=body, physics=True),
+         "kin": PipEstimator(PipConfig.preset("tiny"), body=body, physics=False)}
+    res = evaluate_variants(v, "test", store=Store(), noise="none")
+    gt = res["ground_truth"]
+    assert gt["zmp_distance_m"] == 0.0 and gt["zmp_frames_pct"] > 80  # standing still is balanced
+    for name, row in res["rows"].items():
+        (clip,) = row["per_clip"]
+        assert clip["clip"] == "synthetic/still" and clip["frames"] == T - 8
+        assert clip["translation_error_cm"] >= 0 and "zmp_distance_m" in row
+    at = res["rows"]["phys"]["per_clip"][0]["penetration_at"]
+    assert 0 <= at["frame"] < T - 8 and at["joint"] in range(24)
+    assert "penetration_at" not in res["rows"]["kin"]["per_clip"][0]
