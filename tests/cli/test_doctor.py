@@ -52,3 +52,23 @@ def test_cli_json_report(monkeypatch: pytest.MonkeyPatch) -> None:
     assert all(c["status"] in ("ok", "warn", "fail") for c in out["checks"])
     assert all(c["hint"] for c in out["checks"] if c["status"] != "ok")  # every problem says what to do
     assert "Example: wearpose doctor" in CliRunner().invoke(app, ["doctor", "--help"]).output
+
+
+def test_every_shipped_weight_passes_including_the_forecaster() -> None:
+    """nbeats_cpu (MI-Poser's interference forecaster) is not an estimator checkpoint; doctor used
+    to report it as damaged, so a fresh clone failed `wearpose doctor`."""
+    from wearpose.diagnostics import check_weights
+    from wearpose.weights import list_weights
+
+    checks = {c.name: c for c in check_weights()}
+    assert "nbeats_cpu" in list_weights() and set(list_weights()) <= set(checks)
+    assert all(c.status == "ok" for c in checks.values()), [c for c in checks.values() if c.status != "ok"]
+
+
+def test_table_keeps_bracketed_details(monkeypatch: pytest.MonkeyPatch) -> None:
+    import wearpose.diagnostics as diag
+
+    bad = Check("weights", "x_cpu", "fail", "x_cpu.pt [format]: not a wearpose checkpoint", "re-install [x]")
+    monkeypatch.setattr(diag, "run_checks", lambda *a, **k: [bad])
+    res = CliRunner().invoke(app, ["doctor"], env={"COLUMNS": "200"})
+    assert res.exit_code == 1 and "[format]" in res.output and "[x]" in res.output

@@ -274,3 +274,10 @@ def test_replay_passes_on_the_servers_rate_warning(em_file: Path, monkeypatch) -
     res = runner.invoke(app, ["stream", "replay", str(em_file), "--json"])
     assert res.exit_code == 0, res.output
     assert "trained at 30 Hz but receives 120 Hz" in flat(res.output) and "--stride auto" in flat(res.output)
+
+
+def test_clip_id_without_a_corpus_says_to_set_wearpose_data(tmp_path: Path, capsys, monkeypatch) -> None:
+    monkeypatch.setenv("WEARPOSE_DATA", str(tmp_path / "no_corpus"))
+    monkeypatch.setenv("WEARPOSE_CACHE", str(tmp_path / "no_store"))
+    code, err = run_main(["view", "cmu_daz/05/05_01"], capsys, monkeypatch)
+    assert code == 1 and "cmu_daz/05/05_01: no such motion" in err and "set WEARPOSE_DATA" in err

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console
@@ -32,7 +33,8 @@ def doctor(
         for col in ("area", "check", "status", "found", "what to do"):
             t.add_column(col, overflow="fold")
         for c in r["checks"]:
-            t.add_row(c["area"], c["name"], f"[{_STYLE[c['status']]}]{c['status']}[/]", c["detail"], c["hint"])
+            t.add_row(c["area"], c["name"], f"[{_STYLE[c['status']]}]{c['status']}[/]", escape(c["detail"]),
+                      escape(c["hint"]))  # details quote errors whose [field] rich would take for markup
         console.print(t)
         n = r["counts"]
         console.print(f"{n['ok']} ok, {n['warn']} warnings (optional), {n['fail']} failures")

@@ -67,5 +67,6 @@ def load_motion(spec: str | Path, cache: str | Path | None = None, rest_joints: 
     for cand in (root / f"{spec}.bvh.gz", root / f"{spec}.bvh", root / str(spec)):
         if cand.is_file():
             return load_motion(cand, rest_joints=rest_joints)
-    tried.append(f"corpus file under {root}")
+    tried.append(f"corpus file under {root}" if root.is_dir() else
+                 f"the motion corpus (not found: set WEARPOSE_DATA to the folder holding manifest.csv)")
     raise InputFileError(path, "no such motion", "a .bvh/.bvh.gz/.npz file or a clip id; tried: " + "; ".join(tried))
