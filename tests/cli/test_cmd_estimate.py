@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 from tests.cli.test_errors import _simulated, flat, run_main
 from wearpose.cli import app
 from wearpose.motion import load_motion
-from wearpose.recording import save_recording
+from wearpose.recording import Recording, save_recording
 
 runner = CliRunner()
 
@@ -83,3 +83,37 @@ def test_library_warnings_are_one_line(tmp_path: Path, capsys, monkeypatch) -> N
     code, err = run_main(["estimate", "x.npz", "--model", "empose12_cpu", "--out", str(tmp_path / "p.bvh")],
                          capsys, monkeypatch)
     assert code == 1 and "warning: MI-Poser: no calibration" in err and "UserWarning" not in err
+
+
+def _imu_with_tpose(hold_s: float, mark: bool) -> Recording:
+    """imu6 at 60 Hz on a moving motion that opens with a ``hold_s`` T-pose (site orientations,
+    as `wearpose simulate` writes them), the window marked in meta or not."""
+    import warnings
+
+    import torch
+
+    from tests.sensors.sensor_testutils import smooth_motion
+    from wearpose.body import BodyModel
+    from wearpose.recording import CALIBRATION_WINDOW_KEY, Recording, prepend_tpose
+    from wearpose.sensors import simulate
+
+    m, window = prepend_tpose(smooth_motion(T=60, fps=60.0, seed=1, dtype=torch.float32), hold_s, blend_s=0.25)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = simulate(m, "imu6", BodyModel(), seed=2, noise="none", rate=60.0)
+    return Recording.from_simulation(res, m, meta={CALIBRATION_WINDOW_KEY: window} if mark else {})
+
+
+def test_imu_recording_with_a_marked_tpose_is_estimated_by_pip(tmp_path: Path, capsys, monkeypatch) -> None:
+    """`simulate --tpose` marks its hold; estimate calibrates PIP on that window. A 0.6 s hold
+    is shorter than PIP's default 1 s window, so without the mark the same file is refused."""
+    marked, unmarked = tmp_path / "marked.npz", tmp_path / "unmarked.npz"
+    save_recording(_imu_with_tpose(0.6, mark=True), marked)
+    save_recording(_imu_with_tpose(0.6, mark=False), unmarked)
+    out = tmp_path / "p.npz"
+    res = runner.invoke(app, ["estimate", str(marked), "--model", "pip_cpu", "--out", str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["frames"] == 60 + 36 + 15 and load_motion(str(out)).num_frames == 111
+    code, err = run_main(["estimate", str(unmarked), "--model", "pip_cpu", "--out", str(tmp_path / "q.npz")],
+                         capsys, monkeypatch)
+    assert code == 1 and "could not calibrate" in err

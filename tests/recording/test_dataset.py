@@ -115,3 +115,26 @@ def test_exclude_noncommercial_and_filters(mini, tmp_path):
         simulate_corpus(tmp_path / "out2", "imu6", "train", cache_dir=cache, source="no-such-source", progress=False)
     with pytest.raises(ConfigError, match="noise"):
         simulate_corpus(tmp_path / "out3", "imu6", cache_dir=cache, noise="loud", progress=False)
+
+
+@pytest.mark.corpus
+def test_imu6_clips_open_with_a_marked_tpose_by_default(mini, em_set, tmp_path):
+    """imu6 sets hold 1 s of T-pose before each clip (PIP calibrates from it); --tpose 0 and
+    other kits do not, and their settings (hence existing sets' keys) carry no tpose entry."""
+    from wearpose.motion import CorpusStore
+    from wearpose.recording import calibration_window
+
+    cache, ids = mini
+    res = simulate_corpus(tmp_path / "imu", "imu6", None, cache_dir=cache, limit=1, workers=1, progress=False)
+    assert res["settings"]["tpose_s"] == 1.0
+    row = load_index(tmp_path / "imu")["clips"][ids[0]]
+    rec = load_recording(tmp_path / "imu" / row["file"])
+    clip = CorpusStore(cache).load(ids[0])
+    a, b = calibration_window(rec)
+    assert 0 < a < b < 1.0 and rec.meta["calibration_window"]["prefix_s"] == pytest.approx(1.5, abs=1.0 / clip.fps)
+    assert rec.ground_truth.num_frames == clip.num_frames + round(1.5 * clip.fps)
+    assert "tpose_s" not in em_set[1]["settings"]
+    res0 = simulate_corpus(tmp_path / "imu0", "imu6", None, cache_dir=cache, limit=1, workers=1, progress=False, tpose=0)
+    rec0 = load_recording(tmp_path / "imu0" / row["file"])
+    assert "tpose_s" not in res0["settings"] and calibration_window(rec0) is None
+    assert rec0.ground_truth.num_frames == clip.num_frames

@@ -41,7 +41,7 @@ def estimate(
     from wearpose.calibration import CalibrationError
     from wearpose.errors import InputFileError, ShapeError
     from wearpose.export import export_motion
-    from wearpose.recording import load_recording
+    from wearpose.recording import load_recording, use_calibration_window
     from wearpose.stream import estimator_factory
 
     if out.suffix not in (".bvh", ".npz", ".glb"):
@@ -50,6 +50,7 @@ def estimate(
     torch.set_num_threads(threads)
     rec = load_recording(recording)
     est = estimator_factory(model)()
+    use_calibration_window(est, rec)  # a recording that marks its T-pose (simulate --tpose) calibrates from it
     try:
         # A spinner on stderr: an hour of IMU data through PIP's physics takes minutes.
         with err_console.status(f"estimating {rec.duration:.0f} s of {recording.name} with {model}"):

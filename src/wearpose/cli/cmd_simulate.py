@@ -37,6 +37,10 @@ def simulate(
     executor: str = typer.Option("local", help="local (this machine's processes) or ray (a Ray cluster; "
                                                "pip install 'wearpose[ray]'; corpus and --out on a shared filesystem)."),
     ray_address: Optional[str] = typer.Option(None, help="Ray cluster address (default $RAY_ADDRESS, else a local Ray)."),
+    tpose: Optional[float] = typer.Option(None, "--tpose", metavar="SECONDS",
+                                          help="Hold a calibration T-pose this long before each clip (marked in the "
+                                               "recording's meta; IMU estimators such as pip_cpu calibrate from it). "
+                                               "Default: 1 for imu6, 0 (none) for the other kits."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (progress goes to stderr)."),
 ) -> None:
     """Simulate a sensor kit on every clip of a corpus split: a recording set for training or tests.
@@ -47,6 +51,7 @@ def simulate(
     (exit code 1 if any clip failed). Run `wearpose data prepare` first.
 
     Example: wearpose simulate --kit em12 --split train --out data/sim/em12-train --seed 0
+    IMUs (each clip opens with 1 s of T-pose for the calibration): wearpose simulate --kit imu6 --split test --out sims/
     On a Ray cluster: wearpose simulate --kit imu6 --split all --out /shared/sim/imu6 --executor ray --ray-address auto
     """
     from wearpose.recording.dataset import simulate_corpus
@@ -54,7 +59,8 @@ def simulate(
     res = simulate_corpus(out, kit, None if split == "all" else split, cache_dir=cache, source=source or None,
                           licence=licence or None, include_nc=include_nc, seed=seed, noise=noise, offsets=offsets,
                           rate=rate, limit=limit, workers=workers, source_pose=source_pose, body=body,
-                          overwrite=overwrite, progress=True, executor=executor, ray_address=ray_address)
+                          overwrite=overwrite, progress=True, executor=executor, ray_address=ray_address,
+                          tpose=tpose)
 
     def render(r: dict[str, Any]) -> None:
         t = Table(title=f"simulated {r['kit']} ({r['split'] or 'all splits'}) -> {r['out']}", show_header=False)

@@ -95,11 +95,21 @@ def is_noncommercial(licence: str | None) -> bool:
 
 
 def _settings(kit: str, rate: float | None, noise: str, offsets: str, source_pose: bool, body_asset: str,
-              base_seed: int, include_nc: bool) -> dict[str, Any]:
+              base_seed: int, include_nc: bool, tpose: float = 0.0) -> dict[str, Any]:
     # include_nc is a setting (not a filter like split): a set that promises "no NonCommercial
     # clips" must not silently accumulate them from an earlier run into the same directory.
-    return {"generator": GENERATOR_VERSION, "kit": kit, "rate": rate, "noise": noise, "offsets": offsets,
-            "source_pose": source_pose, "body_asset": body_asset, "base_seed": int(base_seed), "include_nc": include_nc}
+    s = {"generator": GENERATOR_VERSION, "kit": kit, "rate": rate, "noise": noise, "offsets": offsets,
+         "source_pose": source_pose, "body_asset": body_asset, "base_seed": int(base_seed), "include_nc": include_nc}
+    if tpose:  # only when used, so sets made before the option keep their settings key
+        s["tpose_s"] = float(tpose)
+    return s
+
+
+def default_tpose(kit: Any) -> float:
+    """Seconds of calibration T-pose ``simulate`` prepends by default: 1 s for kits of plain IMUs
+    only (``imu6``: their estimator, PIP, calibrates sensor-to-bone from a T-pose, PIP Sec. 3.1),
+    0 for the others (EM and VIO measure poses; MI-Poser builds its own prefix)."""
+    return 1.0 if all(s.kind == "imu" for s in kit.sensors) else 0.0
 
 
 def _key(settings: dict[str, Any]) -> str:
@@ -145,12 +155,17 @@ def _simulate_one(job: dict[str, Any]) -> dict[str, Any]:
         from wearpose.sensors import simulate
 
         motion = MotionSequence.load(job["motion_file"])
+        extra: dict[str, Any] = {}
+        if job.get("tpose"):
+            from wearpose.recording.tpose import CALIBRATION_WINDOW_KEY, prepend_tpose
+
+            motion, extra[CALIBRATION_WINDOW_KEY] = prepend_tpose(motion, job["tpose"])
         with torch.no_grad():
             res = simulate(motion, job["kit"], _BODY, seed=job["seed"], noise=job["noise"], rate=job["rate"],
                            offsets="random" if job["offsets"] == "random" else None)
         # save_recording writes atomically: an interrupted run never leaves a half-written file.
         rec = recording_from_simulation(res, motion, job["subject"], source_pose=job["source_pose"],
-                                        meta={"clip_id": job["id"], "clip_seed": job["seed"], "base_seed": job["base_seed"]})
+                                        meta={"clip_id": job["id"], "clip_seed": job["seed"], "base_seed": job["base_seed"], **extra})
         out = Path(job["out"])
         save_recording(rec, out)
         frames = max(s.num_frames for s in rec.sensors)
@@ -177,7 +192,7 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
                     limit: int | None = None, workers: int | None = None, source_pose: bool = True,
                     body: str | None = None, overwrite: bool = False, progress: bool = True,
                     clip_ids: Sequence[str] | None = None, executor: str = "local",
-                    ray_address: str | None = None) -> dict[str, Any]:
+                    ray_address: str | None = None, tpose: float | None = None) -> dict[str, Any]:
     """Simulate ``kit`` on the prepared corpus clips and write one recording per clip + an index.
 
     Args:
@@ -210,6 +225,10 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
             filesystem every node sees at the same path (workers read clips and write recordings
             themselves). Needs the optional extra: ``pip install "wearpose[ray]"``.
         ray_address: Ray cluster address (``"auto"``, ``"ray://head:10001"``...).
+        tpose: seconds of calibration T-pose held before each clip (0: none; ``None``:
+            :func:`default_tpose` of the kit, 1 s for ``imu6``). The recording's
+            ``meta["calibration_window"]`` marks it (:mod:`wearpose.recording.tpose`) and its
+            ground truth includes it; the index's ``motion_frames``/``seconds`` count it too.
 
     Returns:
         ``{"out", "index", "selected", "simulated", "skipped", "failed", "excluded_nc",
@@ -237,6 +256,10 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         raise ConfigError(f"limit must be >= 1, got {limit!r}")
     if executor not in EXECUTORS:
         raise ConfigError(f"executor must be one of {EXECUTORS}, got {executor!r}")
+    if tpose is None:
+        tpose = default_tpose(kit_obj)
+    if not (tpose == 0 or tpose >= 0.1):
+        raise ConfigError(f"tpose must be 0 (no T-pose) or >= 0.1 s, got {tpose!r}")
     ray = _import_ray() if executor == "ray" else None
     try:
         store = CorpusStore(cache_dir)
@@ -261,7 +284,7 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
 
     body_id = _body_asset_id(body)
     settings = _settings(kit_obj.name, None if rate is None else float(rate), noise, offsets, source_pose, body_id, seed,
-                         include_nc)
+                         include_nc, tpose)
     key = _key(settings)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -298,7 +321,7 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         s = clip_seed(seed, cid)
         todo.append({"id": cid, "motion_file": str(store.root / e["file"]), "out": str(f), "seed": s, "base_seed": int(seed),
                      "kit": kit_obj.name, "rate": rate, "noise": noise, "offsets": offsets, "source_pose": source_pose,
-                     "subject": {"id": f"{e['source']}/{e['subject']}", "note": subject_note},
+                     "tpose": float(tpose), "subject": {"id": f"{e['source']}/{e['subject']}", "note": subject_note},
                      "_row": {"file": rel, "seed": s, "kit": kit_obj.name, "split": e["split"], "source": e["source"],
                               "subject": e["subject"], "licence": e.get("licence"),
                               "noncommercial": is_noncommercial(e.get("licence")), "motion_stamp": e.get("stamp")}})

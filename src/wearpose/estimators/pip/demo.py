@@ -1,6 +1,11 @@
 """``wearpose demo --kit imu6``: a clip -> 6 simulated IMUs -> PIP (kinematics + physics) ->
 metrics, physical properties and a page with the estimate beside the ground truth.
 
+The simulated recording is what ``wearpose simulate --kit imu6`` writes: a 1 s calibration
+T-pose before the clip (marked in ``meta["calibration_window"]``, :mod:`wearpose.recording.tpose`),
+IMUs on the skin; the estimator calibrates on that window and runs on the recording, as
+``wearpose estimate`` does. Metrics cover the clip (not the T-pose), in the calibrated world.
+
 Also :func:`physical_plots`: ground reaction forces of both feet (with body weight) and arm
 joint torques over time, as PNG figures a person can look at (matplotlib, if installed).
 """
@@ -9,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +24,8 @@ from wearpose.viewer.figures import pyplot, save_figure
 
 #: Gravity magnitude used for "body weight", m/s^2.
 G = 9.81
+#: Seconds of calibration T-pose before the clip (PIP calibrates sensor-to-bone from 1 s, Sec. 3.1).
+TPOSE_S = 1.0
 
 
 def physical_summary(track: Any, mass_kg: float) -> dict[str, float]:
@@ -81,11 +89,14 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
         ``{"clip", "frames", "fps", "weights", "html", "title", "metrics": {...}}``.
     """
     from wearpose.estimators.empose.data import clip_seed
-    from wearpose.estimators.pip.data import simulate_clip
+    from wearpose.estimators.miposer.data import heading
+    from wearpose.estimators.pip.data import EDGE_FRAMES
     from wearpose.estimators.pip.estimator import PipEstimator
     from wearpose.evaluate import compute_all
-    from wearpose.motion import load_motion
-    from wearpose.recording import Recording
+    from wearpose.geometry import rotation_y
+    from wearpose.motion import load_motion, resample
+    from wearpose.recording import CALIBRATION_WINDOW_KEY, Recording, prepend_tpose, use_calibration_window
+    from wearpose.sensors import simulate
     from wearpose.viewer import write_html
 
     out = Path(out)
@@ -99,17 +110,42 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
     est = PipEstimator.load(path, physics=physics)
     body = est.body
     seq = load_motion(clip, rest_joints=body.rest_joints())
+    if abs(seq.fps - est.fps) > 1e-9:
+        seq = resample(seq, est.fps)
     seq = seq.slice(0, min(seq.num_frames, int(round(max_seconds * seq.fps))))
-    r = simulate_clip(seq, est.config, body, clip_seed(clip, seed, "demo"), noise="default")
-    gt = r["motion"]
-    Recording.from_simulation(r["sim"], None, meta={"orientation_frame": "segment", "clip": clip}).save(out / "recording.npz")
-    est.set_initial_state(r["pose"][0], r["vel"][0].view(24, 3) * est.config.vel_scale, r["trans"][0], r["betas"])
-    track = est.estimate_tensors(r["acc"], r["ori"])
+    # What `wearpose simulate --kit imu6` writes and a wearer does: a calibration T-pose first,
+    # IMUs on the skin (sensor-to-bone offsets unknown to PIP), the hold marked in the meta.
+    full, window = prepend_tpose(seq, TPOSE_S)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the kit's documented site substitutions warn per call
+        sim = simulate(full, est.config.kit, body, seed=clip_seed(clip, seed, "demo"), noise="default", rate=est.fps)
+    rec = Recording.from_simulation(sim, full, meta={CALIBRATION_WINDOW_KEY: window, "clip": clip})
+    rec.save(out / "recording.npz")
+    # PIP's known initial state (Sec. 3.1.2) is the calibration pose: a T-pose at rest at the
+    # origin, facing +Z; the subject's shape is known, as in PIP.
+    est.set_initial_state(betas=seq.betas)
+    use_calibration_window(est, rec)
+    track = est.estimate(rec)
+    # Ground truth in the calibrated world: the T-pose faced the clip's first heading and the
+    # estimate starts at the origin, so rotate by minus that heading about +Y around the start.
+    R = rotation_y(-heading(full.pose[0, 0].double())).float()
+    gt_pose = full.pose.float().clone()
+    gt_pose[:, 0] = R @ gt_pose[:, 0]
+    gt_trans = (full.trans.float() - full.trans[0].float()) @ R.T
+    gt_betas = full.betas.float()
+    # Metrics on the clip only (not the T-pose prefix), without its first/last EDGE_FRAMES
+    # (many clips start or end with a jump; PIP's evaluation trims the same frames).
+    prefix = int(round(window["prefix_s"] * est.fps))
+    n = min(track.num_frames, full.num_frames)
+    ev = slice(min(prefix + EDGE_FRAMES, n - 1), max(n - EDGE_FRAMES, min(prefix + EDGE_FRAMES, n - 1) + 1))
     with torch.no_grad():
-        p, g = body(track.local_rot, track.betas, track.trans), body(r["pose"], r["betas"], r["trans"])
-    m = compute_all({"local_rot": track.local_rot, "joints": p.joints, "vertices": p.vertices, "trans": track.trans},
-                    {"local_rot": r["pose"], "joints": g.joints, "vertices": g.vertices, "trans": r["trans"]},
+        p = body(track.local_rot[ev], track.betas, track.trans[ev])
+        g = body(gt_pose[ev], gt_betas, gt_trans[ev])
+    m = compute_all({"local_rot": track.local_rot[ev], "joints": p.joints, "vertices": p.vertices,
+                     "trans": track.trans[ev]},
+                    {"local_rot": gt_pose[ev], "joints": g.joints, "vertices": g.vertices, "trans": gt_trans[ev]},
                     fps=est.fps, mask_ignored=True)
+    frames = len(range(*ev.indices(n)))
     keep = ("sip_error_deg", "angular_error_deg", "positional_error_cm", "mesh_error_cm", "jitter_abs_km_s3",
             "translation_error_cm")
     metrics = {k: float(m[k]) for k in keep if k in m and math.isfinite(m[k])}
@@ -118,13 +154,14 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
         mass = est._char[1].mass_kg
         metrics.update({f"physics_{k}": v for k, v in physical_summary(track, mass).items()})
         png = physical_plots(track, mass, out / "physics.png", f"PIP on {clip}: ground reaction forces and arm torques")
-    title = (f"{clip}: PIP ({path.stem}) from 6 simulated IMUs, {gt.num_frames} frames at {gt.fps:g} fps"
+    title = (f"{clip}: PIP ({path.stem}) from 6 simulated IMUs after a {TPOSE_S:g} s calibration T-pose, "
+             f"{frames} clip frames evaluated at {est.fps:g} fps"
              f"{', physics (dual PD)' if track.extras.get('physics') else ', no physics'}")
-    html = write_html(out / "demo.html", body, track.local_rot, track.betas, track.trans, gt.fps, title=title,
-                      label="estimate (6 IMUs, PIP)", compare=[("ground truth", gt.pose, gt.betas, gt.trans)],
+    html = write_html(out / "demo.html", body, track.local_rot, track.betas, track.trans, est.fps, title=title,
+                      label="estimate (6 IMUs, PIP)", compare=[("ground truth", gt_pose[:n], gt_betas, gt_trans[:n])],
                       info={"SIP err (deg)": f"{metrics.get('sip_error_deg', float('nan')):.1f}",
                             "mesh err (cm)": f"{metrics.get('mesh_error_cm', float('nan')):.1f}"})
-    result = {"clip": clip, "frames": gt.num_frames, "fps": gt.fps, "weights": str(path), "weights_licence": licence,
+    result = {"clip": clip, "frames": frames, "fps": est.fps, "tpose_s": TPOSE_S, "weights": str(path), "weights_licence": licence,
               "title": title, "html": str(html), "physics_png": str(png) if png else None, "metrics": metrics}
     (out / "metrics.json").write_text(json.dumps(result, indent=2))
     return result

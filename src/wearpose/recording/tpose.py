@@ -1,0 +1,94 @@
+"""A calibration T-pose at the start of a recording, and the meta entry that marks it.
+
+IMU methods (PIP, BiRAE's inertial alignment) need the wearer to stand in a known pose for a
+moment so that each sensor's mounting (sensor -> bone) and the world heading can be solved
+(``docs/calibration.md``). A real capture starts with it because the operator asks for it; a
+*simulated* recording only has it when the motion has it. :func:`prepend_tpose` gives a motion
+that opening hold (the same construction as MI-Poser's training data,
+:func:`wearpose.estimators.miposer.data.tpose_then`: ``hold_s`` of SMPL's T-pose at the clip's
+first position and heading, a ``blend_s`` smoothstep slerp into the first frame, then the clip),
+and :func:`tpose_meta` / :func:`calibration_window` write and read where the hold is:
+
+``meta["calibration_window"] = {"pose": "tpose", "start_s": a, "stop_s": b, "prefix_s": p}``
+
+``a``..``b`` (seconds on the sensors' clock) lies inside the hold (a little margin at the start,
+the last held frame at the end); ``p`` is where the original clip starts (after the blend), so
+tools can drop the prefix again. ``meta`` is free JSON in format version 1, so this needs no
+version bump; a recording without the entry is read exactly as before.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+#: The meta key marking a recording's calibration pose.
+CALIBRATION_WINDOW_KEY = "calibration_window"
+#: Default blend from the held T-pose into the clip, seconds (MI-Poser's ``blend_s``).
+DEFAULT_BLEND_S = 0.5
+
+
+def prepend_tpose(motion: Any, hold_s: float, blend_s: float = DEFAULT_BLEND_S) -> tuple[Any, dict[str, Any]]:
+    """``motion`` with a calibration T-pose held before it.
+
+    Args:
+        motion: a :class:`wearpose.motion.MotionSequence` (any fps).
+        hold_s: seconds of T-pose (> 0; 1 s is what PIP's calibration reads).
+        blend_s: seconds of blend from the T-pose into the first frame.
+
+    Returns:
+        ``(longer_motion, window)``: ``window`` is the dict stored under
+        ``meta["calibration_window"]`` (see module doc), in seconds from the first frame.
+    """
+    from wearpose.errors import ConfigError
+    from wearpose.estimators.miposer.data import tpose_then  # one T-pose construction for every kit
+
+    if not hold_s > 0:
+        raise ConfigError(f"the T-pose hold must be > 0 s, got {hold_s!r}")
+    fps = float(motion.fps)
+    full, prefix = tpose_then(motion, float(hold_s), float(blend_s))
+    hold = int(round(hold_s * fps))
+    if hold < 2:
+        raise ConfigError(f"a {hold_s} s T-pose is {hold} frame(s) at {fps:g} fps; expected at least 2 frames")
+    # Same margins as MI-Poser's calibration window: skip the first instant, end on the last held frame.
+    window = {"pose": "tpose", "start_s": round(min(0.1, 0.25 * hold_s), 6), "stop_s": round((hold - 1) / fps, 6),
+              "prefix_s": round(prefix / fps, 6)}
+    return full, window
+
+
+def calibration_window(recording: Any) -> tuple[float, float] | None:
+    """The ``(start_s, stop_s)`` of the T-pose a recording's meta marks, or None.
+
+    Raises:
+        wearpose.errors.ShapeError: the entry is there but malformed (a typo must not silently
+            fall back to another window).
+    """
+    from wearpose.errors import ShapeError
+
+    w = (getattr(recording, "meta", None) or {}).get(CALIBRATION_WINDOW_KEY)
+    if w is None:
+        return None
+    try:
+        if w.get("pose", "tpose") != "tpose":
+            raise ValueError(f"pose {w.get('pose')!r}")
+        a, b = float(w["start_s"]), float(w["stop_s"])
+        if not 0 <= a < b:
+            raise ValueError(f"start_s {a} / stop_s {b}")
+    except (AttributeError, KeyError, TypeError, ValueError) as exc:
+        raise ShapeError(f"meta[{CALIBRATION_WINDOW_KEY!r}] = {w!r} is malformed ({exc}); expected "
+                         "{'pose': 'tpose', 'start_s': a, 'stop_s': b} with 0 <= a < b seconds") from None
+    return a, b
+
+
+def use_calibration_window(estimator: Any, recording: Any) -> tuple[float, float] | None:
+    """Point an estimator's built-in T-pose calibration at the window ``recording`` marks.
+
+    Estimators that calibrate uncalibrated recordings themselves expose a
+    ``calibration_window`` attribute (PIP: ``(0, 1)`` s by default); when the recording's meta
+    marks its T-pose, that window is used instead of the default. Returns the window applied, or
+    None (no mark, or an estimator without built-in calibration).
+    """
+    window = calibration_window(recording)
+    if window is None or getattr(estimator, "calibration_window", None) is None:
+        return None
+    estimator.calibration_window = window
+    return window
