@@ -90,6 +90,35 @@ def save_checkpoint(ckpt: Checkpoint, path: str | Path) -> Path:
     return path
 
 
+#: What a checkpoint file is, for error messages.
+EXPECTED_FILE = (f"a .pt checkpoint written by `wearpose train` or Estimator.save (a torch zip archive holding a dict "
+                 f"with format={FORMAT!r}), or the name of shipped weights (`wearpose doctor` lists them)")
+
+
+def _unreadable_problem(path: Path, exc: Exception) -> str:
+    """One short sentence for a file torch cannot load (torch's own messages run to several
+    lines of zip/pickle internals and advice that does not apply)."""
+    import zipfile
+
+    size = path.stat().st_size
+    if size == 0:
+        return "empty file (0 bytes)"
+    with open(path, "rb") as f:
+        head = f.read(8)
+    if not zipfile.is_zipfile(path):
+        if head.startswith(b"PK\x03\x04"):
+            return (f"truncated or damaged torch archive ({size:,} bytes; the zip archive has no end record: an "
+                    "interrupted download, copy or save?)")
+        if head[:1] == b"\x80":  # a pickle protocol marker: torch's legacy (pre-1.6) format or a plain pickle
+            return "a pickle / legacy torch file, not a torch zip archive (re-save it with torch.save in torch >= 1.6)"
+        return f"not a torch checkpoint (no zip archive; the file starts with {head!r})"
+    if isinstance(exc, __import__("pickle").UnpicklingError):
+        first = str(exc).strip().splitlines()[0][:160] if str(exc).strip() else type(exc).__name__
+        return f"holds Python objects wearpose does not load (weights_only: {first})"
+    first = str(exc).strip().splitlines()[0][:160] if str(exc).strip() else ""
+    return f"damaged torch archive ({type(exc).__name__}{': ' + first if first else ''})"
+
+
 def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> Checkpoint:
     """Read a checkpoint written by :func:`save_checkpoint`.
 
@@ -98,13 +127,15 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     """
     path = Path(path)
     if not path.is_file():
-        raise InputFileError(path, "no such checkpoint file", "a .pt file written by wearpose train / Estimator.save")
+        raise InputFileError(path, "no such checkpoint file", EXPECTED_FILE)
     try:
         d = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as exc:  # torch raises several types for corrupt files
-        raise InputFileError(path, f"unreadable ({type(exc).__name__}: {exc})", "a .pt file written by wearpose") from exc
+        raise InputFileError(path, _unreadable_problem(path, exc), EXPECTED_FILE) from None
     if not isinstance(d, dict) or d.get("format") != FORMAT:
-        raise InputFileError(path, "not a wearpose checkpoint", f"a dict with format={FORMAT!r}", field="format")
+        raise InputFileError(path, f"not a wearpose checkpoint (a torch file holding a {type(d).__name__}"
+                             f"{' with format=' + repr(d.get('format')) if isinstance(d, dict) else ''})", EXPECTED_FILE,
+                             field="format")
     if d.get("version") != VERSION:
         raise InputFileError(path, f"checkpoint version {d.get('version')!r}", f"version {VERSION}", field="version")
     return Checkpoint(method=d["method"], config=d["config"], kit=d["kit"], sensors=list(d["sensors"]),
