@@ -25,13 +25,18 @@ Stage 2 alternative, ``EmposeConfig.ik = "closed"`` (ours, not in the paper): th
 global orientations already fix the pose, so the local rotations follow in closed form
 (:func:`closed_form_pose`: ``R_j = G_parent^T G_j``; feet and hands, not mapped, get identity),
 the shape is a ridge least-squares fit of the betas to the mapped joint positions over the whole
-sequence (:func:`fit_betas`; joints are linear in the betas for fixed rotations), and a short
-L-BFGS polish (:func:`polish_pose`) moves the rotations towards the mapped joint positions. No
-network in stage 2; the mapper is trained with an extra loss on the joints that forward
-kinematics of its orientations gives (:data:`FK_JOINT_WEIGHT`). Why: on val the paper's LGD IK,
-fed the *ground-truth* joints and orientations, still erred 11 mm MPJPE (it was trained on
-inputs perturbed by 15 mm, so it smooths), more than the LGD-RNN's whole error; the closed form
-is exact on exact inputs.
+sequence (:func:`fit_betas`; joints are linear in the betas for fixed rotations), and an
+optional L-BFGS polish (:func:`polish_pose`, :data:`POLISH_ITERS`, off by default) moves the
+rotations towards the mapped joint positions. No network in stage 2; the mapper is trained with an extra loss on the joints that forward
+kinematics of its orientations gives (:data:`FK_JOINT_WEIGHT`). Why: on 30 val clips the
+paper's LGD IK, fed the *ground-truth* joints and orientations, still erred 5.4 mm MPJPE (it is
+trained on inputs perturbed by 15 mm, so it smooths), and on the mapper's output 10.1 mm on
+frames with every sensor, where the closed form from the same mapper gave 9.3 mm; the closed
+form is exact on exact inputs.
+
+Mapper input alternative, ``EmposeConfig.mapper_input = "site"`` (ours): the measurements are
+first turned into the skin-site poses the subject offsets imply (:func:`site_poses`, Eq. 4
+inverted), so the mapper need not learn the offsets' bilinear effect (it still gets the offsets).
 
 :class:`TwoStageEstimator` (registry ``empose-twostage``) is offline (bidirectional mapper) and
 returns a pose for every frame, including those with missing sensors (``valid`` is all True;
@@ -69,12 +74,17 @@ P_REMOVE = 0.8  #: fraction of training windows with removed sensors
 #: orientations gives (mean shape of the window), added to the mapper loss; at 100 it is of the
 #: order of the 6D orientation term (the metric is on these joints, the 6D MSE is only a proxy).
 FK_JOINT_WEIGHT = 100.0
-#: ``ik="closed"``: ridge weight of the betas fit (m^2 per frame against |beta|^2, i.e. a N(0, I)
-#: shape prior against a per-frame joint error of ~1 cm per coordinate).
-SHAPE_PRIOR = 1e-4
-#: ``ik="closed"``: L-BFGS iterations of the pose polish (0 = closed form only), and the weight
-#: of the orientation term (squared Frobenius) against the joint term (m^2).
-POLISH_ITERS = 15
+#: ``ik="closed"``: ridge weight of the betas fit (m^2 per frame against |beta|^2, a N(0, I) shape
+#: prior). Chosen on val (174 clips, Table 10 protocol, runs/twostage12_site): 1e-2 gave MPJPE
+#: 10.85 mm against 11.06 with 1e-4; our corpus has only the mean shape (all betas 0), so a
+#: stronger pull to the mean can only help here; real subjects may want a weaker prior.
+SHAPE_PRIOR = 1e-2
+#: ``ik="closed"``: L-BFGS iterations of the pose polish (0 = closed form only, the default), and
+#: the weight of the orientation term (squared Frobenius) against the joint term (m^2). On val the
+#: polish (15 iterations) gained 0.3 mm with the first fine-tuned mapper but nothing with the
+#: site-input one (10.87 vs 10.85 mm all frames, 11.56 vs 11.47 on frames with missing sensors) at
+#: twice the estimate time, so it is off.
+POLISH_ITERS = 0
 POLISH_ROT_WEIGHT = 1e-2
 #: Mapped joint (index into PRED_JOINTS) whose global orientation each of the 24 joints takes in
 #: the closed form: itself, or for the unmapped feet / hands their parent (local identity).
