@@ -30,7 +30,7 @@ import threading
 import time
 from collections import deque
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import torch
@@ -135,6 +135,17 @@ class BodyLayer:
                 v = np.ones(len(self.sites), bool) if sensor_valid is None else np.asarray(sensor_valid, bool)
                 self.sensors.colors = sensor_colours(v, interference)
             self.label.position = tuple(Jn[15] + self.offset + np.array([0, 0.35, 0], np.float32))
+
+
+#: Seconds the viewer waits for its WebSocket to close cleanly before it exits anyway.
+CLOSE_TIMEOUT_S = 2.0
+
+
+def _connection_closed(client: Any) -> bool:
+    """True once the client's reader task has ended (the server closed the WebSocket).
+    StreamClient has no public flag for it (its reader ends exactly when the connection does)."""
+    reader = getattr(client, "_reader", None)
+    return reader is not None and reader.done()
 
 
 def _new_server(host: str, port: int) -> Any:
@@ -400,42 +411,81 @@ class LiveViewer:
         self.shown += 1
         self.timeline.info.content = "  \n".join(lines + [f"poses received: {self.received}"])
 
-    async def run(self, stop: asyncio.Event | None = None, fps: float = 30.0) -> None:
-        """Subscribe and render at ``fps`` until ``stop`` is set (or forever)."""
+    async def run(self, stop: asyncio.Event | None = None, fps: float = 30.0, *, handle_signals: bool = False,
+                  on_subscribed: Callable[[], None] | None = None) -> str:
+        """Subscribe and render at ``fps`` until ``stop`` is set, the server closes the
+        connection, or (``handle_signals``) SIGINT/SIGTERM arrive. ``on_subscribed`` is called
+        once the subscription is sent.
+
+        Returns:
+            why it stopped: ``"stopped"`` (``stop`` set or a signal) or ``"upstream closed"``.
+        """
+        import signal
+
         from wearpose.stream.client import StreamClient
 
-        client = StreamClient(self.url_server, on_pose=self._on_pose)
-        await client.connect()
-        await client.subscribe(self.subjects, "json")
         stop = stop or asyncio.Event()
+        loop = asyncio.get_running_loop()
+        signals = (signal.SIGINT, signal.SIGTERM) if handle_signals else ()
+        previous_term = signal.getsignal(signal.SIGTERM)
+        for sig in signals:
+            # Why our own handlers: asyncio.run's SIGINT handling cancels the main task, and a
+            # cancellation arriving inside wait_for/close on a dead connection could be lost
+            # (view-live ignored Ctrl-C after its server stopped); a flag the loop polls cannot be.
+            loop.add_signal_handler(sig, stop.set)
+        client = StreamClient(self.url_server, on_pose=self._on_pose)
+        why = "stopped"
         try:
+            await client.connect()
+            await client.subscribe(self.subjects, "json")
+            if on_subscribed is not None:
+                on_subscribed()
             while not stop.is_set():
                 for m in list(client.messages):
                     if m.get("type") == "subject":
                         self.meta[int(m["subject"])] = m
                 self.render()
-                try:
-                    await asyncio.wait_for(stop.wait(), 1.0 / fps)
-                except asyncio.TimeoutError:
-                    pass
+                if _connection_closed(client):  # the server stopped: nothing more will come
+                    why = "upstream closed"
+                    break
+                await asyncio.sleep(1.0 / fps)
         finally:
-            await client.close()
+            try:
+                await asyncio.wait_for(client.close(), CLOSE_TIMEOUT_S)
+            except (asyncio.TimeoutError, OSError):
+                pass  # a half-dead connection must not keep the process alive
+            for sig in signals:
+                loop.remove_signal_handler(sig)
+                if sig == signal.SIGTERM:  # remove_signal_handler leaves SIG_DFL: keep SIGTERM a clean stop
+                    signal.signal(sig, previous_term)
+        return why
 
     def close(self) -> None:
         self.server.stop()
 
 
 def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subjects: list[int] | None = None,
-                    body: str | None = None) -> None:
-    """Blocking: the live viewer until Ctrl-C (``wearpose view-live``)."""
+                    body: str | None = None) -> str:
+    """Blocking: the live viewer (``wearpose view-live``) until Ctrl-C / SIGTERM, or until the
+    server closes the connection (it says so and returns). Returns why it stopped."""
+    import signal
+
+    def _terminate(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt  # SIGTERM outside the event loop: the same clean stop as Ctrl-C
+
     v = LiveViewer(url, subjects=subjects, body=BodyModel(body), host=host, port=port)
-    print(f"viewer on {v.url} (poses from {url}); Ctrl-C to stop", flush=True)
+    why = "stopped"
     try:
-        asyncio.run(v.run())
+        signal.signal(signal.SIGTERM, _terminate)
+        print(f"viewer on {v.url} (poses from {url}); Ctrl-C to stop", flush=True)
+        why = asyncio.run(v.run(handle_signals=True, on_subscribed=lambda: print(f"subscribed to {url}", flush=True)))
     except KeyboardInterrupt:
         pass
     finally:
         v.close()
+    if why == "upstream closed":
+        print(f"the server at {url} closed the connection; viewer stopped ({v.received} poses received)", flush=True)
+    return why
 
 
 def _em_track_in_world(est: Any, track: Any, rec: Any) -> Any:
@@ -466,7 +516,10 @@ def run_recording_viewer(path: str | Path, *, model: str | None = None, host: st
     if model is not None:
         from wearpose.stream import estimator_factory
 
+        from wearpose.recording import use_calibration_window
+
         est = estimator_factory(model)()
+        use_calibration_window(est, rec)  # the T-pose the recording marks (simulate --tpose)
         track, names = est.estimate(rec), est.sensor_names
         bm = getattr(est, "body", bm)
         track = _em_track_in_world(est, track, rec)
