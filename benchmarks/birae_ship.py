@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -86,8 +87,12 @@ def main(argv: list[str] | None = None) -> int:
     card["test_command"] = tables["command"] + ("" if cal["command"] == tables["command"] else f"; {cal['command']}")
     card["training_budget"] = {**budget_summary(chain), "chain": chain}
     card["train_commands_all"] = history(chain, previous)
-    card["shipped_with"] = ("python " + " ".join(["benchmarks/birae_ship.py", *(argv if argv is not None else sys.argv[1:])])
-                            + f" (runs: {card.get('shipped_with', 'tools/ship_weights.py')})")
+    args = list(argv if argv is not None else sys.argv[1:])
+    if "--notes" in args:  # the notes are in the card already
+        i = args.index("--notes")
+        args[i:i + 2] = ["--notes", "<notes>"]
+    card["shipped_with"] = (f"python {shlex.join(['benchmarks/birae_ship.py', *args])}"
+                            f" (runs: {card.get('shipped_with', 'tools/ship_weights.py')})")
     if a.notes:
         card["notes"] = a.notes
     else:
