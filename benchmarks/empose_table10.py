@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "empose_table10"))
-    ap.add_argument("--note", default=None, help="a paragraph appended to the markdown")
+    ap.add_argument("--note", default=None, help="a paragraph appended to the markdown (NOTE in the printed command)")
     ap.add_argument("--span", type=int, nargs=2, default=None, metavar=("MIN", "MAX"),
                     help="frames per removal span (default 15 45, i.e. 0.5-1.5 s at 30 Hz)")
     a = ap.parse_args(argv)
@@ -64,7 +64,12 @@ def main(argv: list[str] | None = None) -> int:
     kw = {"span": tuple(a.span)} if a.span else {}
     kw["zeros"] = tuple(a.zeros)
     res = evaluate_dropped(ckpts, a.split, a.limit, noise=a.noise, seed=a.seed, progress=prog, **kw)
-    res["command"] = "python " + shlex.join([sys.argv[0], *(argv if argv is not None else sys.argv[1:])])
+    args = list(argv if argv is not None else sys.argv[1:])
+    # The note is printed under the table; the command shows a placeholder instead of repeating it.
+    shown = [("NOTE" if i and args[i - 1] == "--note" else x) for i, x in enumerate(args)]
+    res["command"] = "python " + shlex.join([sys.argv[0], *shown])
+    if a.note:
+        res["note"] = a.note
     res["wall_seconds"] = time.time() - t0
     res["time_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     res["paper_table10_12"] = PAPER_TABLE10_12
