@@ -117,3 +117,47 @@ def test_imu_recording_with_a_marked_tpose_is_estimated_by_pip(tmp_path: Path, c
     code, err = run_main(["estimate", str(unmarked), "--model", "pip_cpu", "--out", str(tmp_path / "q.npz")],
                          capsys, monkeypatch)
     assert code == 1 and "could not calibrate" in err
+
+
+def test_a_120_hz_recording_is_decimated_to_the_weights_rate_with_one_warning(tmp_path: Path, capsys,
+                                                                               monkeypatch) -> None:
+    rec = tmp_path / "em120.npz"
+    save_recording(_simulated("em12", T=30, rate=120.0), rec)  # 1 s of motion: 120 EM samples
+    code, err = run_main(["estimate", str(rec), "--model", "empose12_cpu", "--out", str(tmp_path / "p.npz"), "--json"],
+                         capsys, monkeypatch)
+    assert code in (0, None) and err.count("warning:") == 1
+    assert "120 Hz decimated by 4 to empose12_cpu's 30 Hz" in err and "--no-resample" in err
+    assert load_motion(str(tmp_path / "p.npz")).num_frames == 30
+    code, err = run_main(["estimate", str(rec), "--model", "empose12_cpu", "--out", str(tmp_path / "q.npz"),
+                          "--no-resample"], capsys, monkeypatch)
+    assert code == 1 and "does not fit empose12_cpu" in err and "120.0 Hz" in err
+
+
+def test_a_non_integer_rate_ratio_is_refused_not_interpolated(tmp_path: Path, capsys, monkeypatch) -> None:
+    rec = tmp_path / "em45.npz"
+    save_recording(_simulated("em12", T=30, rate=45.0), rec)
+    code, err = run_main(["estimate", str(rec), "--model", "empose12_cpu", "--out", str(tmp_path / "p.npz")],
+                         capsys, monkeypatch)
+    assert code == 1 and "does not fit empose12_cpu" in err and "warning" not in err  # auto: left to the estimator
+    code, err = run_main(["estimate", str(rec), "--model", "empose12_cpu", "--out", str(tmp_path / "p.npz"),
+                          "--resample"], capsys, monkeypatch)
+    assert code == 1 and "--resample: sensors 'back', " in err and "cannot resample 45 Hz to 30 Hz (a factor of 1.5, not an integer)" in err
+    assert not (tmp_path / "p.npz").exists()
+
+
+def test_serve_defaults_to_stride_auto(monkeypatch) -> None:
+    """`wearpose serve` estimates at the weights' trained rate unless told otherwise."""
+    import wearpose.stream as stream
+
+    seen = {}
+
+    def fake_run_server(factory, host, port, **kw):  # noqa: ANN001, ANN202
+        seen.update(kw)
+        return {"finished": [], "malformed_total": 0}
+
+    monkeypatch.setattr(stream, "run_server", fake_run_server)
+    res = runner.invoke(app, ["serve", "--model", "null"])
+    assert res.exit_code == 0, res.output
+    assert seen["stride"] == "auto"
+    res = runner.invoke(app, ["serve", "--model", "null", "--stride", "1"])
+    assert res.exit_code == 0 and seen["stride"] == 1

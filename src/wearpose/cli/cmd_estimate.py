@@ -12,6 +12,8 @@ from typing import Any, Optional
 
 import typer
 
+from rich.markup import escape
+
 from wearpose.cli.app import _emit, _kv_table, app, console, err_console
 
 
@@ -22,6 +24,11 @@ def estimate(
     model: str = typer.Option(..., help="Shipped weights (e.g. empose12_cpu, pip_cpu, birae6_cpu, miposer_cpu) or a "
                                         "checkpoint file."),
     out: Path = typer.Option(..., help="Output motion: .bvh (SMPL skeleton, cm), .npz (AMASS-style) or .glb."),
+    resample: Optional[bool] = typer.Option(None, "--resample/--no-resample",
+                                            help="Decimate the recording to the weights' trained rate by an integer "
+                                                 "factor (e.g. 120 -> 30 Hz). Default: done when the rates differ by an "
+                                                 "integer factor, with one warning line; --resample makes any other "
+                                                 "ratio an error; --no-resample refuses another rate."),
     threads: int = typer.Option(1, min=1, help="torch CPU threads."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
@@ -29,15 +36,16 @@ def estimate(
     write it as a motion file (`wearpose view OUT` plays a .bvh or .npz; Blender opens .bvh and .glb).
 
     The recording must hold the sensors of the weights' kit (names as in the card) at the rate
-    they were trained at; a recording that does not fit is refused with the kit, the rate and a
-    command that makes a fitting one. EM methods estimate relative to the EM source (the
+    they were trained at, or at an integer multiple of it (decimated, with a warning line;
+    --no-resample refuses); a recording that does not fit is refused with the kit, the rate and
+    a command that makes a fitting one. EM methods estimate relative to the EM source (the
     result's `frame` says so).
 
     Example: wearpose estimate out/demo/recording.npz --model empose12_cpu --out out/estimate.bvh
     """
     import torch
 
-    from wearpose.cli.models import check_pose_weights, recording_mismatch
+    from wearpose.cli.models import check_pose_weights, fit_rate, recording_mismatch
     from wearpose.calibration import CalibrationError
     from wearpose.errors import InputFileError, ShapeError
     from wearpose.export import export_motion
@@ -48,7 +56,9 @@ def estimate(
         raise typer.BadParameter(f"{out}: expected a .bvh, .npz or .glb file name", param_hint="--out")
     check_pose_weights(model)
     torch.set_num_threads(threads)
-    rec = load_recording(recording)
+    rec, note = fit_rate(recording, load_recording(recording), model, resample)
+    if note:
+        err_console.print(f"[yellow]warning:[/] {escape(note)}", soft_wrap=True)
     est = estimator_factory(model)()
     use_calibration_window(est, rec)  # a recording that marks its T-pose (simulate --tpose) calibrates from it
     try:
@@ -69,8 +79,11 @@ def estimate(
         body = BodyModel()
     path = export_motion(track.to_motion(), out, body)
     valid = float(track.valid.float().mean()) * 100 if track.num_frames else 0.0
+    resampled = rec.meta.get("resampled") if note else None
     res: dict[str, Any] = {"recording": str(recording), "model": model, "frames": track.num_frames,
                            "fps": track.fps, "valid_pct": round(valid, 2),
                            "frame": track.extras.get("frame", "world"),
                            "translation": track.trans is not None, "written": str(path)}
+    if resampled:
+        res["resampled"] = resampled
     _emit(res, as_json, lambda r: console.print(_kv_table(f"estimate of {recording.name} by {model}", r)))

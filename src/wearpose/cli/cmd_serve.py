@@ -43,8 +43,9 @@ def serve(
     port: int = typer.Option(8765, help="TCP port (0: any free port, printed at start)."),
     reorder_window: int = typer.Option(4, help="Lateness bound: a missing frame is given up once a frame this many "
                                                "sequence numbers newer has arrived."),
-    stride: str = typer.Option("1", help="Estimate every N-th frame: 1 (every frame), N, or auto (stream rate / "
-                                         "the estimator's trained rate)."),
+    stride: str = typer.Option("auto", help="Estimate every N-th frame: auto (default: round(stream rate / the "
+                                            "estimator's trained rate), e.g. 4 for 120 Hz into 30 Hz weights), 1 (every "
+                                            "frame) or N."),
     udp_port: Optional[int] = typer.Option(None, help="Also accept the same packets over UDP on this port."),
     workers: int = typer.Option(2, min=1, help="Estimator steps running at once (each subject has its own estimator thread; "
                                         "subjects step in parallel up to this)."),

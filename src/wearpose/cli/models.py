@@ -59,3 +59,42 @@ def recording_mismatch(recording: Path, model: str, problem: str) -> Exception:
     return InputFileError(recording, f"does not fit {model} ({problem})",
                           f"a recording of kit {s['kit']}{rate} with sensors {', '.join(s['sensors'])} "
                           f"(e.g. {sim}), or weights for this recording's sensors")
+
+
+def fit_rate(path: Path, rec: Any, model: str, resample: bool | None) -> tuple[Any, str | None]:
+    """Bring ``rec`` to the rate ``model`` was trained at by integer-factor decimation
+    (:func:`wearpose.recording.decimate`).
+
+    ``resample``: ``None`` (auto) decimates when the weights' sensors in the recording share one
+    rate that is an integer multiple of the trained rate, and returns a one-line note saying so;
+    a ratio that does not decimate is left to the estimator, which refuses it with the fitting
+    kit and rate. ``True`` does the same but makes a non-integer ratio an error naming both
+    rates. ``False`` never changes the recording. Kits whose sensors run at different rates by
+    design (MI-Poser: 60 Hz headset, 120 Hz EM) are left alone in auto mode.
+
+    Returns:
+        ``(recording, note)``; ``note`` is None when nothing changed.
+    """
+    from wearpose.errors import InputFileError
+    from wearpose.recording import RecordingError, decimate
+
+    s = weights_setting(model)
+    target = s.get("fps")
+    if resample is False or not target:
+        return rec, None
+    names = [n for n in s.get("sensors", []) if n in rec.names] or list(rec.names)
+    rates = sorted({float(rec.sensor(n).info.rate) for n in names})
+    if all(abs(r - target) <= 1e-3 * target for r in rates):
+        return rec, None
+    if len(rates) > 1 and resample is None:
+        return rec, None
+    try:
+        out = decimate(rec.select(names), float(target))
+    except RecordingError as exc:
+        if resample:
+            raise InputFileError(path, f"--resample: {exc}", f"sensors at an integer multiple of {target:g} Hz") from None
+        return rec, None
+    k = {d["factor"] for d in out.meta.get("resampled", {}).values()}
+    note = (f"{path.name}: {', '.join(f'{r:g}' for r in rates)} Hz decimated by {'/'.join(map(str, sorted(k)))} to "
+            f"{model}'s {target:g} Hz (every k-th sample as recorded, dropped frames stay dropped; --no-resample refuses)")
+    return out, note

@@ -13,6 +13,8 @@ Public API:
   :func:`wearpose.sensors.simulate` result as a recording
 - :func:`prepend_tpose` / :func:`calibration_window` / :func:`use_calibration_window`: a
   calibration T-pose before a (simulated) motion, marked in ``meta["calibration_window"]``
+- :func:`decimate` / :func:`decimation_factor`: integer-factor decimation (e.g. 120 -> 30 Hz),
+  validity mask kept per kept sample, non-integer ratios refused
 - :class:`RecordingError` for operations a recording cannot do (file problems are
   :class:`wearpose.errors.InputFileError`).
 """
@@ -31,6 +33,7 @@ from wearpose.recording.types import (
 from wearpose.recording.checks import ConventionIssue, check_recording, check_stream
 from wearpose.recording.fileformat import FORMAT_NAME, FORMAT_VERSION, load_recording, recording_arrays, save_recording
 from wearpose.recording.simulated import recording_from_simulation
+from wearpose.recording.resample import decimate, decimation_factor
 from wearpose.recording.tpose import CALIBRATION_WINDOW_KEY, calibration_window, prepend_tpose, use_calibration_window
 from wearpose.recording.converters import (
     DIP_IMU_SENSORS,
@@ -51,6 +54,7 @@ __all__ = [
     "ConventionIssue", "check_stream", "check_recording",
     "FORMAT_NAME", "FORMAT_VERSION", "load_recording", "save_recording", "recording_arrays",
     "recording_from_simulation",
+    "decimate", "decimation_factor",
     "CALIBRATION_WINDOW_KEY", "prepend_tpose", "calibration_window", "use_calibration_window",
     "from_dip_imu", "from_totalcapture", "from_empose", "amass_ground_truth",
     "DIP_IMU_SENSORS", "DIP_IMU_SIX", "EMPOSE_SENSORS", "EMPOSE_SITES", "EMPOSE_SIX", "TOTALCAPTURE_SITES",
