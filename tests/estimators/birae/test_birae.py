@@ -92,12 +92,11 @@ def test_common_heading_error_cancels_and_per_sensor_scenario_does_not() -> None
 
 def test_exponential_learning_rate_decay_in_the_shared_loop(tmp_path: Path) -> None:
     """Sec. IV-E: lr x ``lr_decay`` every ``lr_decay_steps`` (continuous), wired from the config."""
-    from wearpose.estimators.birae.train import _settings
-    from wearpose.estimators.train import _lr_at
+    from wearpose.estimators.train import _lr_at, loop_settings  # train_birae's settings
 
     cfg = BiraeConfig.preset("cpu")
     assert cfg.lr_schedule == "exp" and BiraeConfig.preset("paper").lr_decay_steps == 5000
-    s = _settings(cfg, tmp_path, 1, resume=False, threads=1, device="cpu", checkpoint_every=10, max_steps=None, quiet=True)
+    s = loop_settings(cfg, tmp_path, 1, resume=False, threads=1, device="cpu", checkpoint_every=10, max_steps=None, quiet=True)
     assert s.lr_schedule == "exp" and s.lr_decay == cfg.lr_decay and s.lr_decay_steps == cfg.lr_decay_steps
     assert _lr_at(s, 0, 50) == pytest.approx(cfg.lr)
     assert _lr_at(s, 2 * cfg.lr_decay_steps, 50) == pytest.approx(cfg.lr * cfg.lr_decay ** 2)

@@ -30,7 +30,7 @@ from wearpose.estimators.birae.data import BiraeData, build_from_motions, build_
 from wearpose.estimators.birae.model import masked_mse, nll_loss
 from wearpose.estimators.birae.representations import target_to_pose
 from wearpose.estimators.checkpoint import fingerprint, save_checkpoint
-from wearpose.estimators.train import TrainSettings, train
+from wearpose.estimators.train import loop_settings, train
 
 
 def batch_loss(est: Any, b: dict[str, torch.Tensor], device: torch.device, model: Any = None
@@ -102,14 +102,6 @@ class BiraeTask:
         save_checkpoint(self.est.checkpoint({**meta, "phase": "aug" if self.augmented else "clean"}, train_state), path)
 
 
-def _settings(cfg: Any, out: Path, epochs: int, *, resume: bool, threads: int | None, device: str,
-              checkpoint_every: int, max_steps: int | None, quiet: bool, lr: float | None = None) -> TrainSettings:
-    return TrainSettings(out_dir=out, epochs=epochs, lr=lr or cfg.lr, lr_schedule=cfg.lr_schedule,
-                         lr_min_factor=cfg.lr_min_factor, lr_decay=cfg.lr_decay, lr_decay_steps=cfg.lr_decay_steps,
-                         grad_clip=cfg.grad_clip, resume=resume, threads=threads, device=device,
-                         checkpoint_every=checkpoint_every, max_steps=max_steps, quiet=quiet)
-
-
 def train_birae(est: Any, out_dir: str | Path, *, resume: bool = False, threads: int | None = None,
                 device: str = "cpu", epochs_clean: int | None = None, epochs_aug: int | None = None,
                 max_steps: int | None = None, checkpoint_every: int = 50, train_command: str = "",
@@ -167,12 +159,12 @@ def train_birae(est: Any, out_dir: str | Path, *, resume: bool = False, threads:
     kw = dict(resume=resume, threads=threads, device=device, checkpoint_every=checkpoint_every, max_steps=max_steps,
               quiet=quiet)
     console.print("phase 1/2: clean synthetic orientations")
-    r1 = train(BiraeTask(est, tr, va, False), _settings(cfg, out / "clean", cfg.epochs_clean if epochs_clean is None else epochs_clean, **kw), console)
+    r1 = train(BiraeTask(est, tr, va, False), loop_settings(cfg, out / "clean", cfg.epochs_clean if epochs_clean is None else epochs_clean, **kw), console)
     best1 = out / "clean" / "best.pt"
     if best1.is_file():
         est.model.load_state_dict(load_checkpoint(best1).weights)
     console.print("phase 2/2: noise / impulse / yaw-drift augmented orientations")
-    r2 = train(BiraeTask(est, tr, va, True), _settings(cfg, out / "aug", cfg.epochs_aug if epochs_aug is None else epochs_aug, **kw), console)
+    r2 = train(BiraeTask(est, tr, va, True), loop_settings(cfg, out / "aug", cfg.epochs_aug if epochs_aug is None else epochs_aug, **kw), console)
     best2 = out / "aug" / "best.pt"
     final = best2 if best2.is_file() else best1
     if final.is_file():
@@ -218,8 +210,8 @@ def finetune(est: Any, motions: Sequence[Any], out_dir: str | Path, *, val_motio
         va = tr
     est.meta["finetuned_on"] = fp
     task = BiraeTask(est, tr, va, augmented)
-    s = _settings(cfg, Path(out_dir), epochs, resume=False, threads=threads, device=device, checkpoint_every=10 ** 9,
-                  max_steps=max_steps, quiet=quiet, lr=lr or cfg.lr / 10)
+    s = loop_settings(cfg, out_dir, epochs, resume=False, threads=threads, device=device, checkpoint_every=10 ** 9,
+                      max_steps=max_steps, quiet=quiet, lr=lr or cfg.lr / 10)
     res = train(task, s)
     best = Path(out_dir) / "best.pt"
     if best.is_file():
