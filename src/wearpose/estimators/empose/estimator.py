@@ -24,7 +24,7 @@ import torch
 
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
-from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, load_checkpoint, save_checkpoint
+from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.empose.data import frame_measurements, hold_invalid
 from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, module_version, sensor_features
@@ -57,7 +57,7 @@ class _OnlineStep(torch.nn.Module):
 
 
 @register_estimator("empose")
-class EmposeEstimator(Estimator):
+class EmposeEstimator(NetworkCheckpointing, Estimator):
     """LGD-RNN estimator (see module doc).
 
     Args:
@@ -93,33 +93,15 @@ class EmposeEstimator(Estimator):
         self._offsets: tuple[torch.Tensor, torch.Tensor] | None = None
         self._traced: tuple[Any, Any] | None = None
 
-    def to(self, device: str | torch.device) -> EmposeEstimator:
-        """Move the network and the differentiable body (used inside L_r) to ``device``."""
-        self.device = torch.device(device)
-        self.model.to(self.device)
-        self.body.to(self.device)
-        return self
-
     # ------------------------------------------------------------------ checkpoints
     def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
-        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name,
-                          sensors=list(self.sensor_names), body_asset=self.body_asset_id,
-                          weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
-                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
-                          meta={**self.meta, "sites": self.sites, **(meta or {})}, train_state=train_state)
-
-    def save(self, path: str | Path) -> Path:
-        return save_checkpoint(self.checkpoint(), path)
+        # The sensor sites go with the weights: loading on another body asset must put them where they were.
+        return super().checkpoint({"sites": self.sites, **(meta or {})}, train_state)
 
     @classmethod
     def from_checkpoint(cls, ckpt: Checkpoint, *, kit: str | None = None, body: Any = None,
                         device: str | torch.device = "cpu", path: str | Path = "<checkpoint>") -> EmposeEstimator:
-        ckpt.check(method=cls.name, kit=kit, body_asset=getattr(body, "asset_id", None), path=path)
-        if body is None:
-            from wearpose.body import BodyModel
-
-            body = BodyModel()
-            ckpt.check(body_asset=body.asset_id, path=path)
+        body = cls.check_checkpoint(ckpt, kit=kit, body=body, path=path)
         est = cls(EmposeConfig.from_dict(ckpt.config), body=body, device=device)
         want = ckpt.meta.get("sites")
         if want and want != est.sites:
@@ -127,9 +109,7 @@ class EmposeEstimator(Estimator):
                     if want.get(k) != est.sites.get(k)}
             raise CheckpointMismatchError(f"{path}: body asset {est.body_asset_id!r} puts the sensors of kit "
                                           f"{est.kit_name!r} on other sites than at training time (trained -> now): {diff}")
-        est.model.load_state_dict(ckpt.weights)
-        est.data_fingerprint, est.train_command, est.meta = ckpt.data_fingerprint, ckpt.train_command, dict(ckpt.meta)
-        return est
+        return est.restore(ckpt)
 
     @classmethod
     def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
