@@ -69,7 +69,8 @@ def estimate(
         raise recording_mismatch(recording, model, str(exc)) from None
     except CalibrationError as exc:  # IMU methods calibrate an uncalibrated recording from a T-pose
         raise InputFileError(recording, f"{model} could not calibrate it ({exc})",
-                             "a recording that starts with about 1 s of T-pose, one calibrated with `wearpose "
+                             "a recording that starts with about 1 s of T-pose (or marks its T-pose in "
+                             "meta['calibration_window'], as `wearpose simulate --kit imu6` does), one calibrated with `wearpose "
                              "calibrate REC --method tpose --window START STOP`, or one whose meta says "
                              "orientation_frame='segment' (orientations already of the body segments)") from None
     body = getattr(est, "body", None)
