@@ -48,7 +48,7 @@ from wearpose.estimators.birae.representations import (
     SENSORS, angular_rate, features, relative_orientations, target_to_pose,
 )
 from wearpose.estimators.birae.uncertainty import combine, mc_predict
-from wearpose.estimators.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.registry import register_estimator
 from wearpose.body.skeleton import MAJOR_JOINTS, NUM_JOINTS
 
@@ -71,7 +71,7 @@ def hold_last_valid(R: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
 
 
 @register_estimator("birae")
-class BiraeEstimator(Estimator):
+class BiraeEstimator(NetworkCheckpointing, Estimator):
     """BiRAE estimator (see module doc).
 
     Args:
@@ -117,16 +117,16 @@ class BiraeEstimator(Estimator):
         return self.window[1] / self.fps
 
     # ------------------------------------------------------------------ checkpoints
-    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
-        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name,
-                          sensors=list(self.sensor_names), body_asset=self.body_asset_id,
-                          weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
-                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
-                          meta={**self.meta, "sigma_scale": self.sigma_scale, "calibration": self.calibration,
-                                **(meta or {})}, train_state=train_state)
+    def to(self, device: str | torch.device) -> BiraeEstimator:
+        """Move the network to ``device`` (BiRAE has no body model); returns the estimator."""
+        self.device = torch.device(device)
+        self.model.to(self.device)
+        return self
 
-    def save(self, path: str | Path) -> Path:
-        return save_checkpoint(self.checkpoint(), path)
+    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
+        """:meth:`NetworkCheckpointing.checkpoint` with the uncertainty scale and calibration in the meta."""
+        return super().checkpoint({"sigma_scale": self.sigma_scale, "calibration": self.calibration, **(meta or {})},
+                                  train_state)
 
     @classmethod
     def from_checkpoint(cls, ckpt: Checkpoint, *, kit: str | None = None, device: str | torch.device = "cpu",
@@ -134,8 +134,7 @@ class BiraeEstimator(Estimator):
         ckpt.check(method=cls.name, kit=kit, path=path)
         est = cls(BiraeConfig.from_dict(ckpt.config), device=device)
         ckpt.check(sensors=list(est.sensor_names), path=path)
-        est.model.load_state_dict(ckpt.weights)
-        est.data_fingerprint, est.train_command, est.meta = ckpt.data_fingerprint, ckpt.train_command, dict(ckpt.meta)
+        est.restore(ckpt)
         est.body_asset_id = ckpt.body_asset
         est.sigma_scale = float(ckpt.meta.get("sigma_scale", 1.0))
         est.calibration = dict(ckpt.meta.get("calibration") or {})

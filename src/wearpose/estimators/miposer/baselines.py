@@ -28,7 +28,7 @@ from torch import nn
 
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
-from wearpose.estimators.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from wearpose.estimators.checkpoint import NetworkCheckpointing, load_checkpoint, save_checkpoint
 from wearpose.estimators.empose.baselines import OfflineOnlyError
 from wearpose.estimators.empose.data import clip_seed, num_batches
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, UPPER_BODY, MiposerConfig
@@ -166,7 +166,7 @@ class ImuPoserTask:
 
 
 @register_estimator("imuposer")
-class ImuPoserEstimator(Estimator):
+class ImuPoserEstimator(NetworkCheckpointing, Estimator):
     """IMU-only head + wrists baseline (module doc). Offline only."""
 
     name = "imuposer"
@@ -188,37 +188,20 @@ class ImuPoserEstimator(Estimator):
         self.model = ImuPoserNet(self.config, len(self.sensor_names)).to(self.device)
         self.data_fingerprint, self.train_command, self.meta = "", "", {}
 
-    def to(self, device: str | torch.device) -> ImuPoserEstimator:
-        self.device = torch.device(device)
-        self.model.to(self.device)
-        self.body.to(self.device)
-        return self
-
     def build_data(self, split: str, **kw: Any) -> MiposerData:
         return build_imu_split(split, self.config, self.body, **kw)
 
     def make_task(self, tr: MiposerData, va: MiposerData | None) -> ImuPoserTask:
         return ImuPoserTask(self, tr, va)
 
-    def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
-        return Checkpoint(method=self.name, config=self.config.to_dict(), kit=self.kit_name, sensors=list(self.sensor_names),
-                          body_asset=self.body_asset_id, weights={k: v.detach().cpu() for k, v in self.model.state_dict().items()},
-                          data_fingerprint=self.data_fingerprint, train_command=self.train_command,
-                          meta={**self.meta, **(meta or {})}, train_state=train_state)
-
-    def save(self, path: str | Path) -> Path:
-        return save_checkpoint(self.checkpoint(), path)
-
     @classmethod
     def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
              map_location: str | torch.device = "cpu") -> ImuPoserEstimator:
         ck = load_checkpoint(path, map_location)
-        ck.check(method=cls.name, kit=kit, body_asset=getattr(body, "asset_id", None), path=path)
+        body = cls.check_checkpoint(ck, kit=kit, body=body, path=path)
         est = cls(MiposerConfig.from_dict(ck.config), body=body, device=map_location)
-        ck.check(body_asset=est.body_asset_id, sensors=est.sensor_names, path=path)
-        est.model.load_state_dict(ck.weights)
-        est.data_fingerprint, est.train_command, est.meta = ck.data_fingerprint, ck.train_command, dict(ck.meta)
-        return est
+        ck.check(sensors=est.sensor_names, path=path)
+        return est.restore(ck)
 
     def fit(self, *args: Any, **kwargs: Any) -> Any:
         from wearpose.estimators.miposer.train import train_miposer
