@@ -1,0 +1,201 @@
+"""``wearpose recording import``: turn public real-sensor dataset files (DIP-IMU, TotalCapture,
+EM-POSE) into wearpose Recording ``.npz`` files.
+
+Thin: collects files, calls the converters of :mod:`wearpose.recording.converters` and
+:func:`wearpose.recording.save_recording`, and prints a per-file report (frames, sensors, rate,
+valid share). A file a converter refuses is reported with the converter's one-line error and the
+others are converted (exit code 1 if any failed), like ``wearpose data prepare``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import typer
+from rich.markup import escape
+from rich.table import Table
+
+from wearpose.cli.app import _emit, app, console, err_console, error_text
+
+recording_app = typer.Typer(help="Import real sensor recordings from public datasets (DIP-IMU, TotalCapture, EM-POSE).\n\n"
+                                 "Example: wearpose recording import dip-imu DIP_IMU/s_09 --out recordings/",
+                            no_args_is_help=True)
+app.add_typer(recording_app, name="recording")
+
+#: FORMAT -> (file-name suffixes searched in folders, what a file looks like).
+FORMATS: dict[str, tuple[tuple[str, ...], str]] = {
+    "dip-imu": ((".pkl",), "DIP-IMU .pkl (imu_ori, imu_acc, gt)"),
+    "totalcapture": ((".sensors",), "TotalCapture *_Xsens.sensors / *_Xsens_AuxFields.sensors"),
+    "empose": (("_clean.npz",), "EM-POSE *_clean.npz"),
+}
+
+
+def _parse_sensors(fmt: str, sensors: str | None) -> Any:
+    """``--sensors`` as the converter takes it: 'six'/'all'/indices (DIP-IMU, EM-POSE) or
+    TotalCapture sensor names. Checked once, before any file is read."""
+    if sensors is None:
+        return None
+    items = [s.strip() for s in sensors.split(",") if s.strip()]
+    if fmt == "totalcapture":
+        if not items:
+            raise typer.BadParameter("empty list; expected TotalCapture sensor names, e.g. Head,Pelvis", param_hint="--sensors")
+        return items
+    if sensors.strip() in ("six", "all"):
+        return sensors.strip()
+    n = 17 if fmt == "dip-imu" else 12
+    try:
+        idx = [int(s) for s in items]
+    except ValueError:
+        idx = []
+    if not idx or any(not 0 <= i < n for i in idx):
+        raise typer.BadParameter(f"{sensors!r}; expected 'six', 'all' or comma-separated indices in [0, {n})",
+                                 param_hint="--sensors")
+    return idx
+
+
+def _converter(fmt: str, sensors: Any, fps: float | None, ground_truth: bool) -> Callable[[Path], Any]:
+    """One-argument converter with the options bound (options left unset keep the converter's default)."""
+    from wearpose.recording import from_dip_imu, from_empose, from_totalcapture
+
+    kw: dict[str, Any] = {}
+    if sensors is not None:
+        kw["sensors"] = sensors
+    if fps is not None:
+        kw["fps"] = fps
+    if fmt != "totalcapture":
+        kw["with_ground_truth"] = ground_truth
+    fn = {"dip-imu": from_dip_imu, "totalcapture": from_totalcapture, "empose": from_empose}[fmt]
+    return lambda p: fn(p, **kw)
+
+
+def _collect(fmt: str, paths: list[Path]) -> list[tuple[Path, Path]]:
+    """``(input file, output path relative to --out)``: files as given, folders searched
+    recursively for the format's files (their layout kept, e.g. ``s_09/01.npz``)."""
+    suffixes = FORMATS[fmt][0]
+    found: list[tuple[Path, Path]] = []
+    for p in paths:
+        if p.is_dir():
+            files = sorted(f for f in p.rglob("*") if f.is_file() and f.name.endswith(suffixes))
+            found += [(f, f.relative_to(p).with_suffix(".npz")) for f in files]
+        else:
+            found.append((p, Path(p.name).with_suffix(".npz")))
+    seen: set[Path] = set()
+    out: list[tuple[Path, Path]] = []
+    for f, rel in found:
+        if rel in seen:  # e.g. DIP-IMU's s_09/01.pkl and s_10/01.pkl given as files: keep the subject
+            rel = rel.with_name(f"{f.parent.name}_{rel.name}")
+        seen.add(rel)
+        out.append((f, rel))
+    return out
+
+
+def _summary(rec: Any) -> dict[str, Any]:
+    """Frames, sensors, rate and valid share of one converted recording."""
+    import numpy as np
+
+    valid = np.concatenate([s.valid for s in rec.sensors]) if rec.sensors else np.zeros(0, bool)
+    rates = sorted({float(s.info.rate) for s in rec.sensors if s.info.rate})
+    return {"frames": max((s.num_frames for s in rec.sensors), default=0), "sensors": len(rec.sensors),
+            "sensor_names": list(rec.names), "kinds": sorted(set(rec.kinds)),
+            "rate_hz": rates[0] if len(rates) == 1 else rates,
+            "valid_pct": round(100.0 * float(valid.mean()), 2) if valid.size else 0.0,
+            "ground_truth": rec.ground_truth is not None}
+
+
+def import_recordings(fmt: str, files: list[tuple[Path, Path]], out: Path, convert: Callable[[Path], Any],
+                      on_file: Callable[[Path], None] | None = None) -> dict[str, Any]:
+    """Convert and save each file; a file that fails is recorded with its error line, the others go on."""
+    from wearpose.errors import WearposeError
+    from wearpose.recording import save_recording
+
+    rows: list[dict[str, Any]] = []
+    for f, rel in files:
+        dest = out / rel
+        try:
+            if dest.resolve() == f.resolve():
+                raise WearposeError(f"{f}: the output would overwrite the input file; choose another --out")
+            rec = convert(f)
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            save_recording(rec, dest)
+            rows.append({"file": str(f), "ok": True, "out": str(dest), **_summary(rec)})
+        except (WearposeError, OSError) as exc:
+            msg = error_text(exc)
+            rows.append({"file": str(f), "ok": False, "error": msg if str(f) in msg else f"{f}: {msg}"})
+        if on_file is not None:
+            on_file(f)
+    failed = sum(not r["ok"] for r in rows)
+    return {"format": fmt, "out": str(out), "converted": len(rows) - failed, "failed": failed, "files": rows}
+
+
+def _report_table(res: dict[str, Any]) -> Table:
+    t = Table(title=f"recording import ({res['format']}) -> {res['out']}: {res['converted']} converted, {res['failed']} failed")
+    for c in ("file", "frames", "sensors", "rate (Hz)", "valid %", "ground truth", "status"):
+        t.add_column(c, justify="right" if c in ("frames", "sensors", "rate (Hz)", "valid %") else "left",
+                     overflow="fold" if c == "file" else "ellipsis")
+    for r in res["files"]:
+        name = escape(Path(r["file"]).name)
+        if not r["ok"]:
+            t.add_row(name, "", "", "", "", "", "[red]failed[/]")
+            continue
+        rate = r["rate_hz"] if isinstance(r["rate_hz"], list) else [r["rate_hz"]]
+        t.add_row(name, str(r["frames"]), str(r["sensors"]), "/".join(f"{x:g}" for x in rate), f"{r['valid_pct']:.1f}",
+                  "yes" if r["ground_truth"] else "no", "[green]ok[/]")
+    return t
+
+
+@recording_app.command("import")
+def recording_import(
+    fmt: str = typer.Argument(..., metavar="FORMAT", help="Source layout: dip-imu, totalcapture or empose."),
+    paths: list[Path] = typer.Argument(..., help="Dataset files or folders (searched recursively: *.pkl for dip-imu, *.sensors for totalcapture, *_clean.npz for empose)."),
+    out: Path = typer.Option(Path("recordings"), "--out", help="Output folder: one Recording .npz per input file (folder layout kept)."),
+    sensors: Optional[str] = typer.Option(None, help="Sensors to keep. dip-imu: six (default), all or indices into the 17; "
+                                                     "empose: all (default), six or indices into the 12; "
+                                                     "totalcapture: comma-separated sensor names (default all), e.g. Head,Pelvis,L_LowArm."),
+    fps: Optional[float] = typer.Option(None, help="Sample rate, Hz (default: the dataset's: DIP-IMU 60, TotalCapture 60, EM-POSE 30)."),
+    ground_truth: bool = typer.Option(True, "--ground-truth/--no-ground-truth", help="Attach the dataset's SMPL reference (dip-imu, empose)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the per-file summary as JSON."),
+) -> None:
+    """Convert real sensor files of a public dataset to wearpose Recording .npz files.
+
+    Each file is read by its converter (wearpose.recording.from_dip_imu / from_totalcapture /
+    from_empose), which declares the dataset's units, frames, gravity and up axis (converted by
+    Recording.to_canonical when used) and masks dropped frames without filling them. The report
+    gives frames, sensors, rate and the share of valid sensor frames per file. A file that cannot
+    be read is reported with the reason and the others are converted (exit code 1 if any failed).
+    See docs/formats.md.
+
+    Example: wearpose recording import totalcapture TotalCapture/s1/ --out recordings/tc --sensors Head,Pelvis,L_LowArm,R_LowArm,L_LowLeg,R_LowLeg
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    fmt = fmt.lower()
+    if fmt not in FORMATS:
+        raise typer.BadParameter(f"{fmt!r}; expected one of {', '.join(FORMATS)}", param_hint="FORMAT")
+    parsed = _parse_sensors(fmt, sensors)
+    if fps is not None and not fps > 0:
+        raise typer.BadParameter(f"{fps}; expected a positive rate in Hz", param_hint="--fps")
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        raise typer.BadParameter(f"no such file or folder: {', '.join(missing)}", param_hint="PATHS")
+    files = _collect(fmt, paths)
+    if not files:
+        err_console.print(f"[red]error:[/] no {escape(FORMATS[fmt][1])} files in {escape(', '.join(map(str, paths)))}")
+        raise typer.Exit(code=1)
+    convert = _converter(fmt, parsed, fps, ground_truth)
+    columns = (TextColumn("[bold]importing recordings"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+               TextColumn("{task.description}"))
+    with Progress(*columns, console=err_console, disable=as_json, transient=True) as bar:
+        task = bar.add_task("", total=len(files))
+        res = import_recordings(fmt, files, out, convert,
+                                on_file=lambda f: bar.update(task, advance=1, description=f.name))
+
+    def render(r: dict[str, Any]) -> None:
+        console.print(_report_table(r))
+        for row in r["files"]:
+            if not row["ok"]:
+                err_console.print(f"[red]failed[/] {escape(row['error'])}")
+
+    _emit(res, as_json, render)
+    if res["failed"]:
+        raise typer.Exit(code=1)
