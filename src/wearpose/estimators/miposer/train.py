@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import torch
 
@@ -39,6 +39,10 @@ class MiposerTask(WindowTask):
         loss, parts, _, _ = self._forward(batch, device, self.cfg.dense)
         return loss, parts
 
+    def val_batches(self) -> Iterator[dict[str, torch.Tensor]]:
+        """The validation windows: every half window, ending on clip frames, 256 a batch."""
+        return self.val_data.iter_batches(self.cfg.window, self.cfg.window // 2, 256, shuffle=False, clip_only=True)
+
     @torch.no_grad()
     def validate(self, device: torch.device) -> dict[str, float]:
         from wearpose.evaluate import mpjpe
@@ -47,7 +51,7 @@ class MiposerTask(WindowTask):
             return {}
         self.model.eval()
         tot, n, pe = 0.0, 0, []
-        for b in self.val_data.iter_batches(self.cfg.window, self.cfg.window // 2, 256, shuffle=False, clip_only=True):
+        for b in self.val_batches():
             loss, _, J, Jg = self._forward(b, device, False)
             tot, n = tot + float(loss), n + 1
             pe.append(mpjpe(J, Jg, UPPER_BODY).cpu())
