@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 import torch
@@ -28,12 +28,13 @@ from torch import nn
 
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
-from wearpose.estimators.checkpoint import NetworkCheckpointing, load_checkpoint, save_checkpoint
+from wearpose.estimators.checkpoint import NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.baselines import OfflineOnlyError
-from wearpose.estimators.empose.data import clip_seed, num_batches
-from wearpose.estimators.miposer.config import PREDICTED_JOINTS, UPPER_BODY, MiposerConfig
+from wearpose.estimators.empose.data import clip_seed
+from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.estimators.miposer.data import MiposerData, cached_split
 from wearpose.estimators.miposer.model import decode_pose, heading_frame, ik_loss
+from wearpose.estimators.miposer.train import MiposerTask
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import matrix_to_rot6d
 from wearpose.sensors import SensorKit, SensorSpec, get_kit, list_kits, register_kit
@@ -118,51 +119,21 @@ def build_imu_split(split: str, cfg: MiposerConfig, body: Any, *, store: Any = N
     return cached_split(root / f"imu-{split}-{fp[:16]}.pt", ids, one, fp, settings, progress)
 
 
-class ImuPoserTask:
-    """:class:`~wearpose.estimators.train.TrainTask` of the baseline (every frame of a window
-    supervised; validation: upper-body MPJPE at every frame of non-overlapping windows)."""
+class ImuPoserTask(MiposerTask):
+    """:class:`~wearpose.estimators.train.TrainTask` of the baseline: MI-Poser's task (windows,
+    batches, checkpoints, upper-body MPJPE validation) with every frame of a window supervised
+    (the BiLSTM's output at every frame) and validation on non-overlapping windows (every frame)."""
 
-    val_metric = "val_mpjpe_upper_mm"
-
-    def __init__(self, est: ImuPoserEstimator, train_data: MiposerData, val_data: MiposerData | None) -> None:
-        self.est, self.cfg, self.model = est, est.config, est.model
-        self.train_data, self.val_data = train_data, val_data
-        self._nw = len(train_data.windows(self.cfg.window, self.cfg.stride))
-
-    def num_batches(self) -> int:
-        return num_batches(self._nw, self.cfg.batch_size)
-
-    def batches(self, epoch: int, skip: int):
-        g = torch.Generator().manual_seed(self.cfg.seed * 100_003 + epoch)
-        return self.train_data.iter_batches(self.cfg.window, self.cfg.stride, self.cfg.batch_size, g, skip=skip)
-
-    def _forward(self, b: dict[str, torch.Tensor], device: torch.device):
+    def _forward(self, b: dict[str, torch.Tensor], device: torch.device, every_frame: bool = True):
+        # every_frame is ignored: the bidirectional network is supervised at every frame
         x, C = imu_features(b["R"].to(device), b["p"].to(device))
         root6, local6 = self.model(x)
         return ik_loss((root6.flatten(0, 1), local6.flatten(0, 1)), C.flatten(0, 1), b["pose6"].to(device).flatten(0, 1),
                        self.est.body, self.cfg)
 
-    def loss(self, batch: dict[str, torch.Tensor], device: torch.device):
-        loss, parts, _, _ = self._forward(batch, device)
-        return loss, parts
-
-    @torch.no_grad()
-    def validate(self, device: torch.device) -> dict[str, float]:
-        from wearpose.evaluate import mpjpe
-
-        if self.val_data is None:
-            return {}
-        self.model.eval()
-        tot, n, pe = 0.0, 0, []
-        for b in self.val_data.iter_batches(self.cfg.window, self.cfg.window, 64, shuffle=False):
-            loss, _, J, Jg = self._forward(b, device)
-            tot, n = tot + float(loss), n + 1
-            pe.append(mpjpe(J, Jg, UPPER_BODY).cpu())
-        self.model.train()
-        return {"val_loss": tot / max(n, 1), "val_mpjpe_upper_mm": float(torch.cat(pe).mean()) * 1000 if pe else float("nan")}
-
-    def save(self, path: Path, meta: dict[str, Any], train_state: dict[str, Any] | None) -> None:
-        save_checkpoint(self.est.checkpoint(meta, train_state), path)
+    def val_batches(self) -> Iterator[dict[str, torch.Tensor]]:
+        """Non-overlapping validation windows, 64 a batch (the data has no T-pose prefix)."""
+        return self.val_data.iter_batches(self.cfg.window, self.cfg.window, 64, shuffle=False)
 
 
 @register_estimator("imuposer")
