@@ -200,11 +200,22 @@ class PhysicsCharacter:
         R = torch.as_tensor(pose_local, dtype=torch.float64)
         if R.shape != (NUM_JOINTS, 3, 3):
             raise ShapeError(f"pose_local: expected (24, 3, 3) local rotation matrices, got {tuple(R.shape)}")
-        t = np.asarray(torch.as_tensor(trans, dtype=torch.float64).reshape(-1))
+        t = torch.as_tensor(trans, dtype=torch.float64).reshape(-1)
         if t.shape != (3,):
-            raise ShapeError(f"trans: expected (3,) metres, got {t.shape}")
-        quat = matrix_to_quat(R[list(DFS_ORDER)]).numpy()  # (24, 4) w, x, y, z in Pinocchio order
-        return np.concatenate([t, quat[:, [1, 2, 3, 0]].reshape(-1)])
+            raise ShapeError(f"trans: expected (3,) metres, got {tuple(t.shape)}")
+        return self.q_from_motion(R[None], t[None])[0]
+
+    def q_from_motion(self, pose_local: torch.Tensor | np.ndarray, trans: torch.Tensor | np.ndarray) -> np.ndarray:
+        """Pinocchio configurations ``(T, 99)`` float64 of a motion: local rotations ``(T, 24, 3, 3)``
+        and root translation ``(T, 3)`` m (the batched :meth:`q_from_pose`)."""
+        R = torch.as_tensor(pose_local, dtype=torch.float64)
+        t = torch.as_tensor(trans, dtype=torch.float64)
+        if R.dim() != 4 or R.shape[1:] != (NUM_JOINTS, 3, 3):
+            raise ShapeError(f"pose_local: expected (T, 24, 3, 3) local rotation matrices, got {tuple(R.shape)}")
+        if t.shape != (R.shape[0], 3):
+            raise ShapeError(f"trans: expected ({R.shape[0]}, 3) metres, got {tuple(t.shape)}")
+        quat = matrix_to_quat(R[:, list(DFS_ORDER)]).numpy()  # (T, 24, 4) w, x, y, z in Pinocchio order
+        return np.concatenate([t.numpy(), quat[..., [1, 2, 3, 0]].reshape(len(quat), -1)], axis=1)
 
     def pose_from_q(self, q: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         """Local rotations ``(24, 3, 3)`` and trans ``(3,)`` (float32 tensors) from a configuration."""

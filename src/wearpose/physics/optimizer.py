@@ -269,6 +269,34 @@ def _skew(o: np.ndarray) -> np.ndarray:
     return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
 
 
+
+def contact_square(square_size: float) -> np.ndarray:
+    """World offsets ``(4, 3)`` m of the 4 points of a horizontal, world-aligned contact square of
+    side ``square_size`` (PIP's facet contact) centred on its joint."""
+    h = square_size / 2
+    return np.array([[-h, 0, -h], [h, 0, -h], [-h, 0, h], [h, 0, h]])
+
+
+def contact_offsets(pos: np.ndarray, cj: Any, square: np.ndarray, foot_joints: Any, foot_square_shift: float
+                    ) -> np.ndarray:
+    """World offsets ``(nj, 4, 3)`` m of the contact points of joints ``cj`` from the joints.
+
+    Args:
+        pos: ``(24, 3)`` joint positions, m, world.
+        cj: ``nj`` joint indices in contact.
+        square: ``(4, 3)`` :func:`contact_square`.
+        foot_joints, foot_square_shift: a foot joint's square is moved this fraction of the way
+            (horizontally) towards its parent, the ankle (see :class:`PhysicsConfig`).
+    """
+    offs = np.repeat(square[None], len(cj), axis=0)
+    if foot_square_shift:
+        for i, j in enumerate(cj):
+            if j in foot_joints:
+                d = pos[PARENTS[j]] - pos[j]
+                offs[i, :, [0, 2]] += foot_square_shift * d[[0, 2]][:, None]
+    return offs
+
+
 class PhysicsOptimizer:
     """Online physics optimizer of PIP for one character.
 
@@ -287,8 +315,7 @@ class PhysicsOptimizer:
         self.model = character.model
         self.data = self.model.createData()
         self.nv = self.model.nv
-        h = self.config.square_size / 2
-        self._square = np.array([[-h, 0, -h], [h, 0, -h], [-h, 0, h], [h, 0, h]])  # world offsets of the 4 points
+        self._square = contact_square(self.config.square_size)
         mu = self.config.mu
         # Friction pyramid rows F lambda <= 0 per point (Eq. 10): |x| <= mu y, |z| <= mu y.
         self._fric = np.array([[1.0, -mu, 0.0], [-1.0, -mu, 0.0], [0.0, -mu, 1.0], [0.0, -mu, -1.0]])
@@ -369,14 +396,7 @@ class PhysicsOptimizer:
 
     def _contact_offsets(self, pos: np.ndarray, cj: np.ndarray) -> np.ndarray:
         """World offsets ``(nj, 4, 3)`` of the 4 contact points of each contact joint from the joint."""
-        offs = np.repeat(self._square[None], len(cj), axis=0)
-        shift = self.config.foot_square_shift
-        if shift:
-            for i, j in enumerate(cj):
-                if j in self.config.foot_joints:
-                    d = pos[PARENTS[j]] - pos[j]
-                    offs[i, :, [0, 2]] += shift * d[[0, 2]][:, None]
-        return offs
+        return contact_offsets(pos, cj, self._square, self.config.foot_joints, self.config.foot_square_shift)
 
     def _solve_reused(self, H: np.ndarray, g: np.ndarray, C: np.ndarray, l: np.ndarray, u: np.ndarray) -> Any:
         """Solve ``min x'Hx/2 + g'x s.t. l <= Cx <= u`` with a proxsuite dense QP object kept per

@@ -34,13 +34,13 @@ import numpy as np
 import pinocchio as pin
 import torch
 
-from wearpose.body import JOINT_INDEX, NUM_JOINTS, PARENTS
+from wearpose.body import NUM_JOINTS
 from wearpose.errors import ShapeError
-from wearpose.geometry import matrix_to_quat
-from wearpose.physics.character import DFS_ORDER, PhysicsCharacter
+from wearpose.physics.character import PhysicsCharacter
+from wearpose.physics.optimizer import PhysicsConfig, contact_offsets, contact_square
 
 #: Foot joints (left, right) whose contact squares form the base of support.
-ZMP_FEET = (JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"])
+ZMP_FEET = PhysicsConfig.foot_joints
 
 
 @dataclass
@@ -111,22 +111,9 @@ def distance_to_polygon(point: np.ndarray, hull: np.ndarray) -> float:
     return float(np.min(np.linalg.norm(a + t[:, None] * ab - p, axis=1)))
 
 
-def motion_configurations(character: PhysicsCharacter, pose_local: torch.Tensor, trans: torch.Tensor) -> np.ndarray:
-    """Pinocchio configurations ``(T, nq)`` float64 of a motion: local rotations ``(T, 24, 3, 3)``
-    and root translation ``(T, 3)`` m (the batched form of :meth:`PhysicsCharacter.q_from_pose`)."""
-    R = torch.as_tensor(pose_local, dtype=torch.float64)
-    t = torch.as_tensor(trans, dtype=torch.float64)
-    if R.dim() != 4 or R.shape[1:] != (NUM_JOINTS, 3, 3):
-        raise ShapeError(f"pose_local: expected (T, 24, 3, 3) local rotation matrices, got {tuple(R.shape)}")
-    if t.shape != (R.shape[0], 3):
-        raise ShapeError(f"trans: expected ({R.shape[0]}, 3) metres, got {tuple(t.shape)}")
-    quat = matrix_to_quat(R[:, list(DFS_ORDER)]).numpy()  # (T, 24, 4) w, x, y, z
-    return np.concatenate([t.numpy(), quat[..., [1, 2, 3, 0]].reshape(len(quat), -1)], axis=1)
-
-
 def zmp_distance(character: PhysicsCharacter, pose_local: torch.Tensor, trans: torch.Tensor, fps: float, *,
                  ground_y: float | None = None, contact_height: float = 0.05, contact_speed: float = 0.48,
-                 square_size: float = 0.2, foot_square_shift: float = 0.5, min_support: float = 0.1,
+                 square_size: float = PhysicsConfig.square_size, foot_square_shift: float = PhysicsConfig.foot_square_shift, min_support: float = 0.1,
                  stride: int = 1) -> ZmpResult:
     """ZMP distance to the base of support of a motion (module doc).
 
@@ -152,7 +139,7 @@ def zmp_distance(character: PhysicsCharacter, pose_local: torch.Tensor, trans: t
     """
     model = character.model
     data = model.createData()
-    q = motion_configurations(character, pose_local, trans)
+    q = character.q_from_motion(pose_local, trans)
     T, dt = len(q), 1.0 / float(fps)
     if int(stride) < 1:
         raise ShapeError(f"stride: expected a positive number of frames, got {stride}")
@@ -168,8 +155,7 @@ def zmp_distance(character: PhysicsCharacter, pose_local: torch.Tensor, trans: t
     if T > 1:
         speed = np.linalg.norm(np.gradient(joints[:, feet], dt, axis=0), axis=-1)
     contacts = (joints[:, feet, 1] - y0 < contact_height) & (speed < contact_speed)
-    half = square_size / 2
-    square = np.array([[-half, -half], [half, -half], [-half, half], [half, half]])  # (x, z) offsets
+    square = contact_square(square_size)
 
     dist = np.full(T, np.nan)
     zmp = np.full((T, 2), np.nan)
@@ -191,12 +177,9 @@ def zmp_distance(character: PhysicsCharacter, pose_local: torch.Tensor, trans: t
         h = c[1] - y0
         p = np.array([c[0] - (h * F[0] - N[2]) / F[1], c[2] - (h * F[2] + N[0]) / F[1]])
         zmp[t] = p
-        pts = []
-        for k, f in enumerate(feet):
-            if contacts[t, k]:
-                centre = joints[t, f, [0, 2]] + foot_square_shift * (joints[t, PARENTS[f], [0, 2]] - joints[t, f, [0, 2]])
-                pts.append(centre + square)
-        dist[t] = distance_to_polygon(p, convex_hull_2d(np.concatenate(pts)))
+        cj = [f for k, f in enumerate(feet) if contacts[t, k]]
+        pts = joints[t, cj][:, None] + contact_offsets(joints[t], cj, square, feet, foot_square_shift)  # (nj, 4, 3)
+        dist[t] = distance_to_polygon(p, convex_hull_2d(pts[..., [0, 2]]))
     ok = np.isfinite(dist)
     return ZmpResult(distance=dist, zmp=zmp, contacts=contacts, force=force, ground_y=y0,
                      mean_m=float(dist[ok].mean()) if ok.any() else float("nan"), frames_defined=int(ok.sum()))
