@@ -77,6 +77,11 @@ def rotation_y(angle: torch.Tensor) -> torch.Tensor:
     return torch.stack([c, z, s, z, o, z, -s, z, c], dim=-1).reshape(*angle.shape, 3, 3)
 
 
+def heading(R: torch.Tensor) -> torch.Tensor:
+    """Yaw (rad, about +Y) of the forward axis (+Z column) of ``R`` ``(..., 3, 3)``: 0 facing +Z."""
+    f = R[..., :, 2]
+    return torch.atan2(f[..., 0], f[..., 2])
+
 def rotation_z(angle: torch.Tensor) -> torch.Tensor:
     """Rotation about Z by ``angle`` ``(...)`` radians -> ``(..., 3, 3)``."""
     c, s = torch.cos(angle), torch.sin(angle)

@@ -4,8 +4,8 @@ IMU methods (PIP, BiRAE's inertial alignment) need the wearer to stand in a know
 moment so that each sensor's mounting (sensor -> bone) and the world heading can be solved
 (``docs/calibration.md``). A real capture starts with it because the operator asks for it; a
 *simulated* recording only has it when the motion has it. :func:`prepend_tpose` gives a motion
-that opening hold (the same construction as MI-Poser's training data,
-:func:`wearpose.estimators.miposer.data.tpose_then`: ``hold_s`` of SMPL's T-pose at the clip's
+that opening hold (the construction MI-Poser's training data uses too,
+:func:`tpose_then`: ``hold_s`` of SMPL's T-pose at the clip's
 first position and heading, a ``blend_s`` smoothstep slerp into the first frame, then the clip),
 and :func:`tpose_meta` / :func:`calibration_window` write and read where the hold is:
 
@@ -21,10 +21,37 @@ from __future__ import annotations
 
 from typing import Any
 
+import torch
+
 #: The meta key marking a recording's calibration pose.
 CALIBRATION_WINDOW_KEY = "calibration_window"
 #: Default blend from the held T-pose into the clip, seconds (MI-Poser's ``blend_s``).
 DEFAULT_BLEND_S = 0.5
+
+
+def tpose_then(motion: Any, hold_s: float, blend_s: float) -> tuple[Any, int]:
+    """``hold_s`` of the T-pose at the clip's first position and heading, a ``blend_s`` slerp
+    into the first frame, then the clip.
+
+    Returns:
+        ``(motion, prefix)``: the longer :class:`~wearpose.motion.MotionSequence` and the number
+        of frames before the clip's first frame.
+    """
+    from wearpose.calibration import calibration_pose
+    from wearpose.geometry import heading, rotation_y, slerp_matrix
+    from wearpose.motion import MotionSequence
+
+    fps = motion.fps
+    nh, nb = int(round(hold_s * fps)), int(round(blend_s * fps))
+    pose = motion.pose.to(torch.float64)
+    base = calibration_pose("tpose").clone()
+    base[0] = rotation_y(heading(pose[0, 0]))  # the wearer faces where the clip starts
+    x = torch.arange(1, nb + 1, dtype=torch.float64) / (nb + 1)
+    w = x * x * (3 - 2 * x)  # smoothstep: no velocity jump at either end
+    blend = slerp_matrix(base.expand(nb, 24, 3, 3), pose[0].expand(nb, 24, 3, 3), w[:, None].expand(nb, 24))
+    full = torch.cat([base.expand(nh, 24, 3, 3), blend, pose]).to(motion.pose.dtype)
+    trans = torch.cat([motion.trans[:1].expand(nh + nb, 3), motion.trans])
+    return MotionSequence(full, motion.betas, trans, fps, dict(motion.meta)), nh + nb
 
 
 def prepend_tpose(motion: Any, hold_s: float, blend_s: float = DEFAULT_BLEND_S) -> tuple[Any, dict[str, Any]]:
@@ -40,7 +67,6 @@ def prepend_tpose(motion: Any, hold_s: float, blend_s: float = DEFAULT_BLEND_S) 
         ``meta["calibration_window"]`` (see module doc), in seconds from the first frame.
     """
     from wearpose.errors import ConfigError
-    from wearpose.estimators.miposer.data import tpose_then  # one T-pose construction for every kit
 
     if not hold_s > 0:
         raise ConfigError(f"the T-pose hold must be > 0 s, got {hold_s!r}")

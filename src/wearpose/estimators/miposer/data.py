@@ -40,42 +40,12 @@ from wearpose.errors import ShapeError
 from wearpose.estimators.checkpoint import fingerprint
 from wearpose.estimators.empose.data import clip_seed, hold_invalid, num_batches
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
-from wearpose.geometry import matrix_to_rot6d, rotation_y
+from wearpose.geometry import matrix_to_rot6d
+from wearpose.recording.tpose import tpose_then
 
 DATA_VERSION = 1
 #: Tolerance when picking 120 Hz EM samples at the 60 Hz headset instants, s.
 GRID_TOLERANCE_S = 1e-3
-
-
-def heading(R: torch.Tensor) -> torch.Tensor:
-    """Yaw (rad, about +Y) of the forward axis (+Z column) of ``R`` ``(..., 3, 3)``: 0 facing +Z."""
-    f = R[..., :, 2]
-    return torch.atan2(f[..., 0], f[..., 2])
-
-
-def tpose_then(motion: Any, hold_s: float, blend_s: float) -> tuple[Any, int]:
-    """``hold_s`` of the T-pose at the clip's first position and heading, a ``blend_s`` slerp
-    into the first frame, then the clip.
-
-    Returns:
-        ``(motion, prefix)``: the longer :class:`~wearpose.motion.MotionSequence` and the number
-        of frames before the clip's first frame.
-    """
-    from wearpose.calibration import calibration_pose
-    from wearpose.geometry import slerp_matrix
-    from wearpose.motion import MotionSequence
-
-    fps = motion.fps
-    nh, nb = int(round(hold_s * fps)), int(round(blend_s * fps))
-    pose = motion.pose.to(torch.float64)
-    base = calibration_pose("tpose").clone()
-    base[0] = rotation_y(heading(pose[0, 0]))  # the wearer faces where the clip starts
-    x = torch.arange(1, nb + 1, dtype=torch.float64) / (nb + 1)
-    w = x * x * (3 - 2 * x)  # smoothstep: no velocity jump at either end
-    blend = slerp_matrix(base.expand(nb, 24, 3, 3), pose[0].expand(nb, 24, 3, 3), w[:, None].expand(nb, 24))
-    full = torch.cat([base.expand(nh, 24, 3, 3), blend, pose]).to(motion.pose.dtype)
-    trans = torch.cat([motion.trans[:1].expand(nh + nb, 3), motion.trans])
-    return MotionSequence(full, motion.betas, trans, fps, dict(motion.meta)), nh + nb
 
 
 def _pick(ts: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

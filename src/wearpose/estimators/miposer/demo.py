@@ -72,7 +72,7 @@ def run_demo(clip: str, out: str | Path, weights: str = "miposer_cpu", condition
     from wearpose.body.skeleton import JOINT_NAMES  # noqa: F401 - documents the joint order used below
     from wearpose.calibration import calibrate
     from wearpose.estimators.miposer.config import UPPER_BODY
-    from wearpose.estimators.miposer.data import tpose_then
+    from wearpose.recording.tpose import tpose_then
     from wearpose.estimators.miposer.estimator import MiposerEstimator
     from wearpose.estimators.miposer.evaluate import interference_recording, joint_errors
     from wearpose.interference import simulate_condition

@@ -248,7 +248,8 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
     leave ``max_range`` m of the source are skipped.
     """
     from wearpose.calibration import calibrate
-    from wearpose.estimators.miposer.data import calibrated_inputs, raw_inputs, tpose_then
+    from wearpose.estimators.miposer.data import calibrated_inputs, raw_inputs
+    from wearpose.recording.tpose import tpose_then
     from wearpose.interference import simulate_condition
     from wearpose.motion import CorpusStore, resample
     from wearpose.sensors import get_kit
