@@ -131,7 +131,7 @@ def test_refusal_stats_endpoint_and_clean_shutdown() -> None:
 
     stats, http_stats, n_poses, final = _run(main())
     assert stats["type"] == "stats" and "0" in stats["subjects"]
-    assert http_stats["malformed_total"] == 1
+    assert http_stats["malformed_total"] == 1 and http_stats["refused_total"] == 1
     assert n_poses == 40 and final["finished"]["0"]["estimated"] == 40
 
 
@@ -274,3 +274,42 @@ def test_estimator_errors_are_counted_and_the_stream_goes_on() -> None:
     bad = {n for n in range(1, 21) if n % 5 == 0 or n % 7 == 0}  # steps 5, 7, 10, 14, 15, 20
     assert s["estimator_errors"] == len(bad) and s["estimated"] == 20 - len(bad)
     assert r["poses_received"] == 20 - len(bad) and r["frames_lost"] == len(bad)
+
+
+def test_auto_stride_refuses_rates_that_are_not_an_integer_multiple_and_keeps_serving() -> None:
+    """stride 'auto' follows recording.decimation_factor: 90 Hz (x1.5) and 30 Hz (upsampling) into the
+    60 Hz echo estimator are refused at hello, counted; a 120 Hz subject on the same connection is served."""
+    rec = tiny_recording(40, rate=120.0)
+    st = stack_recording(rec)
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(_Factory(), port=0, stride="auto", warmup=0) as srv, StreamClient(srv.url) as c:
+            errors = []
+            for subject, rate in ((1, 90.0), (2, 30.0)):
+                with pytest.raises(StreamError) as info:
+                    await c.hello(Hello(subject, st.names, st.channels, rate))
+                errors.append(str(info.value))
+            ready = await c.hello(Hello(0, st.names, st.channels, st.rate, "binary"))
+            for k in range(40):
+                await c.send_frame(FramePacket(0, k, float(st.timestamps[k]), st.valid[k], st.data[k]))
+            final = await c.bye(0)
+            return errors, ready, final, srv.stats(), sorted(c.poses.get_nowait()[1].seq for _ in range(c.poses.qsize()))
+
+    errors, ready, final, stats, seqs = _run(main())
+    for msg, rate, what in zip(errors, ("90", "30"), ("not an integer", "upsampling")):
+        assert f"{rate} Hz" in msg and "60 Hz" in msg and what in msg and "--stride N" in msg, msg
+    assert stats["refused_total"] == 2 and set(stats["subjects"]) == set()  # neither kept as a subject
+    assert ready["stride"] == 2 and final["estimated"] == 20 and final["decimated"] == 20
+    assert seqs == list(range(0, 40, 2))
+
+
+def test_explicit_stride_serves_any_rate_with_a_note() -> None:
+    rec = tiny_recording(30, rate=90.0)  # 1.5 x the echo estimator's 60 Hz: 'auto' would refuse it
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(_Factory(), port=0, stride=1, warmup=0) as srv:
+            return await replay(rec, srv.url, realtime=False), srv.stats()
+
+    r, stats = _run(main())
+    assert r["ready"]["stride"] == 1 and "trained at 60 Hz" in r["ready"]["note"]
+    assert r["poses_received"] == 30 and stats["refused_total"] == 0

@@ -43,9 +43,11 @@ def serve(
     port: int = typer.Option(8765, help="TCP port (0: any free port, printed at start)."),
     reorder_window: int = typer.Option(4, help="Lateness bound: a missing frame is given up once a frame this many "
                                                "sequence numbers newer has arrived."),
-    stride: str = typer.Option("auto", help="Estimate every N-th frame: auto (default: round(stream rate / the "
-                                            "estimator's trained rate), e.g. 4 for 120 Hz into 30 Hz weights), 1 (every "
-                                            "frame) or N."),
+    stride: str = typer.Option("auto", help="Estimate every N-th frame: auto (default: the integer factor stream "
+                                            "rate / the estimator's trained rate, e.g. 4 for 120 Hz into 30 Hz weights, "
+                                            "the rule `wearpose estimate` decimates by; a stream below, or not an "
+                                            "integer multiple of, that rate is refused at hello), 1 (every frame) or "
+                                            "N (any rate, output may be degraded)."),
     udp_port: Optional[int] = typer.Option(None, help="Also accept the same packets over UDP on this port."),
     workers: int = typer.Option(2, min=1, help="Estimator steps running at once (each subject has its own estimator thread; "
                                         "subjects step in parallel up to this)."),

@@ -18,6 +18,9 @@ What the server does with imperfect input (all counted in ``stats``):
   with NaN values (masked, not invented); ``masked_sensor_samples`` counts them.
 - **Malformed messages**: logged (rate-limited), counted (``malformed``), skipped; the
   connection and the stream keep running.
+- **Hellos that cannot be served** (a sensor the estimator needs is missing; with ``stride="auto"``
+  a rate below, or not an integer multiple of, the estimator's trained rate): answered with an
+  ``error`` naming the problem, counted (``refused_total``); other subjects go on.
 - **UDP** (optional ``udp_port``): the same messages as datagrams; a lost datagram is a lost
   frame (counted like any gap), replies go back to the sender's address.
 - **Estimator slower than the sensor rate**: frames queue (never dropped); ``queue_max`` and the
@@ -61,6 +64,7 @@ from typing import Any, Callable
 import numpy as np
 
 from wearpose.estimators.base import Estimator, SensorFrame
+from wearpose.recording import RecordingError, decimation_factor
 from wearpose.stream.packets import (
     MAX_MESSAGE_BYTES,
     FramePacket,
@@ -272,8 +276,11 @@ class StreamServer:
         host, port: where to listen (port 0 picks a free one; see :attr:`port`).
         reorder_window: lateness bound in frames.
         stride: estimate every ``stride``-th frame (by sequence number) and skip the others
-            (counted ``decimated``): ``"auto"`` = round(stream rate / estimator rate), for a
-            network trained at a lower rate than the sensors stream. Default 1: every frame.
+            (counted ``decimated``): ``"auto"`` = the integer factor stream rate / estimator rate
+            (:func:`wearpose.recording.decimation_factor`, as offline decimation), for a network
+            trained at a lower rate than the sensors stream; a hello whose rate is below, or not an
+            integer multiple of, the trained rate is refused (``error`` reply, ``refused_total``).
+            Default 1: every frame.
         workers: estimator steps running at once (each subject has its own thread; at most this
             many step at the same time) and threads loading estimators.
         warmup: synthetic steps run on each fresh estimator before its subject's ``ready``
@@ -304,6 +311,7 @@ class StreamServer:
         self.subscribers: dict[Any, tuple[str, set[int] | None]] = {}
         self.connections: set[Any] = set()
         self.malformed = 0
+        self.refused = 0  # hellos answered with an error (missing sensor, rate that does not fit...)
         self.subscriber_skipped = 0
         self.finished: dict[str, dict[str, Any]] = {}  # stats of subjects whose stream ended
         self.started = time.time()
@@ -370,6 +378,7 @@ class StreamServer:
         """Counters and latency summaries (what ``{"type": "stats"}`` and ``GET /stats`` return)."""
         return {"type": "stats", "uptime_s": round(time.time() - self.started, 3), "connections": len(self.connections),
                 "subscribers": len(self.subscribers), "malformed_total": self.malformed,
+                "refused_total": self.refused,
                 "subscriber_skipped": self.subscriber_skipped,
                 "subjects": {str(k): s.stats() for k, s in self.subjects.items()}, "finished": dict(self.finished)}
 
@@ -509,11 +518,12 @@ class StreamServer:
         self.subjects[hello.subject] = s
         loop = asyncio.get_running_loop()
         try:
-            s.estimator = await loop.run_in_executor(self.pool, self._make_estimator, hello)
+            s.estimator, s.stride = await loop.run_in_executor(self.pool, self._make_estimator, hello)
         except Exception as exc:  # noqa: BLE001 - a bad hello must not take the server down
             if self.subjects.get(hello.subject) is s:
                 self.subjects.pop(hello.subject)
             s.ready.set()
+            self.refused += 1
             log.warning("subject %d refused: %s", hello.subject, exc)
             await self._safe_send(ws, json.dumps({"type": "error", "subject": hello.subject, "error": str(exc)}))
             return
@@ -521,8 +531,6 @@ class StreamServer:
         # collection, so a full collection does not stall a step for tens of ms.
         gc.freeze()
         est = s.estimator
-        s.stride = max(1, round(hello.rate / est.fps)) if self.stride == "auto" and est.fps > 0 else (
-            1 if self.stride == "auto" else int(self.stride))
         # Frames that arrived while the estimator loaded were queued before the stride was known.
         if s.stride > 1:
             queued = _drain_queue(s.inbox)
@@ -546,12 +554,15 @@ class StreamServer:
         for sub in list(self.subscribers):
             await self._safe_send(sub, self._subject_message(hello.subject, s))
 
-    def _make_estimator(self, hello: Hello) -> Estimator:
+    def _make_estimator(self, hello: Hello) -> tuple[Estimator, int]:
+        """A fresh, warmed-up estimator for ``hello`` and the subject's stride; raises (the hello is refused)
+        when the estimator needs a sensor the hello lacks or the rate does not fit (:meth:`_stride_for`)."""
         est = self.factory()
         missing = [n for n in est.sensor_names if n not in hello.sensors]
         if missing:
             raise PacketError(f"hello.sensors lacks {missing} needed by estimator {est.name!r} "
                               f"(it needs {list(est.sensor_names)})")
+        stride = self._stride_for(hello, est)  # before the warm-up: a refusal costs no steps
         offsets = hello.subject_info.get("offsets")
         if offsets and hasattr(est, "set_offsets") and hasattr(est, "_offsets_from"):
             # Subject calibration (EM-POSE sensor offsets), read exactly as from a Recording.
@@ -559,7 +570,28 @@ class StreamServer:
         if self.warmup > 0:
             _warm_up(est, hello, self.warmup)
         est.reset()
-        return est
+        return est, stride
+
+    def _stride_for(self, hello: Hello, est: Estimator) -> int:
+        """The subject's stride: an explicit ``stride`` as given; ``"auto"``: the integer factor from the
+        stream rate to the estimator's trained rate, by the rule recordings are decimated with
+        (:func:`wearpose.recording.decimation_factor`; 1 for an estimator of any rate, ``fps <= 0``).
+
+        Raises:
+            PacketError: ``"auto"`` and a stream rate that is below, or not an integer multiple of,
+                the trained rate (names both rates and what to do).
+        """
+        if self.stride != "auto":
+            return int(self.stride)
+        if est.fps <= 0:
+            return 1
+        try:
+            return decimation_factor(hello.rate, est.fps)
+        except RecordingError as exc:
+            raise PacketError(
+                f"hello.rate {hello.rate:g} Hz does not fit estimator {est.name!r} trained at {est.fps:g} Hz "
+                f"(the server runs with stride 'auto'): {exc}; or start the server with an explicit "
+                f"`wearpose serve --stride N` to estimate every N-th frame anyway (output may be degraded)") from None
 
     @staticmethod
     def _subject_message(k: int, s: _Subject) -> str:
