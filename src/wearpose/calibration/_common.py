@@ -1,4 +1,4 @@
-"""Small helpers shared by the calibration procedures (rotation averages, yaw, windows)."""
+"""Small helpers shared by the calibration procedures (rotation averages, windows; yaw lives in geometry)."""
 
 from __future__ import annotations
 
@@ -54,11 +54,6 @@ def rotation_y(angle: torch.Tensor | float) -> torch.Tensor:
     c, s = torch.cos(a), torch.sin(a)
     o, z = torch.ones_like(a), torch.zeros_like(a)
     return torch.stack([c, z, s, z, o, z, -s, z, c], -1).reshape(*a.shape, 3, 3)
-
-
-def best_yaw(M: torch.Tensor) -> torch.Tensor:
-    """Angle ``psi`` ``(...)`` of the rotation about +Y closest (Frobenius) to ``M`` ``(..., 3, 3)``."""
-    return torch.atan2(M[..., 0, 2] - M[..., 2, 0], M[..., 0, 0] + M[..., 2, 2])
 
 
 def window_mask(timestamps: np.ndarray | torch.Tensor, window: tuple[float, float], name: str) -> np.ndarray:

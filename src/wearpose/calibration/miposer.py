@@ -40,8 +40,9 @@ from typing import Any, Sequence
 import torch
 
 from wearpose.body.skeleton import JOINT_INDEX
-from wearpose.calibration._common import F64, CalibrationError, best_yaw, chordal_mean, rotation_y, t64
+from wearpose.calibration._common import F64, CalibrationError, chordal_mean, rotation_y, t64
 from wearpose.calibration.result import CalibrationResult
+from wearpose.geometry import best_yaw
 
 #: Target SMPL joint of each MI-Poser sensor role (App. A: joints 15, 20, 21).
 TARGET_JOINT = {"head": "head", "left_wrist": "left_wrist", "right_wrist": "right_wrist"}

@@ -57,10 +57,10 @@ import torch
 
 from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.calibration._common import (
-    E_Y, F64, G_VEC, CalibrationError, DegenerateCalibrationError, best_yaw, chordal_mean, rotation_y, t64, window_mask,
+    E_Y, F64, G_VEC, CalibrationError, DegenerateCalibrationError, chordal_mean, rotation_y, t64, window_mask,
 )
 from wearpose.calibration.result import CalibrationResult
-from wearpose.geometry import geodesic_angle, rotation_between, rotation_z
+from wearpose.geometry import best_yaw, geodesic_angle, rotation_between, rotation_z
 
 POSES: tuple[str, ...] = ("tpose", "ipose")
 #: I-pose arm angle: rotation of each upper arm down from the T-pose, about the body's forward

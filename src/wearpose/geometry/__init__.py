@@ -31,6 +31,8 @@ from wearpose.geometry.rotations import (
     rotation_x,
     rotation_y,
     heading,
+    vector_heading,
+    best_yaw,
     rotation_z,
     slerp_matrix,
 )
@@ -55,7 +57,7 @@ __all__ = [
     "axis_angle_to_matrix", "matrix_to_axis_angle", "quat_to_matrix", "matrix_to_quat",
     "rot6d_to_matrix", "matrix_to_rot6d", "euler_to_matrix", "matrix_to_euler",
     "geodesic_angle", "slerp_matrix", "project_to_so3", "rotation_between",
-    "rotation_x", "rotation_y", "rotation_z", "heading",
+    "rotation_x", "rotation_y", "rotation_z", "heading", "vector_heading", "best_yaw",
     "Z_UP_TO_Y_UP", "Y_UP_TO_Z_UP", "change_world_rotation", "change_world_points",
     "CM_TO_M", "MM_TO_M", "M_TO_MM", "M_TO_CM", "INCH_TO_M", "DEG_TO_RAD", "RAD_TO_DEG", "GRAVITY",
 ]

@@ -79,8 +79,26 @@ def rotation_y(angle: torch.Tensor) -> torch.Tensor:
 
 def heading(R: torch.Tensor) -> torch.Tensor:
     """Yaw (rad, about +Y) of the forward axis (+Z column) of ``R`` ``(..., 3, 3)``: 0 facing +Z."""
-    f = R[..., :, 2]
-    return torch.atan2(f[..., 0], f[..., 2])
+    return vector_heading(R[..., :, 2])
+
+
+def vector_heading(v: torch.Tensor) -> torch.Tensor:
+    """Yaw (rad, about +Y, in (-pi, pi]) of direction ``v`` ``(..., 3)`` seen from above:
+    ``atan2(x, z)``, 0 along +Z, +pi/2 along +X (``rotation_y(a) @ e_z`` has heading ``a``).
+    The vertical component is ignored; a vertical ``v`` gives ``atan2(0, 0) = 0``."""
+    return torch.atan2(v[..., 0], v[..., 2])
+
+
+def best_yaw(M: torch.Tensor) -> torch.Tensor:
+    """Angle ``psi`` ``(...)`` rad of the rotation about +Y closest (Frobenius) to ``M`` ``(..., 3, 3)``.
+
+    ``rotation_y(psi)`` maximises ``trace(rotation_y(psi)^T M)`` (1-D Wahba), so
+    ``psi = atan2(M[0, 2] - M[2, 0], M[0, 0] + M[2, 2])``. Not :func:`heading`: for a pure
+    rotation about +Y both give its angle, but for a tilted ``M`` this is the yaw of the whole
+    rotation (used for yaw *errors* ``R_est R_true^T``), while :func:`heading` is where one axis
+    points. ``M`` need not be a rotation (e.g. a sum of rotations).
+    """
+    return torch.atan2(M[..., 0, 2] - M[..., 2, 0], M[..., 0, 0] + M[..., 2, 2])
 
 def rotation_z(angle: torch.Tensor) -> torch.Tensor:
     """Rotation about Z by ``angle`` ``(...)`` radians -> ``(..., 3, 3)``."""

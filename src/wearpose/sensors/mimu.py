@@ -43,7 +43,7 @@ import numpy as np
 import torch
 
 from wearpose.errors import ConfigError, ShapeError
-from wearpose.geometry import Y_UP_TO_Z_UP, axis_angle_to_matrix, matrix_to_rot6d, rotation_y
+from wearpose.geometry import Y_UP_TO_Z_UP, axis_angle_to_matrix, best_yaw, matrix_to_rot6d, rotation_y, vector_heading
 from wearpose.sensors.imu import ImuNoise, simulate_imu
 
 #: Earth field in the world frame, tesla: 50 uT, inclination 60 deg (northern hemisphere:
@@ -138,8 +138,8 @@ def magnetic_disturbance(T: int, num_sensors: int, fps: float, noise: MimuNoise,
             d[:, s, 0] += amp * h * math.sin(ang) * env
             d[:, s, 2] += amp * h * math.cos(ang) * env
     tot = m + d
-    # Heading of the horizontal field about +Y (atan2(x, z)); the filter's estimate turns by -delta.
-    delta = torch.atan2(tot[..., 0], tot[..., 2]) - math.atan2(float(m[0]), float(m[2]))
+    # Heading of the horizontal field about +Y; the filter's estimate turns by -delta.
+    delta = vector_heading(tot) - vector_heading(m)
     delta = torch.remainder(delta + math.pi, 2 * math.pi) - math.pi
     return d, -delta
 
@@ -202,7 +202,7 @@ def simulate_mimu(R: torch.Tensor, p: torch.Tensor, fps: float, *, noise: MimuNo
                               for k in range(S)], dim=1)
         # heading error of the fused estimate about the vertical (diagnostic)
         E = R_meas @ R64.transpose(-1, -2)
-        psi = torch.atan2(E[..., 0, 2] - E[..., 2, 0], E[..., 0, 0] + E[..., 2, 2])
+        psi = best_yaw(E)
     g = torch.tensor((0.0, -9.81, 0.0), dtype=torch.float64)
     acc = (R_meas @ f.unsqueeze(-1)).squeeze(-1) + g
     valid = out["valid"]

@@ -26,7 +26,7 @@ from torch import nn
 
 from wearpose.body.skeleton import NUM_JOINTS
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
-from wearpose.geometry import matrix_to_rot6d, rot6d_to_matrix, rotation_y
+from wearpose.geometry import heading, matrix_to_rot6d, rot6d_to_matrix, rotation_y
 
 #: Numbers per sensor and frame in :func:`window_features`.
 FEATURES_PER_SENSOR = 18
@@ -36,8 +36,7 @@ HEAD, LEFT_WRIST, RIGHT_WRIST = 15, 20, 21
 def heading_frame(R_head: torch.Tensor, p_head: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """``(C (..., 3, 3), o (..., 3))``: world -> heading frame rotation (about +Y) and origin (the
     head's floor projection, y = 0) for head poses ``R_head`` ``(..., 3, 3)``, ``p_head`` ``(..., 3)``."""
-    f = R_head[..., :, 2]
-    C = rotation_y(-torch.atan2(f[..., 0], f[..., 2]))
+    C = rotation_y(-heading(R_head))
     o = p_head.clone()
     o[..., 1] = 0.0
     return C.to(R_head.dtype), o
