@@ -157,8 +157,9 @@ def test_eliminated_and_full_qp_agree(char):
 
 def test_friction_cone_respected_under_horizontal_demand(char):
     """Reference velocities ask every joint to move sideways at 3 m/s while both feet are held:
-    the friction pyramid must bound every point force, and bind somewhere."""
-    cfg = PhysicsConfig()
+    the friction pyramid must bound every point force, and bind somewhere. (The feet's reference
+    velocity is 3 m/s too: ``foot_release_speed`` off, or it would release them.)"""
+    cfg = PhysicsConfig(foot_release_speed=None)
     opt = PhysicsOptimizer(char, cfg)
     opt.reset(EYE, torch.zeros(3))
     vel = torch.zeros(NUM_JOINTS, 3)
@@ -265,7 +266,7 @@ def test_planted_foot_does_not_lift_and_released_foot_may(char):
     vel[[lf, JOINT_INDEX["left_ankle"], JOINT_INDEX["left_knee"]], 1] = 1.0  # lift the left leg at 1 m/s
     rise = {}
     for p in (1.0, 0.0, None):
-        opt = PhysicsOptimizer(char, PhysicsConfig(contact_no_lift=p is not None))
+        opt = PhysicsOptimizer(char, PhysicsConfig(contact_no_lift=p is not None, foot_release_speed=None))
         p = 1.0 if p is None else p
         opt.reset(EYE, torch.zeros(3))
         y0 = opt.joint_positions()[lf, 1]
@@ -276,6 +277,28 @@ def test_planted_foot_does_not_lift_and_released_foot_may(char):
     assert rise[(1.0, True)] <= 6 * PhysicsConfig().sigma * dt + 1e-6
     assert rise[(0.0, True)] > 5 * rise[(1.0, True)] and rise[(0.0, True)] > 5e-3
     assert rise[(1.0, False)] > 5 * rise[(1.0, True)]
+
+
+def test_foot_release_speed_frees_a_fast_planted_foot(char):
+    """A foot called planted (p = 1) whose reference velocity is above ``foot_release_speed`` is
+    released (may rise as with p = 0); below the speed, or with the rule off, it stays planted."""
+    lf = JOINT_INDEX["left_foot"]
+    vel = torch.zeros(NUM_JOINTS, 3)
+    vel[[lf, JOINT_INDEX["left_ankle"], JOINT_INDEX["left_knee"]], 1] = 1.0  # lift the left leg at 1 m/s
+    rise = {}
+    for release in (None, 0.5, 2.0):
+        opt = PhysicsOptimizer(char, PhysicsConfig(foot_release_speed=release))
+        opt.reset(EYE, torch.zeros(3))
+        y0 = opt.joint_positions()[lf, 1]
+        for _ in range(6):
+            st = opt.step(EYE, vel, torch.tensor([1.0, 1.0]))
+        rise[release] = float(st.joints[lf, 1]) - y0
+    bound = 6 * PhysicsConfig().sigma / 60 + 1e-6
+    assert rise[None] <= bound and rise[2.0] <= bound  # 1 m/s is below 2 m/s: still planted
+    assert rise[0.5] > 5e-3
+    assert PhysicsConfig().foot_release_speed == 0.48  # the contact labels' speed threshold
+    with pytest.raises(ConfigError, match="foot_release_speed"):
+        PhysicsConfig(foot_release_speed=0.0)
 
 
 def test_reused_qp_matches_a_fresh_solve(char):
