@@ -28,9 +28,13 @@ def main() -> None:
     ap.add_argument("name")
     ap.add_argument("--eval", type=Path, help="evaluation JSON (benchmarks/empose_eval.py output)")
     ap.add_argument("--eval-row", default=None, help="row of the evaluation JSON describing these weights")
+    ap.add_argument("--half", action="store_true",
+                    help="store floating weights as float16 (half the file; loaded back into float32 modules)")
     args = ap.parse_args()
     ck = torch.load(args.checkpoint, map_location="cpu", weights_only=True)
     ck["train_state"] = None
+    if args.half:  # the estimators load state dicts into float32 modules, which casts back
+        ck["weights"] = {k: v.half() if v.is_floating_point() else v for k, v in ck["weights"].items()}
     out = WEIGHTS_DIR / f"{args.name}.pt"
     torch.save(ck, out)
     store = CorpusStore()
@@ -52,7 +56,8 @@ def main() -> None:
                     "(research terms)") if "CC-BY-NC-4.0" in licences else "see training_data.licences",
         "validation": {k: v for k, v in ck.get("meta", {}).items() if k.startswith("val_") or k == "epoch"},
         "size_bytes": out.stat().st_size,
-        "shipped_with": f"python tools/ship_weights.py {args.checkpoint} {args.name}"
+        "storage": "float16 (loaded as float32)" if args.half else "float32",
+        "shipped_with": f"python tools/ship_weights.py {args.checkpoint} {args.name}" + (" --half" if args.half else "")
                         + (f" --eval {args.eval} --eval-row {args.eval_row}" if args.eval else ""),
     }
     if args.eval:
