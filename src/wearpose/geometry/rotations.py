@@ -100,6 +100,7 @@ def best_yaw(M: torch.Tensor) -> torch.Tensor:
     """
     return torch.atan2(M[..., 0, 2] - M[..., 2, 0], M[..., 0, 0] + M[..., 2, 2])
 
+
 def rotation_z(angle: torch.Tensor) -> torch.Tensor:
     """Rotation about Z by ``angle`` ``(...)`` radians -> ``(..., 3, 3)``."""
     c, s = torch.cos(angle), torch.sin(angle)
