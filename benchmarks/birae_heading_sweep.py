@@ -43,11 +43,12 @@ def main(argv: list[str] | None = None) -> int:
     from wearpose.estimators.birae.evaluate import evaluate, scenario_recordings
 
     ests: dict[str, Any] = {}
+    paths: dict[str, str] = {}
     for spec in a.ckpt:
         name, sep, path = spec.partition("=")
         if not sep or not Path(path).is_file():
             ap.error(f"--ckpt {spec!r}: expected NAME=PATH to an existing checkpoint")
-        ests[name] = BiraeEstimator.load(path)
+        ests[name], paths[name] = BiraeEstimator.load(path), path
     t0 = time.time()
     res: dict[str, dict[str, dict[str, float]]] = {n: {} for n in ests}
     for off in a.offsets:
@@ -80,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     (RESULTS / f"{stem}.md").write_text("\n".join(md) + "\n")
     (RESULTS / f"{stem}.json").write_text(json.dumps(
         {"command": cmd, "split": a.split, "clips": len(recs), "offsets_deg": a.offsets, "mc_samples": a.mc,
-         "checkpoints": {n: str(e.source) if hasattr(e, "source") else None for n, e in ests.items()},
+         "checkpoints": paths,
          "mpjae_deg": res, "wall_seconds": time.time() - t0}, indent=1))
     print("\n".join(md))
     return 0
