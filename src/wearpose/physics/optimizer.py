@@ -282,7 +282,6 @@ def _skew(o: np.ndarray) -> np.ndarray:
     return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
 
 
-
 def contact_square(square_size: float) -> np.ndarray:
     """World offsets ``(4, 3)`` m of the 4 points of a horizontal, world-aligned contact square of
     side ``square_size`` (PIP's facet contact) centred on its joint."""

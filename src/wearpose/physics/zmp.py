@@ -113,7 +113,8 @@ def distance_to_polygon(point: np.ndarray, hull: np.ndarray) -> float:
 
 def zmp_distance(character: PhysicsCharacter, pose_local: torch.Tensor, trans: torch.Tensor, fps: float, *,
                  ground_y: float | None = None, contact_height: float = 0.05, contact_speed: float = 0.48,
-                 square_size: float = PhysicsConfig.square_size, foot_square_shift: float = PhysicsConfig.foot_square_shift, min_support: float = 0.1,
+                 square_size: float = PhysicsConfig.square_size,
+                 foot_square_shift: float = PhysicsConfig.foot_square_shift, min_support: float = 0.1,
                  stride: int = 1) -> ZmpResult:
     """ZMP distance to the base of support of a motion (module doc).
 
