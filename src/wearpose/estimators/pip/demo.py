@@ -89,11 +89,10 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
         ``{"clip", "frames", "fps", "weights", "html", "title", "metrics": {...}}``.
     """
     from wearpose.estimators.empose.data import clip_seed
-    from wearpose.geometry import heading
     from wearpose.estimators.pip.data import EDGE_FRAMES
     from wearpose.estimators.pip.estimator import PipEstimator
     from wearpose.evaluate import compute_all
-    from wearpose.geometry import rotation_y
+    from wearpose.geometry import heading, rotation_y
     from wearpose.motion import load_motion, resample
     from wearpose.recording import CALIBRATION_WINDOW_KEY, Recording, prepend_tpose, use_calibration_window
     from wearpose.sensors import simulate
