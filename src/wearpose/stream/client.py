@@ -60,6 +60,12 @@ class StreamClient:
         self._reader = asyncio.create_task(self._read())
         return self
 
+    @property
+    def disconnected(self) -> bool:
+        """True once the connection has ended (its reader task, which runs exactly as long as
+        the WebSocket is open, is done); False before :meth:`connect` and while connected."""
+        return self._reader is not None and self._reader.done()
+
     async def close(self) -> None:
         if self._ws is not None:
             await self._ws.close()

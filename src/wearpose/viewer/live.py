@@ -141,13 +141,6 @@ class BodyLayer:
 CLOSE_TIMEOUT_S = 2.0
 
 
-def _connection_closed(client: Any) -> bool:
-    """True once the client's reader task has ended (the server closed the WebSocket).
-    StreamClient has no public flag for it (its reader ends exactly when the connection does)."""
-    reader = getattr(client, "_reader", None)
-    return reader is not None and reader.done()
-
-
 def _new_server(host: str, port: int) -> Any:
     import viser
 
@@ -445,7 +438,7 @@ class LiveViewer:
                     if m.get("type") == "subject":
                         self.meta[int(m["subject"])] = m
                 self.render()
-                if _connection_closed(client):  # the server stopped: nothing more will come
+                if client.disconnected:  # the server stopped: nothing more will come
                     why = "upstream closed"
                     break
                 await asyncio.sleep(1.0 / fps)
