@@ -41,6 +41,9 @@ from wearpose.geometry.frames import (
     Y_UP_TO_Z_UP,
     change_world_rotation,
     change_world_points,
+    MIRROR_X,
+    mirror_rotation,
+    mirror_points,
 )
 from wearpose.geometry.units import (
     CM_TO_M,
@@ -59,5 +62,6 @@ __all__ = [
     "geodesic_angle", "slerp_matrix", "project_to_so3", "rotation_between",
     "rotation_x", "rotation_y", "rotation_z", "heading", "vector_heading", "best_yaw",
     "Z_UP_TO_Y_UP", "Y_UP_TO_Z_UP", "change_world_rotation", "change_world_points",
+    "MIRROR_X", "mirror_rotation", "mirror_points",
     "CM_TO_M", "MM_TO_M", "M_TO_MM", "M_TO_CM", "INCH_TO_M", "DEG_TO_RAD", "RAD_TO_DEG", "GRAVITY",
 ]

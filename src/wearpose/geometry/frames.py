@@ -32,3 +32,19 @@ def change_world_rotation(C: torch.Tensor, R: torch.Tensor) -> torch.Tensor:
 def change_world_points(C: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
     """Re-express points/vectors ``(..., 3)`` in a new world frame: ``C @ p``."""
     return p @ C.to(p).T
+
+
+#: Reflection through the body's sagittal plane at zero pose (x -> -x: left <-> right).
+MIRROR_X = torch.diag(torch.tensor([-1.0, 1.0, 1.0], dtype=torch.float64))
+
+
+def mirror_rotation(R: torch.Tensor) -> torch.Tensor:
+    """The left/right mirror image of rotations ``(..., 3, 3)``: ``M R M`` with ``M`` =
+    :data:`MIRROR_X` (still a proper rotation; local or global, since ``M`` is its own inverse)."""
+    M = MIRROR_X.to(R)
+    return M @ R @ M
+
+
+def mirror_points(p: torch.Tensor) -> torch.Tensor:
+    """The left/right mirror image of points/vectors ``(..., 3)`` (x negated)."""
+    return p * MIRROR_X.diagonal().to(p)

@@ -5,6 +5,7 @@ World frame everywhere: Y up, metres, at zero pose the body faces +Z with its le
 """
 
 from wearpose.motion.amass import read_amass, save_amass
+from wearpose.motion.augment import mirror, play_speed
 from wearpose.motion.asf import AsfSkeleton, find_asf_for, parse_amc_text, parse_asf_text, read_asf, read_asf_amc
 from wearpose.motion.bvh import (
     BvhMotion, BvhSkeleton, bvh_forward_kinematics, end_site_positions, parse_bvh_text, read_bvh,
@@ -24,7 +25,7 @@ from wearpose.motion.store import CorpusStore, prepare_corpus
 from wearpose.motion.template import default_rest_joints, template_rest_joints
 
 __all__ = [
-    "MotionSequence", "FORMAT_VERSION", "resample", "load_motion",
+    "MotionSequence", "FORMAT_VERSION", "resample", "load_motion", "mirror", "play_speed",
     "read_bvh", "parse_bvh_text", "BvhMotion", "BvhSkeleton", "bvh_forward_kinematics", "end_site_positions",
     "retarget_bvh", "Retargeted", "SkeletonMap", "TPose", "solve_tpose", "detect_skeleton_map", "estimate_hinge_axes",
     "bone_direction_errors", "lowest_foot_height", "RetargetError", "CMU_DAZ", "BANDAI", "BUILTIN_MAPS",
