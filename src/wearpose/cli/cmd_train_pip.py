@@ -27,6 +27,9 @@ def train_pip_cmd(
                                       help="Learned RNN initialisation I_PL / I_VA (off: Table 2 ablation)."),
     limit: Optional[int] = typer.Option(None, min=1, help="Use only N training clips spread over the split (quick runs)."),
     sitting_clips: Optional[int] = typer.Option(None, help="Add N synthetic sitting clips to train (N/10 to val)."),
+    mirror: bool = typer.Option(False, "--mirror", help="Add the left/right mirror image of every training clip."),
+    speed_copies: int = typer.Option(0, min=0, help="Add N copies of every training clip played 0.8-1.25x as fast "
+                                                     "(PipConfig.aug_speed_range)."),
     lr: Optional[float] = typer.Option(None, help="Override the learning rate."),
     init_from: Optional[Path] = typer.Option(None, help="Start from this checkpoint's weights (fine-tuning; fresh optimiser)."),
     checkpoint_every: int = typer.Option(100, min=1, help="Save last.pt every N optimiser steps (and every epoch)."),
@@ -38,11 +41,15 @@ def train_pip_cmd(
 
     Fine-tune with synthetic sitting: wearpose train pip --config cpu --threads 1 --init-from
     runs/pip_cpu/best.pt --sitting-clips 150 --epochs 2 --lr 3e-4 --out runs/pip_cpu_sit
+
+    Augmented data (3x the corpus: mirrored copies and one speed-changed copy of every clip):
+    wearpose train pip --config cpu --threads 1 --mirror --speed-copies 1 --out runs/pip_aug
     """
     from wearpose.estimators.pip import PipConfig, PipEstimator, train_pip
 
     cfg = PipConfig.preset(config).override(hidden=hidden, batch_size=batch_size, learned_init=learned_init,
-                                            sitting_clips=sitting_clips, lr=lr)
+                                            sitting_clips=sitting_clips, lr=lr, aug_mirror=mirror or None,
+                                            aug_speed_copies=speed_copies or None)
     if hidden is not None:
         cfg = cfg.override(init_widths=(hidden, 2 * hidden))
     out = out or Path("runs") / f"pip_{config}{'' if learned_init else '_noinit'}"

@@ -294,3 +294,30 @@ def test_sitting_drift_reports_series_and_upper_legs(body) -> None:
     assert r["frames"] == 7200 and [s["minutes"] for s in r["series"]] == [0.0, 1.0, 2.0]
     assert 0.0 <= r["upper_leg_error_at_end_deg"] <= 180.0 and r["drift_total_deg"] >= 0.0
     assert r["upper_leg_error_max_deg"] == max(s["upper_leg_error_deg"] for s in r["series"])
+
+
+def test_augmented_train_split_mirror_and_speed(body, tmp_path: Path) -> None:
+    from wearpose.body.skeleton import MIRROR
+    from wearpose.estimators.pip.data import augmented_ids
+
+    store = FakeStore(tmp_path / "store", {"train": 3, "val": 2})
+    cfg = tiny(aug_mirror=True, aug_speed_copies=2, aug_speed_range=(0.7, 1.4))
+    base = build_split("train", tiny(), body, store=store, cache_root=tmp_path / "cache")
+    aug = build_split("train", cfg, body, store=store, cache_root=tmp_path / "cache")
+    assert aug.clip_ids[:3] == base.clip_ids and len(aug.clip_ids) == 3 * 4
+    assert aug.clip_ids[3:] == augmented_ids(base.clip_ids, cfg)
+    assert torch.equal(aug.x[:base.num_frames], base.x)  # the corpus clips are untouched
+    # Mirrored copy: each joint's root-frame velocity is its mirror joint's, x negated.
+    i = aug.clip_ids.index(base.clip_ids[0] + "#mirror")
+    s, L = int(aug.starts[i]), int(aug.lengths[i])
+    assert L == int(base.lengths[0])
+    v, vm = base.vel[:L].view(L, 24, 3), aug.vel[s:s + L].view(L, 24, 3)
+    assert torch.allclose(vm, v[:, list(MIRROR)] * torch.tensor([-1.0, 1.0, 1.0]), atol=1e-4)
+    assert torch.equal(aug.contact[s:s + L], base.contact[:L].flip(-1))
+    # Speed copies: length scales by 1 / factor within the range (clips lose 2 * 4 edge frames).
+    for k in range(2):
+        j = aug.clip_ids.index(base.clip_ids[1] + f"#speed{k}")
+        raw = int(base.lengths[1]) + 8
+        assert raw / 1.4 - 10 <= int(aug.lengths[j]) <= raw / 0.7 + 2
+    # Validation is never augmented.
+    assert build_split("val", cfg, body, store=store, cache_root=tmp_path / "cache").clip_ids == store.clips("val")

@@ -44,11 +44,16 @@ class PipConfig(ConfigIO):
     ``val_clips`` (validation clips per epoch, 0 = all), ``seed``, ``sitting_clips`` synthetic
     sitting clips (:mod:`~wearpose.estimators.pip.sitting`; the corpus has none) added to the
     train split (and a tenth as many, at least 4, to val); 0 = corpus only.
+    Augmentation of the *train* split's corpus clips (:mod:`wearpose.motion.augment`; the
+    sensors are simulated from the augmented motion): ``aug_mirror`` adds the left/right mirror
+    image of every clip; ``aug_speed_copies`` adds that many copies of every clip played at a
+    speed drawn per clip log-uniformly from ``aug_speed_range`` (each mirrored with probability
+    1/2 when ``aug_mirror``). Validation and test are never augmented.
     Optimisation: ``lr``, ``lr_schedule``, ``lr_min_factor``, ``batch_size``, ``epochs``,
     ``grad_clip``.
     """
 
-    TUPLE_FIELDS = {"init_widths": int, "vel_windows": int}
+    TUPLE_FIELDS = {"init_widths": int, "vel_windows": int, "aug_speed_range": float}
 
     hidden: int = 256
     rnn_layers: int = 2
@@ -73,6 +78,9 @@ class PipConfig(ConfigIO):
     val_clips: int = 0
     seed: int = 0
     sitting_clips: int = 0
+    aug_mirror: bool = False
+    aug_speed_copies: int = 0
+    aug_speed_range: tuple[float, float] = (0.8, 1.25)
     lr: float = 1e-3
     lr_schedule: str = "constant"
     lr_min_factor: float = 0.1
@@ -91,6 +99,12 @@ class PipConfig(ConfigIO):
             raise ConfigError(f"PipConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
         if self.seq_len < 2 or self.window_stride < 1:
             raise ConfigError("PipConfig: seq_len >= 2 and window_stride >= 1 required")
+        lo, hi = (tuple(self.aug_speed_range) + (0.0, 0.0))[:2]
+        if len(self.aug_speed_range) != 2 or not 0.0 < lo <= hi:
+            raise ConfigError(f"PipConfig.aug_speed_range: expected (low, high) with 0 < low <= high, "
+                              f"got {self.aug_speed_range!r}")
+        if self.aug_speed_copies < 0:
+            raise ConfigError(f"PipConfig.aug_speed_copies: expected >= 0, got {self.aug_speed_copies!r}")
         if len(self.init_widths) != 2:
             raise ConfigError(f"PipConfig.init_widths: expected two widths, got {self.init_widths!r}")
 

@@ -210,17 +210,62 @@ def build_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, lim
         cache_root: directory of the tensor cache (default ``<corpus cache>/estimators/pip``).
         progress: optional callable ``progress(done, total)``.
 
-    With ``cfg.sitting_clips`` > 0, synthetic sitting clips (:func:`sitting_count`) follow the
-    corpus clips (cached separately, so the corpus cache is shared with runs without them).
+    On the train split with ``cfg.aug_mirror`` / ``cfg.aug_speed_copies``, the augmented copies
+    (:func:`augmented_ids`) follow the corpus clips; with ``cfg.sitting_clips`` > 0, synthetic
+    sitting clips (:func:`sitting_count`) follow those (each cached separately, so the corpus
+    cache is shared with runs without them).
     """
     from wearpose.motion import CorpusStore
 
-    data = _build_corpus_split(split, cfg, body, store=store, limit=limit, cache_root=cache_root, progress=progress)
+    store = store or CorpusStore()
+    root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "pip"
+    ids = _corpus_ids(split, store, limit)
+    data = _build_corpus_split(split, ids, cfg, body, store, root, progress)
+    if split == "train" and (cfg.aug_mirror or cfg.aug_speed_copies > 0):
+        data = concat_data(data, _build_augmented(split, ids, cfg, body, store, root, progress))
     n_sit = sitting_count(cfg, split)
     if n_sit == 0:
         return data
-    return concat_data(data, _build_sitting(split, n_sit, cfg, body, Path(cache_root) if cache_root is not None else
-                                            Path((store or CorpusStore()).root) / "estimators" / "pip"))
+    return concat_data(data, _build_sitting(split, n_sit, cfg, body, root))
+
+
+def augmented_ids(ids: list[str], cfg: PipConfig) -> list[str]:
+    """Ids of the augmented copies of corpus clips ``ids`` (``<id>#mirror``, ``<id>#speed<k>``)."""
+    tags = (["mirror"] if cfg.aug_mirror else []) + [f"speed{k}" for k in range(cfg.aug_speed_copies)]
+    return [f"{cid}#{t}" for cid in ids for t in tags]
+
+
+def augmented_motion(aid: str, store: Any, cfg: PipConfig, body: Any) -> Any:
+    """The motion of augmented clip ``aid`` (:func:`augmented_ids`): the corpus clip mirrored,
+    or played at a speed drawn log-uniformly from ``cfg.aug_speed_range`` (seeded by ``aid``)
+    and, when ``cfg.aug_mirror``, mirrored with probability 1/2."""
+    import math
+
+    from wearpose.motion import mirror, play_speed
+
+    cid, tag = aid.rsplit("#", 1)
+    m = store.load(cid)
+    root_rest = body.rest_joints(m.betas.to(body.dtype))[0]
+    if tag == "mirror":
+        return mirror(m, root_rest)
+    g = torch.Generator().manual_seed(clip_seed(aid, cfg.seed, "pip-speed"))
+    u, flip = torch.rand(2, generator=g, dtype=torch.float64).tolist()
+    lo, hi = (math.log(v) for v in cfg.aug_speed_range)
+    m = play_speed(m, math.exp(lo + u * (hi - lo)))
+    return mirror(m, root_rest) if cfg.aug_mirror and flip < 0.5 else m
+
+
+def _build_augmented(split: str, ids: list[str], cfg: PipConfig, body: Any, store: Any, root: Path,
+                     progress: Any = None) -> PipData:
+    """The augmented copies (:func:`augmented_ids`) of corpus clips ``ids``, simulated like corpus
+    clips (own noise seeds); cached apart from the corpus clips."""
+    aids = augmented_ids(ids, cfg)
+    settings = {**data_settings(cfg, body), "augment_version": 1, "aug_mirror": cfg.aug_mirror,
+                "aug_speed_copies": cfg.aug_speed_copies, "aug_speed_range": list(cfg.aug_speed_range)}
+    fp = fingerprint(aids, {**settings, "split": split})
+    return _simulate_cached(root / f"{split}-aug-{fp[:16]}.pt", aids, fp, settings,
+                            lambda aid: simulate_clip(augmented_motion(aid, store, cfg, body), cfg, body,
+                                                      clip_seed(aid, cfg.seed, "pip")), progress)
 
 
 def sitting_count(cfg: PipConfig, split: str) -> int:
@@ -256,17 +301,18 @@ def _build_sitting(split: str, n: int, cfg: PipConfig, body: Any, root: Path) ->
     return _simulate_cached(root / f"{split}-sitting-{fp[:16]}.pt", ids, fp, settings, one)
 
 
-def _build_corpus_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, limit: int | None = None,
-                        cache_root: str | Path | None = None, progress: Any = None) -> PipData:
-    from wearpose.motion import CorpusStore
-
-    store = store or CorpusStore()
+def _corpus_ids(split: str, store: Any, limit: int | None) -> list[str]:
+    """Sorted clip ids of ``split``; ``limit`` of them spread evenly over the list."""
     ids = store.clips(split=split)
     if limit and limit < len(ids):
         ids = [ids[int(i * len(ids) / limit)] for i in range(limit)]
+    return ids
+
+
+def _build_corpus_split(split: str, ids: list[str], cfg: PipConfig, body: Any, store: Any, root: Path,
+                        progress: Any = None) -> PipData:
     settings = data_settings(cfg, body)
     fp = fingerprint(ids, {**settings, "split": split})
-    root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "pip"
     return _simulate_cached(root / f"{split}-{fp[:16]}.pt", ids, fp, settings,
                             lambda cid: simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed, "pip")),
                             progress)
