@@ -1,7 +1,15 @@
 """PIP long-sitting test alone (Fig. 6 / Fig. 9): :func:`wearpose.estimators.pip.evaluate.sitting_drift`
 for learned-init / no-init checkpoint pairs, both starts, ``--hours`` of still seated input.
 
-Run: ``taskset -c 0 python benchmarks/pip_sitting.py --hours 4.63 --pair LABEL FULL NOINIT [...]``.
+With ``--synthetic N`` also N held-out synthetic sitting clips
+(:func:`wearpose.estimators.pip.sitting.heldout_sitting_clip`: the test namespace, never
+trained on; random seated postures, 75-100 deg hips, each ending seated) for each model, each
+played whole ("clip": from its own first frame, standing or seated) or only its last, seated
+second ("seated"), then ``--synthetic-hours`` of still input; the summary gives the mean
+upper-leg error and how many clips end within 30 deg of their seated thighs.
+
+Run: ``taskset -c 0 python benchmarks/pip_sitting.py --hours 4.63 --pair LABEL FULL NOINIT [...]
+[--synthetic 20 --synthetic-hours 0.5]``.
 Writes ``benchmarks/results/pip_sitting.json`` (the series every 10 min included).
 """
 
@@ -20,18 +28,38 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hours", type=float, default=4.63, help="still input length (PIP Fig. 9: 1M frames = 4.63 h)")
     ap.add_argument("--pair", nargs=3, action="append", required=True, metavar=("LABEL", "FULL", "NOINIT"))
+    ap.add_argument("--synthetic", type=int, default=0, help="held-out synthetic sitting clips per model (0 = none)")
+    ap.add_argument("--synthetic-hours", type=float, default=0.5, help="still input after each synthetic clip")
+    ap.add_argument("--skip-fixed", action="store_true", help="only the synthetic clips")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "pip_sitting.json")
     a = ap.parse_args()
     torch.set_num_threads(1)
     from wearpose.body import BodyModel
     from wearpose.estimators.pip.estimator import PipEstimator
     from wearpose.estimators.pip.evaluate import sitting_drift
+    from wearpose.estimators.pip.sitting import heldout_sitting_clip
 
-    body, rows = BodyModel(), []
+    body, rows, synth, summary = BodyModel(), [], [], []
+    clips = [heldout_sitting_clip(i, body) for i in range(a.synthetic)]
     for label, full, noinit in a.pair:
         for init, path in (("learned init", full), ("w/o learned init", noinit)):
             est = PipEstimator.load(path, body=body, physics=False)
-            for start in ("standing", "seated"):
+            for start in ("standing", "seated") if clips else ():
+                res = [sitting_drift(est, hours=a.synthetic_hours, start=start, seq=c, noise="default") for c in clips]
+                for i, s in enumerate(res):
+                    synth.append({"model": f"{label}, {init}", "clip": i, "start": "clip" if start == "standing" else start,
+                                  **{k: s[k] for k in ("upper_leg_error_at_start_deg", "upper_leg_error_at_end_deg",
+                                                       "error_at_start_deg", "error_at_end_deg", "drift_total_deg")}})
+                ends = [s["upper_leg_error_at_end_deg"] for s in res]
+                summary.append({"model": f"{label}, {init}", "checkpoint": path,
+                                "start": "clip" if start == "standing" else start, "clips": len(res),
+                                "upper_leg_error_at_start_deg": sum(s["upper_leg_error_at_start_deg"] for s in res) / len(res),
+                                "upper_leg_error_at_end_deg": sum(ends) / len(res),
+                                "clips_within_30deg_at_end": sum(e < 30.0 for e in ends),
+                                "drift_total_deg_mean": sum(s["drift_total_deg"] for s in res) / len(res)})
+                print("synthetic: " + ", ".join(f"{k} {v:.1f}" if isinstance(v, float) else f"{k} {v}"
+                                                for k, v in summary[-1].items() if k != "checkpoint"), flush=True)
+            for start in ("standing", "seated") if not a.skip_fixed else ():
                 s = sitting_drift(est, hours=a.hours, start=start)
                 s.update(model=f"{label}, {init}", checkpoint=path)
                 rows.append(s)
@@ -39,6 +67,8 @@ def main() -> int:
                       f"{s['upper_leg_error_at_end_deg']:.1f} deg, all joints {s['error_at_start_deg']:.2f} -> "
                       f"{s['error_at_end_deg']:.2f} deg, drift {s['drift_total_deg']:.2f} deg", flush=True)
     a.out.write_text(json.dumps({"command": "python " + " ".join(sys.argv), "hours": a.hours, "rows": rows,
+                                 "synthetic_hours": a.synthetic_hours if clips else None,
+                                 "synthetic_summary": summary, "synthetic_rows": synth,
                                  "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=2))
     print(f"wrote {a.out}")
     return 0

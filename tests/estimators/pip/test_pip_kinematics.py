@@ -296,6 +296,26 @@ def test_sitting_drift_reports_series_and_upper_legs(body) -> None:
     assert r["upper_leg_error_max_deg"] == max(s["upper_leg_error_deg"] for s in r["series"])
 
 
+def test_heldout_sitting_clips_end_seated_and_are_not_training_clips(body) -> None:
+    from wearpose.estimators.empose.data import clip_seed
+    from wearpose.estimators.pip.evaluate import sitting_drift
+    from wearpose.estimators.pip.sitting import heldout_sitting_clip, sitting_clip_id, sitting_motion
+
+    c0, c1 = heldout_sitting_clip(0, body), heldout_sitting_clip(1, body)
+    assert not torch.equal(c0.pose[-1], c1.pose[-1])
+    for c in (c0, c1):
+        _, first, n = next(sg for sg in c.meta["segments"] if sg[0] == "sit")
+        assert c.num_frames == first + n and n >= 3 * 60  # cut right after a seated hold of >= 3 s
+    # The training clip with the same index (what build_split simulates for sitting_clips) differs.
+    train0 = sitting_motion(torch.Generator().manual_seed(clip_seed(sitting_clip_id("train", 0), 0, "pip-sitting")), body)
+    assert sitting_clip_id("test", 0) != sitting_clip_id("train", 0)
+    assert train0.num_frames != c0.num_frames or not torch.equal(train0.pose[-1], c0.pose[-1])
+    # sitting_drift measures against the clip's own last (seated) pose.
+    torch.manual_seed(0)
+    r = sitting_drift(PipEstimator(tiny(), body=body, physics=False), hours=1 / 60, start="seated", seq=c0)
+    assert r["frames"] == 3600 and 0.0 <= r["upper_leg_error_at_end_deg"] <= 180.0
+
+
 def test_augmented_train_split_mirror_and_speed(body, tmp_path: Path) -> None:
     from wearpose.body.skeleton import MIRROR
     from wearpose.estimators.pip.data import augmented_ids

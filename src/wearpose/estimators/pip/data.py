@@ -288,9 +288,9 @@ def concat_data(a: PipData, b: PipData) -> PipData:
 def _build_sitting(split: str, n: int, cfg: PipConfig, body: Any, root: Path) -> PipData:
     """``n`` synthetic sitting clips (:func:`~wearpose.estimators.pip.sitting.sitting_motion`),
     seeds in a per-split namespace, simulated like corpus clips; cached under ``root``."""
-    from wearpose.estimators.pip.sitting import sitting_motion
+    from wearpose.estimators.pip.sitting import sitting_clip_id, sitting_motion
 
-    ids = [f"synthetic/sitting/{split}/{i:04d}" for i in range(n)]
+    ids = [sitting_clip_id(split, i) for i in range(n)]
     settings = {**data_settings(cfg, body), "sitting_version": 2}
     fp = fingerprint(ids, {**settings, "split": split})
 

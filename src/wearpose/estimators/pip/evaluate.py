@@ -183,10 +183,13 @@ def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int 
 
 @torch.no_grad()
 def sitting_drift(est: Any, hours: float = 1.0, start: str = "standing", chunk: int = 3600, seed: int = 0,
-                  noise: str = "none", every_s: float = 600.0) -> dict[str, Any]:
+                  noise: str = "none", every_s: float = 600.0, seq: Any = None) -> dict[str, Any]:
     """PIP Fig. 6 / Fig. 9: a sit-down (:func:`~wearpose.estimators.pip.sitting.sitting_sequence`;
     or already seated, ``start="seated"``: only its last, seated second) followed by ``hours`` of
     perfectly still input (zero accelerations, the seated orientations), kinematics only.
+    ``seq``: another clip to play instead of the sit-down (a :class:`~wearpose.motion.MotionSequence`
+    whose last second is seated, e.g. :func:`~wearpose.estimators.pip.sitting.heldout_sitting_clip`);
+    its last frame is then the seated pose errors are measured against.
 
     Returns the root-relative angular error against the seated pose (all joints, and the upper
     legs alone, the quantity of PIP's Fig. 6) at the start of the still period, after 1 min and
@@ -198,7 +201,8 @@ def sitting_drift(est: Any, hours: float = 1.0, start: str = "standing", chunk: 
     from wearpose.evaluate.metrics import joint_angle_errors
 
     body, cfg = est.body, est.config
-    seq = sitting_sequence(body)
+    target = sitting_pose() if seq is None else seq.pose[-1].float()
+    seq = sitting_sequence(body) if seq is None else seq
     r = simulate_clip(seq, cfg, body, seed, noise=noise, trim=0)
     if start == "seated":
         n = int(r["x"].shape[0])
@@ -210,7 +214,6 @@ def sitting_drift(est: Any, hours: float = 1.0, start: str = "standing", chunk: 
     x_still = imu_features(torch.zeros_like(r["acc"][-1]), r["ori"][-1], cfg.acc_scale)
     states = est._start_states()
     out, states = est.model(x[None], states)
-    target = sitting_pose()
     root = r["ori"][-1, 5]
     legs = [1, 2]  # SMPL left/right hip joints: the upper-leg orientations
 

@@ -145,3 +145,21 @@ def sitting_sequence(body: Any, seconds_stand: float = 1.0, seconds_down: float 
     trans = ankles[0] - ankles
     trans[:, 1] += float(-j[0, [JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"]], 1].min())
     return MotionSequence(pose, torch.zeros(10), trans, fps, {"clip": "synthetic/sit-down"})
+
+
+def heldout_sitting_clip(i: int, body: Any, fps: float = 60.0, seed: int = 0) -> Any:
+    """Synthetic sitting clip ``i`` of the *test* namespace (``synthetic/sitting/test/<i>``, seeded
+    like the train/val clips of :func:`wearpose.estimators.pip.data.build_split`, which never
+    draws test ids), cut after its seated hold: it ends seated (input for
+    :func:`~wearpose.estimators.pip.evaluate.sitting_drift`'s ``seq``)."""
+    from wearpose.estimators.empose.data import clip_seed
+
+    m = sitting_motion(torch.Generator().manual_seed(clip_seed(sitting_clip_id("test", i), seed, "pip-sitting")),
+                       body, fps)
+    _, first, n = next(sg for sg in m.meta["segments"] if sg[0] == "sit")
+    return m.slice(0, first + n)
+
+
+def sitting_clip_id(split: str, i: int) -> str:
+    """Id of synthetic sitting clip ``i`` of ``split`` (its seed derives from it)."""
+    return f"synthetic/sitting/{split}/{i:04d}"
