@@ -27,6 +27,8 @@ def train_pip_cmd(
                                       help="Learned RNN initialisation I_PL / I_VA (off: Table 2 ablation)."),
     limit: Optional[int] = typer.Option(None, min=1, help="Use only N training clips spread over the split (quick runs)."),
     sitting_clips: Optional[int] = typer.Option(None, help="Add N synthetic sitting clips to train (N/10 to val)."),
+    balanced_sitting: bool = typer.Option(False, "--balanced-sitting",
+                                          help="Synthetic sitting clips stand as long as they sit (3-20 s holds)."),
     mirror: bool = typer.Option(False, "--mirror", help="Add the left/right mirror image of every training clip."),
     speed_copies: int = typer.Option(0, min=0, help="Add N copies of every training clip played 0.8-1.25x as fast "
                                                      "(PipConfig.aug_speed_range)."),
@@ -49,7 +51,8 @@ def train_pip_cmd(
 
     cfg = PipConfig.preset(config).override(hidden=hidden, batch_size=batch_size, learned_init=learned_init,
                                             sitting_clips=sitting_clips, lr=lr, aug_mirror=mirror or None,
-                                            aug_speed_copies=speed_copies or None)
+                                            aug_speed_copies=speed_copies or None,
+                                            sitting_stand_s=(3.0, 20.0) if balanced_sitting else None)
     if hidden is not None:
         cfg = cfg.override(init_widths=(hidden, 2 * hidden))
     out = out or Path("runs") / f"pip_{config}{'' if learned_init else '_noinit'}"

@@ -56,6 +56,10 @@ def test_presets_and_config_errors() -> None:
         PipConfig(dropout=1.0)
     with pytest.raises(ConfigError):
         PipConfig.from_dict({"hidden": 8, "nope": 1})
+    for bad in ({"aug_speed_range": (1.25, 0.8)}, {"aug_speed_range": (0.0, 1.0)}, {"aug_speed_copies": -1},
+                {"sitting_stand_s": (4.0, 1.0)}):
+        with pytest.raises(ConfigError, match=next(iter(bad))):
+            PipConfig(**bad)
 
 
 def test_imu_features_are_root_relative() -> None:
@@ -283,6 +287,14 @@ def test_synthetic_sitting_is_ambiguous_for_the_imus(body) -> None:
         assert j[stand[1], 0, 1] - j[first_sit, 0, 1] > 0.2
     seq = sitting_sequence(body)
     assert seq.pose.shape[0] == 60 + 90 + 60
+    # explicit default standing holds = the old clips (their cache stays valid); balanced holds
+    # stand 3-20 s, seeded the same way otherwise
+    m3 = sitting_motion(torch.Generator().manual_seed(3), body, stand_s=(1.0, 4.0))
+    assert torch.equal(m.pose, m3.pose)
+    for seed in range(6):
+        b = sitting_motion(torch.Generator().manual_seed(seed), body, stand_s=(3.0, 20.0))
+        stands = [s[2] for s in b.meta["segments"] if s[0] == "stand"]
+        assert all(3 * 60 <= n <= 20 * 60 for n in stands)
 
 
 def test_sitting_drift_reports_series_and_upper_legs(body) -> None:

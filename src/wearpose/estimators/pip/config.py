@@ -43,7 +43,8 @@ class PipConfig(ConfigIO):
     error model (``default`` / ``none``), ``max_train_clips`` (0 = whole train split),
     ``val_clips`` (validation clips per epoch, 0 = all), ``seed``, ``sitting_clips`` synthetic
     sitting clips (:mod:`~wearpose.estimators.pip.sitting`; the corpus has none) added to the
-    train split (and a tenth as many, at least 4, to val); 0 = corpus only.
+    train split (and a tenth as many, at least 4, to val); 0 = corpus only; ``sitting_stand_s``
+    the range of their standing holds, s (seated holds: 3-20 s; ``(3, 20)`` = balanced).
     Augmentation of the *train* split's corpus clips (:mod:`wearpose.motion.augment`; the
     sensors are simulated from the augmented motion): ``aug_mirror`` adds the left/right mirror
     image of every clip; ``aug_speed_copies`` adds that many copies of every clip played at a
@@ -53,7 +54,7 @@ class PipConfig(ConfigIO):
     ``grad_clip``.
     """
 
-    TUPLE_FIELDS = {"init_widths": int, "vel_windows": int, "aug_speed_range": float}
+    TUPLE_FIELDS = {"init_widths": int, "vel_windows": int, "aug_speed_range": float, "sitting_stand_s": float}
 
     hidden: int = 256
     rnn_layers: int = 2
@@ -78,6 +79,7 @@ class PipConfig(ConfigIO):
     val_clips: int = 0
     seed: int = 0
     sitting_clips: int = 0
+    sitting_stand_s: tuple[float, float] = (1.0, 4.0)
     aug_mirror: bool = False
     aug_speed_copies: int = 0
     aug_speed_range: tuple[float, float] = (0.8, 1.25)
@@ -103,6 +105,9 @@ class PipConfig(ConfigIO):
         if len(self.aug_speed_range) != 2 or not 0.0 < lo <= hi:
             raise ConfigError(f"PipConfig.aug_speed_range: expected (low, high) with 0 < low <= high, "
                               f"got {self.aug_speed_range!r}")
+        if len(self.sitting_stand_s) != 2 or not 0.0 < self.sitting_stand_s[0] <= self.sitting_stand_s[1]:
+            raise ConfigError(f"PipConfig.sitting_stand_s: expected (low, high) seconds with 0 < low <= high, "
+                              f"got {self.sitting_stand_s!r}")
         if self.aug_speed_copies < 0:
             raise ConfigError(f"PipConfig.aug_speed_copies: expected >= 0, got {self.aug_speed_copies!r}")
         if len(self.init_widths) != 2:

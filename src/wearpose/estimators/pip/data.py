@@ -292,11 +292,14 @@ def _build_sitting(split: str, n: int, cfg: PipConfig, body: Any, root: Path) ->
 
     ids = [sitting_clip_id(split, i) for i in range(n)]
     settings = {**data_settings(cfg, body), "sitting_version": 2}
+    if tuple(cfg.sitting_stand_s) != (1.0, 4.0):  # keeps the fingerprint (cache) of the default clips
+        settings["sitting_stand_s"] = list(cfg.sitting_stand_s)
     fp = fingerprint(ids, {**settings, "split": split})
 
     def one(cid: str) -> dict[str, Any]:
         seed = clip_seed(cid, cfg.seed, "pip-sitting")
-        return simulate_clip(sitting_motion(torch.Generator().manual_seed(seed), body, cfg.rate), cfg, body, seed)
+        return simulate_clip(sitting_motion(torch.Generator().manual_seed(seed), body, cfg.rate,
+                                            stand_s=tuple(cfg.sitting_stand_s)), cfg, body, seed)
 
     return _simulate_cached(root / f"{split}-sitting-{fp[:16]}.pt", ids, fp, settings, one)
 

@@ -86,9 +86,14 @@ def _sway(g: torch.Generator, T: int, fps: float) -> torch.Tensor:
     return R
 
 
-def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tuple[float, float] = (3.0, 20.0)) -> Any:
+def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tuple[float, float] = (3.0, 20.0),
+                   stand_s: tuple[float, float] = (1.0, 4.0)) -> Any:
     """One synthetic sitting clip (module doc) as a :class:`~wearpose.motion.MotionSequence`
-    at ``fps`` with zero betas; ``meta["segments"]`` lists ``(name, first_frame, frames)``."""
+    at ``fps`` with zero betas; ``meta["segments"]`` lists ``(name, first_frame, frames)``.
+    Seated holds last ``hold_s`` seconds, standing holds ``stand_s``: with ``stand_s = hold_s``
+    still standing and still sitting with the same upper-body posture are equally common, so a
+    still posture alone does not tell them apart (with the default short stands a network
+    learns "arms bent forward and still = seated", see docs/pip.md, "Long sitting")."""
     from wearpose.motion import MotionSequence
 
     stand = _upper_body(g)
@@ -98,10 +103,10 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
     end_seated = _u(g, 0, 1) < 0.3
     plan: list[tuple[str, int]] = []
     if not start_seated:
-        plan += [("stand", int(_u(g, 1.0, 4.0) * fps)), ("down", int(_u(g, 0.8, 2.0) * fps))]
+        plan += [("stand", int(_u(g, *stand_s) * fps)), ("down", int(_u(g, 0.8, 2.0) * fps))]
     plan.append(("sit", int(_u(g, *hold_s) * fps)))
     if not end_seated:
-        plan += [("up", int(_u(g, 0.8, 2.0) * fps)), ("stand", int(_u(g, 1.0, 4.0) * fps))]
+        plan += [("up", int(_u(g, 0.8, 2.0) * fps)), ("stand", int(_u(g, *stand_s) * fps))]
     s_parts, segs, first = [], [], 0
     for name, n in plan:
         if name == "stand":
