@@ -8,8 +8,13 @@ played whole ("clip": from its own first frame, standing or seated) or only its 
 second ("seated"), then ``--synthetic-hours`` of still input; the summary gives the mean
 upper-leg error and how many clips end within 30 deg of their seated thighs.
 
+With ``--arm-postures`` also the fixed sit-down with the arms swung forward / elbows bent (0/0,
+20/45, 40/80 deg, the same posture standing and seated) and one minute of still input, and the
+same postures standing still throughout ("standing still", errors against the standing pose):
+does the arm posture, rather than the history or the learned initial state, decide "seated"?
+
 Run: ``taskset -c 0 python benchmarks/pip_sitting.py --hours 4.63 --pair LABEL FULL NOINIT [...]
-[--synthetic 20 --synthetic-hours 0.5]``.
+[--synthetic 20 --synthetic-hours 0.5] [--arm-postures]``.
 Writes ``benchmarks/results/pip_sitting.json`` (the series every 10 min included).
 """
 
@@ -30,16 +35,18 @@ def main() -> int:
     ap.add_argument("--pair", nargs=3, action="append", required=True, metavar=("LABEL", "FULL", "NOINIT"))
     ap.add_argument("--synthetic", type=int, default=0, help="held-out synthetic sitting clips per model (0 = none)")
     ap.add_argument("--synthetic-hours", type=float, default=0.5, help="still input after each synthetic clip")
-    ap.add_argument("--skip-fixed", action="store_true", help="only the synthetic clips")
+    ap.add_argument("--arm-postures", action="store_true", help="the fixed sit-down with three arm postures")
+    ap.add_argument("--skip-fixed", action="store_true", help="skip the fixed sit-down of --hours")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "pip_sitting.json")
     a = ap.parse_args()
     torch.set_num_threads(1)
     from wearpose.body import BodyModel
     from wearpose.estimators.pip.estimator import PipEstimator
     from wearpose.estimators.pip.evaluate import sitting_drift
-    from wearpose.estimators.pip.sitting import heldout_sitting_clip
+    from wearpose.estimators.pip.sitting import arms_forward, heldout_sitting_clip, sitting_sequence
+    from wearpose.motion import MotionSequence
 
-    body, rows, synth, summary = BodyModel(), [], [], []
+    body, rows, synth, summary, arms = BodyModel(), [], [], [], []
     clips = [heldout_sitting_clip(i, body) for i in range(a.synthetic)]
     for label, full, noinit in a.pair:
         for init, path in (("learned init", full), ("w/o learned init", noinit)):
@@ -59,6 +66,18 @@ def main() -> int:
                                 "drift_total_deg_mean": sum(s["drift_total_deg"] for s in res) / len(res)})
                 print("synthetic: " + ", ".join(f"{k} {v:.1f}" if isinstance(v, float) else f"{k} {v}"
                                                 for k, v in summary[-1].items() if k != "checkpoint"), flush=True)
+            for fwd, elbow in ((0.0, 0.0), (20.0, 45.0), (40.0, 80.0)) if a.arm_postures else ():
+                seq = sitting_sequence(body, base=arms_forward(fwd, elbow))
+                # the same posture standing still the whole time: errors against the standing pose
+                still = MotionSequence(seq.pose[:1].repeat(seq.num_frames, 1, 1, 1), seq.betas,
+                                       seq.trans[:1].repeat(seq.num_frames, 1), seq.fps)
+                for start, clip in (("standing", seq), ("seated", seq), ("standing still", still)):
+                    s = sitting_drift(est, hours=1 / 60, start="standing" if start == "standing still" else start,
+                                      seq=clip)
+                    arms.append({"model": f"{label}, {init}", "arms_forward_deg": fwd, "elbows_deg": elbow, "start": start,
+                                 "upper_leg_error_at_end_deg": s["upper_leg_error_at_end_deg"]})
+                    print(f"arms {fwd:g}/{elbow:g} deg, {arms[-1]['model']}, {start}: upper legs "
+                          f"{s['upper_leg_error_at_end_deg']:.1f} deg after 1 min", flush=True)
             for start in ("standing", "seated") if not a.skip_fixed else ():
                 s = sitting_drift(est, hours=a.hours, start=start)
                 s.update(model=f"{label}, {init}", checkpoint=path)
@@ -68,7 +87,7 @@ def main() -> int:
                       f"{s['error_at_end_deg']:.2f} deg, drift {s['drift_total_deg']:.2f} deg", flush=True)
     a.out.write_text(json.dumps({"command": "python " + " ".join(sys.argv), "hours": a.hours, "rows": rows,
                                  "synthetic_hours": a.synthetic_hours if clips else None,
-                                 "synthetic_summary": summary, "synthetic_rows": synth,
+                                 "synthetic_summary": summary, "synthetic_rows": synth, "arm_postures": arms,
                                  "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=2))
     print(f"wrote {a.out}")
     return 0

@@ -62,14 +62,31 @@ def _upper_body(g: torch.Generator) -> torch.Tensor:
     for name, lim in (("spine1", 6.0), ("spine3", 6.0), ("neck", 10.0), ("head", 10.0)):
         aa = torch.tensor([_u(g, -lim, lim), _u(g, -lim, lim), _u(g, -lim / 2, lim / 2)]).mul(math.pi / 180)
         P[JOINT_INDEX[name]] = axis_angle_to_matrix(aa)
-    for side, s in (("left", 1.0), ("right", -1.0)):
-        sh = P[JOINT_INDEX[f"{side}_shoulder"]]
-        fwd = rotation_x(torch.tensor(-math.radians(_u(g, 0.0, 50.0))))  # swing the hanging arm forward (+Z)
-        out = rotation_z(torch.tensor(s * math.radians(_u(g, -5.0, 20.0))))  # and outward (+-X)
-        M = fwd @ out @ sh
-        P[JOINT_INDEX[f"{side}_shoulder"]] = M
-        # bend the forearm forward about the world X axis, expressed in the upper arm's frame
-        P[JOINT_INDEX[f"{side}_elbow"]] = M.T @ rotation_x(torch.tensor(-math.radians(_u(g, 0.0, 90.0)))) @ M
+    for side in ("left", "right"):
+        fwd, out, elbow = _u(g, 0.0, 50.0), _u(g, -5.0, 20.0), _u(g, 0.0, 90.0)
+        _pose_arm(P, side, fwd, out, elbow)
+    return P
+
+
+def _pose_arm(P: torch.Tensor, side: str, fwd_deg: float, out_deg: float, elbow_deg: float) -> None:
+    """In place on ``P`` ``(24, 3, 3)``: swing the hanging ``side`` arm forward (+Z) by ``fwd_deg``
+    and outward (+-X) by ``out_deg``, and bend its forearm forward by ``elbow_deg``."""
+    sh = P[JOINT_INDEX[f"{side}_shoulder"]]
+    s = 1.0 if side == "left" else -1.0
+    M = rotation_x(torch.tensor(-math.radians(fwd_deg))) @ rotation_z(torch.tensor(s * math.radians(out_deg))) @ sh
+    P[JOINT_INDEX[f"{side}_shoulder"]] = M
+    # bend the forearm forward about the world X axis, expressed in the upper arm's frame
+    P[JOINT_INDEX[f"{side}_elbow"]] = M.T @ rotation_x(torch.tensor(-math.radians(elbow_deg))) @ M
+
+
+def arms_forward(fwd_deg: float, elbow_deg: float) -> torch.Tensor:
+    """The calibration I-pose ``(24, 3, 3)`` with both arms swung forward by ``fwd_deg`` and both
+    elbows bent by ``elbow_deg`` (a base posture for :func:`sitting_sequence`)."""
+    from wearpose.calibration import calibration_pose
+
+    P = calibration_pose("ipose").float().clone()
+    for side in ("left", "right"):
+        _pose_arm(P, side, fwd_deg, 0.0, elbow_deg)
     return P
 
 
@@ -133,13 +150,15 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
     return MotionSequence(pose, betas, trans, fps, {"clip": "synthetic/sitting", "segments": segs})
 
 
-def sitting_sequence(body: Any, seconds_stand: float = 1.0, seconds_down: float = 1.5, fps: float = 60.0) -> Any:
-    """Deterministic stand (arms down) -> sit down (90/90 deg) -> one second seated: the start of
-    the long-sitting test (Fig. 6 / Fig. 9)."""
+def sitting_sequence(body: Any, seconds_stand: float = 1.0, seconds_down: float = 1.5, fps: float = 60.0,
+                     base: torch.Tensor | None = None) -> Any:
+    """Deterministic stand (arms down, or the posture ``base`` ``(24, 3, 3)``) -> sit down (90/90
+    deg) -> one second seated: the start of the long-sitting test (Fig. 6 / Fig. 9)."""
     from wearpose.calibration import calibration_pose
     from wearpose.motion import MotionSequence
 
-    stand, sit = calibration_pose("ipose").float(), sitting_pose()
+    stand = calibration_pose("ipose").float() if base is None else base.float()
+    sit = sitting_pose(base=stand)
     n0, n1 = int(seconds_stand * fps), int(seconds_down * fps)
     s = torch.cat([torch.zeros(n0), 0.5 - 0.5 * torch.cos(torch.linspace(0, math.pi, n1)), torch.ones(int(fps))])
     T = len(s)
