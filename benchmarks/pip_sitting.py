@@ -35,6 +35,9 @@ def main() -> int:
     ap.add_argument("--pair", nargs=3, action="append", required=True, metavar=("LABEL", "FULL", "NOINIT"))
     ap.add_argument("--synthetic", type=int, default=0, help="held-out synthetic sitting clips per model (0 = none)")
     ap.add_argument("--synthetic-hours", type=float, default=0.5, help="still input after each synthetic clip")
+    ap.add_argument("--synthetic-starts", nargs="+", default=["clip", "seated"], choices=("clip", "seated"))
+    ap.add_argument("--models", nargs="+", default=["learned init", "w/o learned init"],
+                    choices=("learned init", "w/o learned init"), help="which model of each pair to run")
     ap.add_argument("--arm-postures", action="store_true", help="the fixed sit-down with three arm postures")
     ap.add_argument("--skip-fixed", action="store_true", help="skip the fixed sit-down of --hours")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "pip_sitting.json")
@@ -49,9 +52,10 @@ def main() -> int:
     body, rows, synth, summary, arms = BodyModel(), [], [], [], []
     clips = [heldout_sitting_clip(i, body) for i in range(a.synthetic)]
     for label, full, noinit in a.pair:
-        for init, path in (("learned init", full), ("w/o learned init", noinit)):
+        for init, path in [(i, p) for i, p in (("learned init", full), ("w/o learned init", noinit)) if i in a.models]:
             est = PipEstimator.load(path, body=body, physics=False)
-            for start in ("standing", "seated") if clips else ():
+            for start in [st for st in ("standing", "seated") if clips and
+                          ("clip" if st == "standing" else st) in a.synthetic_starts]:
                 res = [sitting_drift(est, hours=a.synthetic_hours, start=start, seq=c, noise="default") for c in clips]
                 for i, s in enumerate(res):
                     synth.append({"model": f"{label}, {init}", "clip": i, "start": "clip" if start == "standing" else start,
