@@ -101,8 +101,7 @@ class PipConfig(ConfigIO):
             raise ConfigError(f"PipConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
         if self.seq_len < 2 or self.window_stride < 1:
             raise ConfigError("PipConfig: seq_len >= 2 and window_stride >= 1 required")
-        lo, hi = (tuple(self.aug_speed_range) + (0.0, 0.0))[:2]
-        if len(self.aug_speed_range) != 2 or not 0.0 < lo <= hi:
+        if len(self.aug_speed_range) != 2 or not 0.0 < self.aug_speed_range[0] <= self.aug_speed_range[1]:
             raise ConfigError(f"PipConfig.aug_speed_range: expected (low, high) with 0 < low <= high, "
                               f"got {self.aug_speed_range!r}")
         if len(self.sitting_stand_s) != 2 or not 0.0 < self.sitting_stand_s[0] <= self.sitting_stand_s[1]:

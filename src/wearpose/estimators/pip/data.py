@@ -25,6 +25,7 @@ ids and all simulation settings, so epochs never re-simulate.
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -239,8 +240,6 @@ def augmented_motion(aid: str, store: Any, cfg: PipConfig, body: Any) -> Any:
     """The motion of augmented clip ``aid`` (:func:`augmented_ids`): the corpus clip mirrored,
     or played at a speed drawn log-uniformly from ``cfg.aug_speed_range`` (seeded by ``aid``)
     and, when ``cfg.aug_mirror``, mirrored with probability 1/2."""
-    import math
-
     from wearpose.motion import mirror, play_speed
 
     cid, tag = aid.rsplit("#", 1)
