@@ -161,3 +161,16 @@ def test_serve_defaults_to_stride_auto(monkeypatch) -> None:
     assert seen["stride"] == "auto"
     res = runner.invoke(app, ["serve", "--model", "null", "--stride", "1"])
     assert res.exit_code == 0 and seen["stride"] == 1
+
+
+def test_weights_setting_from_cards_equals_the_checkpoints() -> None:
+    # estimate/serve word rate and kit errors from the weight card (no second 14 MB load): the
+    # cards must say what the checkpoints say, for every shipped pose estimator
+    from wearpose.cli.models import pose_weights, weights_setting
+    from wearpose.estimators.checkpoint import load_checkpoint
+    from wearpose.weights import weight_path
+
+    for name in pose_weights():
+        ck = load_checkpoint(weight_path(name))
+        fps = ck.config.get("rate") if isinstance(ck.config, dict) else None
+        assert weights_setting(name) == {"kit": ck.kit, "sensors": list(ck.sensors), "fps": fps, "method": ck.method}, name

@@ -34,10 +34,16 @@ def check_pose_weights(model: str, param_hint: str = "--model") -> None:
 
 
 def weights_setting(model: str) -> dict[str, Any]:
-    """Kit, sensors and rate of shipped weights or a checkpoint file (for error messages), or ``{}``."""
+    """Kit, sensors, method and trained rate (``fps``) of shipped weights (read from their card) or
+    of a checkpoint file, or ``{}`` when neither says (rate fitting and error messages)."""
     from wearpose.estimators.checkpoint import load_checkpoint
-    from wearpose.weights import list_weights, weight_path
+    from wearpose.weights import card, list_weights, weight_path
 
+    if model in list_weights():  # the card says the same as the checkpoint without loading its weights
+        c = card(model)
+        if all(k in c for k in ("kit", "sensors", "method")):
+            rate = c.get("config", {}).get("rate") if isinstance(c.get("config"), dict) else None
+            return {"kit": c["kit"], "sensors": list(c["sensors"]), "fps": rate, "method": c["method"]}
     try:
         ck = load_checkpoint(weight_path(model) if model in list_weights() else Path(model))
     except Exception:  # noqa: BLE001 - only used to word an error; the loader reports its own problems
