@@ -54,16 +54,17 @@ def main() -> int:
     for label, full, noinit in a.pair:
         for init, path in [(i, p) for i, p in (("learned init", full), ("w/o learned init", noinit)) if i in a.models]:
             est = PipEstimator.load(path, body=body, physics=False)
-            for start in [st for st in ("standing", "seated") if clips and
-                          ("clip" if st == "standing" else st) in a.synthetic_starts]:
+            for start_label in a.synthetic_starts if clips else ():
+                # "clip": the whole clip from its first frame = sitting_drift's "standing" start
+                start = "standing" if start_label == "clip" else start_label
                 res = [sitting_drift(est, hours=a.synthetic_hours, start=start, seq=c, noise="default") for c in clips]
                 for i, s in enumerate(res):
-                    synth.append({"model": f"{label}, {init}", "clip": i, "start": "clip" if start == "standing" else start,
+                    synth.append({"model": f"{label}, {init}", "clip": i, "start": start_label,
                                   **{k: s[k] for k in ("upper_leg_error_at_start_deg", "upper_leg_error_at_end_deg",
                                                        "error_at_start_deg", "error_at_end_deg", "drift_total_deg")}})
                 ends = [s["upper_leg_error_at_end_deg"] for s in res]
                 summary.append({"model": f"{label}, {init}", "checkpoint": path,
-                                "start": "clip" if start == "standing" else start, "clips": len(res),
+                                "start": start_label, "clips": len(res),
                                 "upper_leg_error_at_start_deg": sum(s["upper_leg_error_at_start_deg"] for s in res) / len(res),
                                 "upper_leg_error_at_end_deg": sum(ends) / len(res),
                                 "clips_within_30deg_at_end": sum(e < 30.0 for e in ends),

@@ -48,11 +48,12 @@ def train_pip_cmd(
     wearpose train pip --config cpu --threads 1 --mirror --speed-copies 1 --out runs/pip_aug
     """
     from wearpose.estimators.pip import PipConfig, PipEstimator, train_pip
+    from wearpose.estimators.pip.sitting import SIT_HOLD_S
 
     cfg = PipConfig.preset(config).override(hidden=hidden, batch_size=batch_size, learned_init=learned_init,
                                             sitting_clips=sitting_clips, lr=lr, aug_mirror=mirror or None,
                                             aug_speed_copies=speed_copies or None,
-                                            sitting_stand_s=(3.0, 20.0) if balanced_sitting else None)
+                                            sitting_stand_s=SIT_HOLD_S if balanced_sitting else None)
     if hidden is not None:
         cfg = cfg.override(init_widths=(hidden, 2 * hidden))
     out = out or Path("runs") / f"pip_{config}{'' if learned_init else '_noinit'}"

@@ -22,6 +22,7 @@ from typing import Any
 
 from wearpose.errors import ConfigError
 from wearpose.estimators.configio import ConfigIO
+from wearpose.estimators.pip.sitting import STAND_HOLD_S
 
 
 @dataclass(frozen=True)
@@ -79,7 +80,7 @@ class PipConfig(ConfigIO):
     val_clips: int = 0
     seed: int = 0
     sitting_clips: int = 0
-    sitting_stand_s: tuple[float, float] = (1.0, 4.0)
+    sitting_stand_s: tuple[float, float] = STAND_HOLD_S
     aug_mirror: bool = False
     aug_speed_copies: int = 0
     aug_speed_range: tuple[float, float] = (0.8, 1.25)

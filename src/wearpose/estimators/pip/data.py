@@ -287,11 +287,11 @@ def concat_data(a: PipData, b: PipData) -> PipData:
 def _build_sitting(split: str, n: int, cfg: PipConfig, body: Any, root: Path) -> PipData:
     """``n`` synthetic sitting clips (:func:`~wearpose.estimators.pip.sitting.sitting_motion`),
     seeds in a per-split namespace, simulated like corpus clips; cached under ``root``."""
-    from wearpose.estimators.pip.sitting import sitting_clip_id, sitting_motion
+    from wearpose.estimators.pip.sitting import STAND_HOLD_S, sitting_clip_id, sitting_motion
 
     ids = [sitting_clip_id(split, i) for i in range(n)]
     settings = {**data_settings(cfg, body), "sitting_version": 2}
-    if tuple(cfg.sitting_stand_s) != (1.0, 4.0):  # keeps the fingerprint (cache) of the default clips
+    if tuple(cfg.sitting_stand_s) != STAND_HOLD_S:  # keeps the fingerprint (cache) of the default clips
         settings["sitting_stand_s"] = list(cfg.sitting_stand_s)
     fp = fingerprint(ids, {**settings, "split": split})
 

@@ -103,8 +103,14 @@ def _sway(g: torch.Generator, T: int, fps: float) -> torch.Tensor:
     return R
 
 
-def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tuple[float, float] = (3.0, 20.0),
-                   stand_s: tuple[float, float] = (1.0, 4.0)) -> Any:
+#: Seconds of a synthetic clip's seated hold (low, high).
+SIT_HOLD_S: tuple[float, float] = (3.0, 20.0)
+#: Seconds of its standing holds by default (low, high); ``SIT_HOLD_S`` = balanced.
+STAND_HOLD_S: tuple[float, float] = (1.0, 4.0)
+
+
+def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tuple[float, float] = SIT_HOLD_S,
+                   stand_s: tuple[float, float] = STAND_HOLD_S) -> Any:
     """One synthetic sitting clip (module doc) as a :class:`~wearpose.motion.MotionSequence`
     at ``fps`` with zero betas; ``meta["segments"]`` lists ``(name, first_frame, frames)``.
     Seated holds last ``hold_s`` seconds, standing holds ``stand_s``: with ``stand_s = hold_s``
