@@ -32,6 +32,10 @@ def train_pip_cmd(
     mirror: bool = typer.Option(False, "--mirror", help="Add the left/right mirror image of every training clip."),
     speed_copies: int = typer.Option(0, min=0, help="Add N copies of every training clip played 0.8-1.25x as fast "
                                                      "(PipConfig.aug_speed_range)."),
+    seq_len: Optional[int] = typer.Option(None, min=2, help="Override the training window length, frames."),
+    window_stride: Optional[int] = typer.Option(None, min=1, help="Override the stride between windows, frames."),
+    min_window: Optional[int] = typer.Option(None, min=0, help="Clips of at least N frames but shorter than the window "
+                                                                "train as one padded window (0: left out)."),
     lr: Optional[float] = typer.Option(None, help="Override the learning rate."),
     init_from: Optional[Path] = typer.Option(None, help="Start from this checkpoint's weights (fine-tuning; fresh optimiser)."),
     checkpoint_every: int = typer.Option(100, min=1, help="Save last.pt every N optimiser steps (and every epoch)."),
@@ -46,6 +50,9 @@ def train_pip_cmd(
 
     Augmented data (3x the corpus: mirrored copies and one speed-changed copy of every clip):
     wearpose train pip --config cpu --threads 1 --mirror --speed-copies 1 --out runs/pip_aug
+
+    Long windows (20 s, short clips padded): wearpose train pip --config cpu --threads 1
+    --seq-len 1200 --window-stride 600 --min-window 60 --out runs/pip_long
     """
     from wearpose.estimators.pip import PipConfig, PipEstimator, train_pip
     from wearpose.estimators.pip.sitting import SIT_HOLD_S
@@ -53,7 +60,8 @@ def train_pip_cmd(
     cfg = PipConfig.preset(config).override(hidden=hidden, batch_size=batch_size, learned_init=learned_init,
                                             sitting_clips=sitting_clips, lr=lr, aug_mirror=mirror or None,
                                             aug_speed_copies=speed_copies or None,
-                                            sitting_stand_s=SIT_HOLD_S if balanced_sitting else None)
+                                            sitting_stand_s=SIT_HOLD_S if balanced_sitting else None,
+                                            seq_len=seq_len, window_stride=window_stride, min_window=min_window)
     if hidden is not None:
         cfg = cfg.override(init_widths=(hidden, 2 * hidden))
     out = out or Path("runs") / f"pip_{config}{'' if learned_init else '_noinit'}"

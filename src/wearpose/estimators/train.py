@@ -309,9 +309,10 @@ class WindowTask:
     :meth:`batches` (the order of an epoch is seeded by ``config.seed`` and the epoch, so a
     resumed run skips the batches it did) and :meth:`save` (``est.checkpoint(meta, train_state)``).
 
-    Subclasses give :meth:`window` and the ``loss`` / ``validate`` / ``val_metric`` of
-    :class:`TrainTask`. The data must have ``windows(length, stride)`` and
-    ``iter_batches(length, stride, batch_size, generator, skip=...)`` (as
+    Subclasses give :meth:`window` (and :meth:`window_options` for keyword options of the
+    data's windowing) and the ``loss`` / ``validate`` / ``val_metric`` of :class:`TrainTask`.
+    The data must have ``windows(length, stride, **options)`` and
+    ``iter_batches(length, stride, batch_size, generator, skip=..., **options)`` (as
     :class:`~wearpose.estimators.empose.data.EmposeData`).
     """
 
@@ -319,11 +320,15 @@ class WindowTask:
         self.est, self.cfg = est, est.config
         self.model = est.model
         self.train_data, self.val_data = train_data, val_data
-        self._nw = len(train_data.windows(*self.window()))
+        self._nw = len(train_data.windows(*self.window(), **self.window_options()))
 
     def window(self) -> tuple[int, int]:
         """``(length, stride)`` of the training windows, frames."""
         raise NotImplementedError
+
+    def window_options(self) -> dict[str, Any]:
+        """Keyword options of the data's ``windows`` / ``iter_batches`` (none by default)."""
+        return {}
 
     def num_batches(self) -> int:
         from wearpose.estimators.empose.data import num_batches
@@ -332,7 +337,7 @@ class WindowTask:
 
     def batches(self, epoch: int, skip: int) -> Iterable[Any]:
         g = torch.Generator().manual_seed(self.cfg.seed * 100_003 + epoch)
-        return self.train_data.iter_batches(*self.window(), self.cfg.batch_size, g, skip=skip)
+        return self.train_data.iter_batches(*self.window(), self.cfg.batch_size, g, skip=skip, **self.window_options())
 
     def save(self, path: Path, meta: dict[str, Any], train_state: dict[str, Any] | None) -> None:
         save_checkpoint(self.est.checkpoint(meta, train_state), path)

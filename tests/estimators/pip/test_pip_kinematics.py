@@ -57,7 +57,7 @@ def test_presets_and_config_errors() -> None:
     with pytest.raises(ConfigError):
         PipConfig.from_dict({"hidden": 8, "nope": 1})
     for bad in ({"aug_speed_range": (1.25, 0.8)}, {"aug_speed_range": (0.0, 1.0)}, {"aug_speed_copies": -1},
-                {"sitting_stand_s": (4.0, 1.0)}):
+                {"sitting_stand_s": (4.0, 1.0)}, {"min_window": -1}, {"min_window": 201}):
         with pytest.raises(ConfigError, match=next(iter(bad))):
             PipConfig(**bad)
 
@@ -125,6 +125,61 @@ def test_cumulative_velocity_loss() -> None:
     alt[:, 0::2, 0::3] = 0.1
     alt[:, 1::2, 0::3] = -0.1
     assert float(cumulative_velocity_loss(alt, gt, (1, 3, 9, 27))) < got / 5
+
+
+def test_padded_windows_cover_short_clips_and_tails() -> None:
+    from wearpose.estimators.pip.data import TENSORS, PipData
+
+    lengths = [5, 12, 30]  # shorter than min_len, shorter than seq_len, longer with a tail
+    F = sum(lengths)
+    data = PipData(**{k: torch.arange(F, dtype=torch.float32)[:, None].repeat(1, 2) for k in TENSORS},
+                   starts=torch.tensor([0, 5, 17]), lengths=torch.tensor(lengths), clip_ids=["a", "b", "c"],
+                   fingerprint="x", settings={})
+    # min_len 0: only full windows (the old behaviour): clip c (frames 17-46) at 17 and 25, its
+    # last 2 frames left out, clips a and b left out
+    assert data.windows(20, 8).tolist() == [[17, 20], [25, 20]]
+    w = data.windows(20, 8, min_len=6)
+    # clip b whole (padded), clip c's tail gets a window ending at its last frame, clip a still out
+    assert w.tolist() == [[5, 12], [17, 20], [25, 20], [27, 20]]
+    b = data.batch(w)
+    assert b["x"].shape == (4, 20, 2) and b["mask"].sum(1).tolist() == [12, 20, 20, 20]
+    assert b["x"][0, :12, 0].tolist() == list(range(5, 17)) and (b["x"][0, 12:, 0] == 16).all()  # pads repeat
+    # bucketed shuffling: every window exactly once per epoch, reproducible, skip drops batches
+    got = [tuple(bb["x"][:, 0, 0].long().tolist()) for bb in data.iter_batches(20, 8, 1, torch.Generator().manual_seed(3),
+                                                                                min_len=6)]
+    again = [tuple(bb["x"][:, 0, 0].long().tolist()) for bb in data.iter_batches(20, 8, 1, torch.Generator().manual_seed(3),
+                                                                                  min_len=6)]
+    assert got == again and sorted(x for t in got for x in t) == [5, 17, 25, 27]
+    skipped = [tuple(bb["x"][:, 0, 0].long().tolist()) for bb in data.iter_batches(20, 8, 1, torch.Generator().manual_seed(3),
+                                                                                    min_len=6, skip=1)]
+    assert skipped == got[1:]
+
+
+def test_padding_does_not_change_the_loss() -> None:
+    """A window padded into a longer batch has the loss it has alone (masked means)."""
+    cfg = tiny()
+    torch.manual_seed(0)
+    net = PipNet(cfg).eval()
+    T, L = 12, 7
+    b = {"x": torch.randn(1, T, 72), "leaf": torch.randn(1, T, 15), "joints": torch.randn(1, T, 69),
+         "rot6": torch.randn(1, T, 138), "vel": torch.randn(1, T, 72), "contact": torch.rand(1, T, 2).round()}
+    short = {k: v[:, :L] for k, v in b.items()}
+    padded = {k: torch.cat([v[:, :L], v[:, L - 1:L].expand(1, T - L, v.shape[-1])], 1) for k, v in b.items()}
+    padded["mask"] = torch.arange(T)[None] < L
+    with torch.no_grad():
+        alone, parts_alone = pip_loss(run_windows(net, short)[0], short, cfg)
+        pad, parts_pad = pip_loss(run_windows(net, padded)[0], padded, cfg)
+    for k in parts_alone:
+        if k != "loss_vel":  # the cumulative loss chunks differently (T // n) -- compared below
+            assert parts_pad[k] == pytest.approx(parts_alone[k], rel=1e-5), k
+    # cumulative velocity loss: chunks of the padded window that start on valid frames count
+    e = torch.randn(1, T, 72)
+    full = cumulative_velocity_loss(e, torch.zeros_like(e), (1, 3))
+    same = cumulative_velocity_loss(e, torch.zeros_like(e), (1, 3), torch.ones(1, T, dtype=torch.bool))
+    assert float(same) == pytest.approx(float(full), rel=1e-6)
+    m = torch.arange(T)[None] < 6
+    assert float(cumulative_velocity_loss(e, torch.zeros_like(e), (1, 3), m)) == pytest.approx(
+        float(cumulative_velocity_loss(e[:, :6], torch.zeros_like(e[:, :6]), (1, 3))), rel=1e-5)
 
 
 def test_network_shapes_causality_and_init() -> None:

@@ -40,7 +40,11 @@ class PipConfig(ConfigIO):
     Contact labels (TransPose): a foot (SMPL joints 10/11) is in contact when it moves less than
     ``contact_speed`` m/s; additionally it must be within ``contact_height`` m of the clip's
     lowest foot height (rules out the slow apex of a jump).
-    Data: ``rate`` Hz, ``seq_len`` frames per window, ``window_stride``, ``train_noise`` IMU
+    Data: ``rate`` Hz, ``seq_len`` frames per window, ``window_stride``, ``min_window`` (0: only
+    windows of exactly ``seq_len`` frames, clips shorter than that are not trained on; N > 0: a
+    clip of N to ``seq_len`` - 1 frames is one padded, masked window, and a long clip's tail the
+    stride leaves out gets a window of its own -- what lets long windows, the LSTM's memory
+    of a sit-down over many seconds, coexist with the corpus's short clips), ``train_noise`` IMU
     error model (``default`` / ``none``), ``max_train_clips`` (0 = whole train split),
     ``val_clips`` (validation clips per epoch, 0 = all), ``seed``, ``sitting_clips`` synthetic
     sitting clips (:mod:`~wearpose.estimators.pip.sitting`; the corpus has none) added to the
@@ -75,6 +79,7 @@ class PipConfig(ConfigIO):
     rate: float = 60.0
     seq_len: int = 200
     window_stride: int = 200
+    min_window: int = 0
     train_noise: str = "default"
     max_train_clips: int = 0
     val_clips: int = 0
@@ -102,6 +107,9 @@ class PipConfig(ConfigIO):
             raise ConfigError(f"PipConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
         if self.seq_len < 2 or self.window_stride < 1:
             raise ConfigError("PipConfig: seq_len >= 2 and window_stride >= 1 required")
+        if not 0 <= self.min_window <= self.seq_len:
+            raise ConfigError(f"PipConfig.min_window: expected 0 <= min_window <= seq_len ({self.seq_len}), "
+                              f"got {self.min_window!r}")
         if len(self.aug_speed_range) != 2 or not 0.0 < self.aug_speed_range[0] <= self.aug_speed_range[1]:
             raise ConfigError(f"PipConfig.aug_speed_range: expected (low, high) with 0 < low <= high, "
                               f"got {self.aug_speed_range!r}")

@@ -168,24 +168,57 @@ class PipData:
     def num_frames(self) -> int:
         return int(self.x.shape[0])
 
-    def windows(self, seq_len: int, stride: int) -> torch.Tensor:
-        """``(W,)`` first frame of every window of ``seq_len`` frames inside one clip."""
-        out = [torch.arange(int(s), int(s) + int(L) - seq_len + 1, max(1, stride))
-               for s, L in zip(self.starts, self.lengths) if int(L) >= seq_len]
-        return torch.cat(out) if out else torch.zeros(0, dtype=torch.long)
+    def windows(self, seq_len: int, stride: int, min_len: int = 0) -> torch.Tensor:
+        """``(W, 2)`` (first frame, length) of the training windows.
 
-    def batch(self, first: torch.Tensor, seq_len: int) -> dict[str, torch.Tensor]:
-        """Windows starting at ``first`` ``(B,)`` -> tensors ``(B, seq_len, ...)``."""
-        idx = first[:, None] + torch.arange(seq_len)
-        return {k: getattr(self, k)[idx] for k in TENSORS}
+        ``min_len == 0``: every window of exactly ``seq_len`` frames starting every ``stride``
+        frames inside one clip (a clip shorter than ``seq_len`` gives none). ``min_len > 0``: as
+        well, one more window ending at the clip's last frame when the stride leaves a tail out,
+        and a clip of ``min_len <= L < seq_len`` frames is one window of length ``L`` (padded and
+        masked in :meth:`batch`), so every frame of such clips is trained on.
+        """
+        out = []
+        for s, L in zip(self.starts.tolist(), self.lengths.tolist()):
+            if L >= seq_len:
+                firsts = list(range(s, s + L - seq_len + 1, max(1, stride)))
+                if min_len > 0 and firsts[-1] != s + L - seq_len:
+                    firsts.append(s + L - seq_len)
+                out += [(f, seq_len) for f in firsts]
+            elif min_len > 0 and L >= min_len:
+                out.append((s, L))
+        return torch.tensor(out, dtype=torch.long).reshape(-1, 2)
+
+    def batch(self, win: torch.Tensor, seq_len: int | None = None) -> dict[str, torch.Tensor]:
+        """Windows ``(B, 2)`` (first frame, length) -> tensors ``(B, T, ...)`` with ``T`` the longest
+        window, and ``mask`` ``(B, T)`` (False on padding; padding repeats the window's last frame).
+        ``seq_len`` is accepted for the common window-task signature and not needed."""
+        T = int(win[:, 1].max())
+        step = torch.arange(T)
+        mask = step[None] < win[:, 1:2]
+        idx = win[:, :1] + torch.minimum(step[None], win[:, 1:2] - 1)
+        return {**{k: getattr(self, k)[idx] for k in TENSORS}, "mask": mask}
 
     def iter_batches(self, seq_len: int, stride: int, batch_size: int, generator: torch.Generator | None = None,
-                     shuffle: bool = True, skip: int = 0) -> Iterator[dict[str, torch.Tensor]]:
-        """Batches of windows (shuffled by ``generator``), skipping the first ``skip`` batches."""
-        w = self.windows(seq_len, stride)
+                     shuffle: bool = True, skip: int = 0, min_len: int = 0) -> Iterator[dict[str, torch.Tensor]]:
+        """Batches of :meth:`windows` (shuffled by ``generator``), skipping the first ``skip`` batches.
+
+        With windows of several lengths (``min_len > 0``) a shuffled batch would be padded to
+        its longest window almost always; so the shuffled windows are sorted by length within
+        groups of 32 batches, cut into batches, and the batches shuffled (same ``generator``):
+        the padding stays small and the order is still random and reproducible.
+        """
+        w = self.windows(seq_len, stride, min_len)
         order = torch.randperm(len(w), generator=generator) if shuffle else torch.arange(len(w))
-        for i in range(skip, num_batches(len(w), batch_size)):
-            yield self.batch(w[order[i * batch_size:(i + 1) * batch_size]], seq_len)
+        n = num_batches(len(w), batch_size)
+        if min_len > 0 and shuffle:
+            group = 32 * batch_size
+            order = torch.cat([g[torch.argsort(w[g, 1], stable=True)] for g in order.split(group)]) if len(w) else order
+            bo = torch.randperm(n, generator=generator)
+            batches = [order[int(i) * batch_size:(int(i) + 1) * batch_size] for i in bo]
+        else:
+            batches = [order[i * batch_size:(i + 1) * batch_size] for i in range(n)]
+        for sel in batches[skip:]:
+            yield self.batch(w[sel])
 
 
 def data_settings(cfg: PipConfig, body: Any) -> dict[str, Any]:

@@ -114,7 +114,8 @@ class PipNet(nn.Module):
         return {"leaf": leaf, "joints": joints, "rot6": rot6, "vel": vel, "contact_logit": cl}, states
 
 
-def cumulative_velocity_loss(pred: torch.Tensor, gt: torch.Tensor, windows: tuple[int, ...]) -> torch.Tensor:
+def cumulative_velocity_loss(pred: torch.Tensor, gt: torch.Tensor, windows: tuple[int, ...],
+                             mask: torch.Tensor | None = None) -> torch.Tensor:
     """TransPose's cumulative velocity loss: for each window length ``n``, the squared norm of
     the error *summed* over consecutive non-overlapping ``n``-frame windows (a position drift
     over n frames, in units of ``vel_scale / fps`` m), divided by ``n``, averaged over windows and
@@ -122,32 +123,52 @@ def cumulative_velocity_loss(pred: torch.Tensor, gt: torch.Tensor, windows: tupl
 
     Args:
         pred, gt: ``(B, T, 3J)`` velocities.
+        mask: ``(B, T)`` bool, False on padding (a window that starts on padding is not counted;
+            one that runs into it sums its valid frames). None = all valid.
     """
     B, T = pred.shape[:2]
     e = (pred - gt).view(B, T, -1, 3)
+    if mask is not None:
+        e = e * mask[:, :, None, None]
     total = pred.new_zeros(())
     for n in windows:
         k = T // n
         if k == 0:
             continue
         s = e[:, :k * n].reshape(B, k, n, -1, 3).sum(2)
-        total = total + (s ** 2).sum(-1).mean() / n
+        sq = (s ** 2).sum(-1)  # (B, k, J)
+        if mask is None:
+            total = total + sq.mean() / n
+        else:
+            m = mask[:, :k * n:n].to(sq.dtype)  # (B, k): the chunk's first frame is valid
+            total = total + (sq * m[:, :, None]).sum() / (m.sum() * sq.shape[-1]).clamp(min=1) / n
     return total
 
 
 def pip_loss(out: dict[str, torch.Tensor], b: dict[str, torch.Tensor], cfg: PipConfig
              ) -> tuple[torch.Tensor, dict[str, float]]:
     """Weighted sum of the five losses (L2 for P_L, P_A, R_A as mean squared error per
-    coordinate in cm / 6D units, cumulative for V_A, BCE for C_F); returns ``(loss, parts)``."""
+    coordinate in cm / 6D units, cumulative for V_A, BCE for C_F); returns ``(loss, parts)``.
+    A batch with ``mask`` ``(B, T)`` (padded windows) averages over its valid frames only."""
+    mask = b.get("mask")
+    if mask is not None and bool(mask.all()):
+        mask = None  # equal-length windows: the plain means (bitwise as before padding existed)
+
+    def mean(x: torch.Tensor) -> torch.Tensor:  # x (B, T, D)
+        if mask is None:
+            return x.mean()
+        m = mask[:, :, None].to(x.dtype)
+        return (x * m).sum() / (m.sum() * x.shape[-1])
+
     def l2(p: torch.Tensor, g: torch.Tensor, k: float = 1.0) -> torch.Tensor:
-        return ((p - g) * k).pow(2).mean()
+        return mean(((p - g) * k).pow(2))
 
     # Positions in decimetres so the L2 terms have similar magnitudes (each RNN has its own
     # parameters, so the weights only matter for reporting and the shared optimiser's steps).
     parts = {"leaf": l2(out["leaf"], b["leaf"], 10.0), "joints": l2(out["joints"], b["joints"], 10.0),
              "rot": l2(out["rot6"], b["rot6"]),
-             "vel": cumulative_velocity_loss(out["vel"], b["vel"], cfg.vel_windows),
-             "contact": F.binary_cross_entropy_with_logits(out["contact_logit"], b["contact"])}
+             "vel": cumulative_velocity_loss(out["vel"], b["vel"], cfg.vel_windows, mask),
+             "contact": mean(F.binary_cross_entropy_with_logits(out["contact_logit"], b["contact"], reduction="none"))}
     w = {"leaf": cfg.w_leaf, "joints": cfg.w_joints, "rot": cfg.w_rot, "vel": cfg.w_vel, "contact": cfg.w_contact}
     loss = sum(w[k] * v for k, v in parts.items())
     return loss, {f"loss_{k}": float(v.detach()) for k, v in parts.items()}

@@ -21,6 +21,9 @@ class PipTask(EmposeTask):
 
     val_metric = "val_joints_mm"
 
+    def window_options(self) -> dict[str, Any]:
+        return {"min_len": self.cfg.min_window}
+
     def loss(self, batch: dict[str, torch.Tensor], device: torch.device):
         b = {k: v.to(device) for k, v in batch.items()}
         out, _ = run_windows(self.model, b)
@@ -28,26 +31,29 @@ class PipTask(EmposeTask):
 
     @torch.no_grad()
     def validate(self, device: torch.device) -> dict[str, float]:
-        """Validation windows (non-overlapping, from learned initial states): loss, mean joint
+        """Validation windows (non-overlapping, ``seq_len`` frames, and the shorter clips as one
+        window when ``min_window`` says so; from learned initial states): loss, mean joint
         position error of P_A (mm, root frame, 23 joints), root-relative rotation error of R_A
-        (deg, 23 joints), contact accuracy (%), root speed error (cm/s)."""
+        (deg, 23 joints), contact accuracy (%), root speed error (cm/s); over valid frames."""
         from wearpose.geometry import geodesic_angle, rot6d_to_matrix
 
         if self.val_data is None:
             return {}
         self.model.eval()
         tot, n, pe, ae, acc, ve = 0.0, 0, [], [], [], []
-        for b in self.val_data.iter_batches(self.cfg.seq_len, self.cfg.seq_len, max(self.cfg.batch_size, 32), shuffle=False):
+        for b in self.val_data.iter_batches(self.cfg.seq_len, self.cfg.seq_len, max(self.cfg.batch_size, 32), shuffle=False,
+                                            min_len=self.cfg.min_window):
             b = {k: v.to(device) for k, v in b.items()}
             out, _ = run_windows(self.model, b)
             loss, _ = pip_loss(out, b, self.cfg)
             tot, n = tot + float(loss), n + 1
             B, T = b["x"].shape[:2]
-            pe.append((out["joints"] - b["joints"]).view(B, T, -1, 3).norm(dim=-1).mean(-1).flatten())
+            m = b["mask"]  # (B, T)
+            pe.append((out["joints"] - b["joints"]).view(B, T, -1, 3).norm(dim=-1).mean(-1)[m])
             ae.append(geodesic_angle(rot6d_to_matrix(out["rot6"].view(B, T, -1, 6)),
-                                     rot6d_to_matrix(b["rot6"].view(B, T, -1, 6))).mean(-1).flatten())
-            acc.append(((out["contact_logit"] > 0).float() == b["contact"]).float().flatten())
-            ve.append((out["vel"] - b["vel"]).view(B, T, -1, 3)[:, :, 0].norm(dim=-1).flatten() * self.cfg.vel_scale)
+                                     rot6d_to_matrix(b["rot6"].view(B, T, -1, 6))).mean(-1)[m])
+            acc.append(((out["contact_logit"] > 0).float() == b["contact"]).float()[m].flatten())
+            ve.append((out["vel"] - b["vel"]).view(B, T, -1, 3)[:, :, 0].norm(dim=-1)[m] * self.cfg.vel_scale)
         self.model.train()
         if n == 0:
             return {}
