@@ -55,6 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     from wearpose.estimators.empose.data import clip_seed
     from wearpose.estimators.pip.data import simulate_clip
     from wearpose.estimators.pip.estimator import PipEstimator
+    from wearpose.estimators.pip.evaluate import horizontal_path_m
     from wearpose.motion import CorpusStore, MotionSequence
     from wearpose.physics import PhysicsCharacter, PhysicsConfig, PhysicsOptimizer, kinematic_reference
 
@@ -68,8 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         seq = store.load(cid)
         r = simulate_clip(seq, est.config, body, clip_seed(cid, 0, "pip-eval"))
         gt_trans = r["trans"].float()
-        step = (gt_trans[1:, [0, 2]] - gt_trans[:-1, [0, 2]]).norm(dim=-1)
-        travelled = float(step.sum())
+        travelled = horizontal_path_m(gt_trans)
         if travelled < a.min_travel:
             continue
         ref = kinematic_reference(MotionSequence(pose=r["pose"].float(), betas=r["betas"].float(), trans=gt_trans,

@@ -3,7 +3,9 @@ joint) of each clip for the physics variants and the kinematic baseline, to find
 drive the split averages of ``pip_eval.py``.
 
 Run: ``taskset -c 0 python benchmarks/pip_perclip.py --split val --limit 30 [--set FIELD=JSON ...]
-[--variants PIP "single PD" "w/o physics"] [--clips ID ...] --out NAME``.
+[--variants PIP "single PD" "w/o physics"] [--clips ID ... | --min-travel M] --out NAME``.
+``--min-travel 1.0`` evaluates the clips whose ground truth travels at least 1 m on the ground
+plane (the rule of ``pip_dualpd_inputs.py``: :func:`wearpose.estimators.pip.evaluate.clip_travel_m`).
 Writes ``benchmarks/results/pip_perclip_<NAME>.json`` (per-clip rows and the split summary).
 """
 
@@ -29,6 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--split", default="val")
     ap.add_argument("--limit", type=int, default=None)
     ap.add_argument("--clips", nargs="*", default=None, help="only these clip ids (of the split)")
+    ap.add_argument("--min-travel", type=float, default=0.0, help="keep clips whose ground truth travels >= this, m")
     ap.add_argument("--weights", default="src/wearpose/weights/pip_cpu.pt")
     ap.add_argument("--variants", nargs="*", default=list(VARIANTS))
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=JSON", help="PhysicsConfig override")
@@ -59,10 +62,10 @@ def main(argv: list[str] | None = None) -> int:
     else:
         use = store
     t0 = time.time()
-    res = evaluate_variants(variants, a.split, a.limit, store=use,
+    res = evaluate_variants(variants, a.split, a.limit, store=use, min_travel=a.min_travel,
                             progress=lambda d, t: print(f"  {d}/{t} ({time.time() - t0:.0f} s)", file=sys.stderr, flush=True))
     out = {"command": "python " + " ".join([sys.argv[0], *(argv if argv is not None else sys.argv[1:])]),
-           "split": a.split, "clips": res["clips"], "frames": res["frames"], "overrides": overrides,
+           "split": a.split, "min_travel_m": a.min_travel, "clips": res["clips"], "frames": res["frames"], "overrides": overrides,
            "summary": {n: {k: r.get(k) for k in SUMMARY} for n, r in res["rows"].items()},
            "ground_truth": res.get("ground_truth"),
            "per_clip": {n: r["per_clip"] for n, r in res["rows"].items()}, "wall_seconds": time.time() - t0}

@@ -112,3 +112,19 @@ def test_evaluate_variants_per_clip_and_zmp(body) -> None:
     at = res["rows"]["phys"]["per_clip"][0]["penetration_at"]
     assert 0 <= at["frame"] < T - 8 and at["joint"] in range(24)
     assert "penetration_at" not in res["rows"]["kin"]["per_clip"][0]
+
+
+def test_travel_rule_counts_ground_plane_path_after_trimming() -> None:
+    from wearpose.estimators.pip.evaluate import clip_travel_m, horizontal_path_m
+    from wearpose.motion import MotionSequence
+
+    T = 121  # 2 s at 60 Hz: 1 m/s along x and 3 m/s up and down along y (a jump does not travel)
+    t = torch.arange(T) / 60.0
+    trans = torch.stack([t, 0.9 + 0.3 * torch.sin(10 * t), torch.zeros(T)], -1)
+    assert horizontal_path_m(trans) == pytest.approx(2.0, rel=1e-5)
+    m = MotionSequence(torch.eye(3).repeat(T, 24, 1, 1), torch.zeros(10), trans, 60.0)
+    assert clip_travel_m(m, 60.0) == pytest.approx((T - 1 - 8) / 60.0, rel=1e-5)  # 4 frames cut at each end
+    assert clip_travel_m(m, 60.0, trim=0) == pytest.approx(2.0, rel=1e-5)
+    # at 30 Hz the same clip (resampled to 60 Hz) travels the same way
+    half = MotionSequence(m.pose[::2], m.betas, trans[::2], 30.0)
+    assert clip_travel_m(half, 60.0, trim=0) == pytest.approx(2.0, rel=1e-4)

@@ -26,13 +26,32 @@ import numpy as np
 import torch
 
 from wearpose.estimators.empose.data import clip_seed
-from wearpose.estimators.pip.data import simulate_clip
+from wearpose.estimators.pip.data import EDGE_FRAMES, simulate_clip
 
 #: Travelled-distance thresholds of the translation error curve, m.
 DISTANCES = tuple(float(d) for d in range(0, 21, 2))
 #: Metrics averaged over frames (keys of :func:`wearpose.evaluate.compute_all`).
 FRAME_METRICS = ("sip_error_deg", "angular_error_deg", "positional_error_cm", "mesh_error_cm", "jitter_abs_km_s3",
                  "jitter_rel_km_s3", "mpjpe_major_mm", "translation_error_cm")
+
+
+def horizontal_path_m(trans: torch.Tensor) -> float:
+    """Ground-plane path length of a root trajectory ``trans`` ``(T, 3)`` (y up), m: the
+    travelled distance by which clips are selected ("clips that travel > 1 m")."""
+    return float((trans[1:, [0, 2]] - trans[:-1, [0, 2]]).norm(dim=-1).sum())
+
+
+def clip_travel_m(motion: Any, rate: float, trim: int = EDGE_FRAMES) -> float:
+    """:func:`horizontal_path_m` of a corpus clip as the evaluation sees it: resampled to
+    ``rate`` Hz and cut by ``trim`` frames at both ends (as :func:`simulate_clip`), without
+    simulating sensors."""
+    from wearpose.motion import resample
+
+    m = motion if abs(motion.fps - rate) < 1e-9 else resample(motion, rate)
+    trans = m.trans.float()
+    if trim > 0 and trans.shape[0] > 2 * trim + 2:
+        trans = trans[trim:trans.shape[0] - trim]
+    return horizontal_path_m(trans)
 
 
 #: finite-difference stride of the ZMP metric, frames at 60 fps (see :func:`zmp_of`)
@@ -101,18 +120,22 @@ def clip_metrics(est: Any, r: dict[str, Any], body: Any, gt: Any = None) -> tupl
 
 
 def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int | None = None, *, noise: str = "default",
-                      seed: int = 0, store: Any = None, progress: Callable[[int, int], None] | None = None
-                      ) -> dict[str, Any]:
+                      seed: int = 0, store: Any = None, progress: Callable[[int, int], None] | None = None,
+                      min_travel: float = 0.0) -> dict[str, Any]:
     """Evaluate several estimators (name -> :class:`PipEstimator`, all with one body) on the same
-    simulated clips (module doc). Returns ``{"rows": {name: {...}}, "clips", "frames", ...}``."""
+    simulated clips (module doc); ``min_travel`` > 0 keeps only the clips whose
+    :func:`clip_travel_m` reaches it (m; applied before ``limit``). Returns ``{"rows": {name:
+    {...}}, "clips", "frames", ...}``."""
     from wearpose.motion import CorpusStore
 
     store = store or CorpusStore()
     ids = store.clips(split=split)
-    if limit and limit < len(ids):
-        ids = [ids[int(i * len(ids) / limit)] for i in range(limit)]
     first = next(iter(variants.values()))
     body, cfg = first.body, first.config
+    if min_travel > 0:
+        ids = [cid for cid in ids if clip_travel_m(store.load(cid), cfg.rate) >= min_travel]
+    if limit and limit < len(ids):
+        ids = [ids[int(i * len(ids) / limit)] for i in range(limit)]
     acc: dict[str, dict[str, Any]] = {n: {"sums": {}, "frames": 0, "curves": [], "drift": [], "qp_ms": [], "pen": [],
                                           "seconds": 0.0, "per_clip": [], "zmp": [0.0, 0]} for n in variants}
     frames = 0
