@@ -37,6 +37,20 @@ def test_hull_and_distance():
     assert np.isclose(distance_to_polygon(np.array([1.0, 3.0]), seg), 3.0)
 
 
+def test_hull_matches_qhull_on_random_sets():
+    from scipy.spatial import ConvexHull
+
+    rng = np.random.default_rng(0)
+    for n in (3, 5, 8, 40):
+        for _ in range(25):
+            pts = rng.normal(size=(n, 2))
+            ours = convex_hull_2d(pts)
+            ref = pts[ConvexHull(pts).vertices]  # counter-clockwise for 2-D input
+            assert len(ours) == len(ref)
+            k = int(np.argmin(np.linalg.norm(ref - ours[0], axis=1)))  # same cycle, any start vertex
+            assert np.allclose(np.roll(ref, -k, axis=0), ours)
+
+
 def test_standing_still_is_balanced(char):
     pose, trans = _still(20)
     res = zmp_distance(char, pose, trans, FPS)

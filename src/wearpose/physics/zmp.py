@@ -70,6 +70,10 @@ class ZmpResult:
 def convex_hull_2d(points: np.ndarray) -> np.ndarray:
     """Convex hull ``(K, 2)`` (counter-clockwise, Andrew's monotone chain) of ``points`` ``(N, 2)``;
     degenerate inputs give 1 or 2 vertices."""
+    # Not scipy.spatial.ConvexHull: Qhull raises on the degenerate supports that occur every few
+    # frames here (one contact point; the points of a foot on its edge, collinear seen from
+    # above), and the base of support is then a point or a segment, not an error. Tested
+    # against Qhull on non-degenerate sets (tests/physics/test_zmp.py).
     pts = np.unique(np.asarray(points, dtype=np.float64).reshape(-1, 2), axis=0)
     if len(pts) <= 2:
         return pts
