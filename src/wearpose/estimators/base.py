@@ -17,7 +17,7 @@ from __future__ import annotations
 import abc
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar, Iterator, Sequence
+from typing import Any, ClassVar, Iterator, Mapping, Sequence
 
 import numpy as np
 import torch
@@ -144,6 +144,15 @@ class Estimator(abc.ABC):
     @abc.abstractmethod
     def fit(self, *args: Any, **kwargs: Any) -> Any:
         """Train on the corpus (methods document their arguments); returns a training summary."""
+
+    @classmethod
+    def training_data_description(cls, config: Mapping[str, Any]) -> str | None:
+        """One sentence for the weights card saying how this method's training inputs were made
+        from the corpus train split (simulation, augmentation, synthetic clips, windows),
+        derived from a checkpoint's ``config`` dict (the method config's ``to_dict()``) so cards
+        are not patched by hand. None when the method does not say (``tools/ship_weights.py``
+        then needs ``--simulation``)."""
+        return None
 
     @abc.abstractmethod
     def save(self, path: str | Path) -> Path:

@@ -33,9 +33,10 @@ input rate.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 import torch
@@ -152,6 +153,24 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
         from wearpose.estimators.birae.train import train_birae
 
         return train_birae(self, *args, **kwargs)
+
+    @classmethod
+    def training_data_description(cls, config: Mapping[str, Any]) -> str | None:
+        """The card sentence (:meth:`Estimator.training_data_description`) of
+        :func:`wearpose.estimators.birae.data.build_split` and the two training phases."""
+        from wearpose.estimators.birae.data import augmentation_noise  # lazy: data pulls in the simulators
+
+        cfg = BiraeConfig.from_dict(dict(config))
+        walk = math.degrees(augmentation_noise(cfg).yaw_bias_walk)  # not a config field: read it where it is set
+        text = (f"ideal {cfg.kit} segment orientations by forward kinematics ({cfg.rate:g} Hz), root-relative, "
+                f"input representation {cfg.rep}, subsequences of {cfg.seq_len} frames (pieces under {cfg.min_len} "
+                f"frames dropped)")
+        if cfg.train_clips > 0:
+            text += f", first {cfg.train_clips} train clips only"
+        return text + (f"; phase 1 ideal, phase 2 one seeded augmented copy per clip: {cfg.aug_white_deg:g} deg white "
+                       f"orientation noise, impulses (p={cfg.aug_impulse_prob:g} per frame, {cfg.aug_impulse_deg:g} deg), "
+                       f"per-sensor yaw drift from a random yaw-rate bias (std {cfg.aug_yaw_bias_dps:g} deg/s, random "
+                       f"walk {walk:.2g} deg/s/sqrt(s)), no magnetic disturbance (wearpose.estimators.birae.data)")
 
     def finetune(self, motions: Any, out_dir: str | Path, **kwargs: Any) -> Any:
         """Fine-tune on target-domain motions (see :func:`wearpose.estimators.birae.train.finetune`)."""

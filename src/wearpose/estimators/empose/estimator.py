@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 import torch
@@ -121,6 +121,32 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         from wearpose.estimators.empose.train import train_empose
 
         return train_empose(self, *args, **kwargs)
+
+    @classmethod
+    def training_data_description(cls, config: Mapping[str, Any]) -> str | None:
+        """The card sentence (:meth:`Estimator.training_data_description`) of
+        :func:`wearpose.estimators.empose.data.build_split`; shared by the Table 2 baselines and
+        the two-stage model, which train on the same data (plus its sensor removal)."""
+        cfg = EmposeConfig.from_dict(dict(config))
+        noise = {"default": "default EM noise", "none": "no noise"}[cfg.train_noise]
+        offsets = {"random": "random subject offsets per clip",
+                   "rot": "random subject offset rotations per clip, translations zero",
+                   "none": "no subject offsets"}[cfg.offsets]
+        twostage = cfg.model == "twostage"
+        # the two-stage mapper sees a dropped sample as zeros plus an availability flag, the others a held value
+        dropped = ("dropped frames as zeros with an availability flag" if twostage else
+                   "dropped frames held at the last valid value")
+        text = (f"virtual EM sensors, kit {cfg.kit} (wearpose.sensors.simulate, {noise}, {offsets}) at {cfg.rate:g} Hz, "
+                f"relative to the EM source on the lower back" + (f", {dropped}" if cfg.train_noise == "default" else "")
+                + f"; windows of {cfg.seq_len} frames every {cfg.window_stride}")
+        if cfg.inputs != "both":  # the Table 3 "pos only" / "ori only" ablations
+            text += f"; network input: sensor {cfg.inputs}s only"
+        if twostage:
+            from wearpose.estimators.empose.twostage import MAX_REMOVED, P_REMOVE
+
+            text += (f"; the joint mapper trains with 1-{MAX_REMOVED} sensors removed (zeros, flag off) for half of "
+                     f"the window in {P_REMOVE:.0%} of the windows")
+        return text
 
     # ------------------------------------------------------------------ inputs
     def _offsets_from(self, recording: Any) -> tuple[torch.Tensor, torch.Tensor]:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Any
+from typing import Any, Mapping
 
 import torch
 from torch import nn
@@ -129,6 +129,12 @@ class LbfgsEstimator(EmposeEstimator):
         self.max_iter = max_iter
         self.every = 1
         self._warm: tuple[torch.Tensor, ...] | None = None
+
+    @classmethod
+    def training_data_description(cls, config: Mapping[str, Any]) -> str | None:
+        """None: no network sees simulated sensors here (the pose prior is fitted to corpus poses),
+        so the inherited EM sentence would be wrong; ship with ``--simulation``."""
+        return None
 
     def _solve(self, p: torch.Tensor, R: torch.Tensor, offR: torch.Tensor, offt: torch.Tensor,
                warm: tuple[torch.Tensor, ...] | None) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...], float]:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Mapping
 
 import numpy as np
 import torch
@@ -178,6 +178,16 @@ class ImuPoserEstimator(NetworkCheckpointing, Estimator):
         from wearpose.estimators.miposer.train import train_miposer
 
         return train_miposer(self, *args, **kwargs)
+
+    @classmethod
+    def training_data_description(cls, config: Mapping[str, Any]) -> str | None:
+        """The card sentence (:meth:`Estimator.training_data_description`) of :func:`build_imu_split`
+        and the training windows."""
+        cfg = MiposerConfig.from_dict(dict(config))
+        noise = {"default": "default IMU noise", "none": "no noise"}[cfg.train_noise]
+        return (f"kit {cfg.kit} (head + wrist IMUs, wearpose.sensors.simulate, {noise}, imu_orientation='segment' = "
+                f"sensor-to-segment calibrated) at {cfg.rate:g} Hz, no T-pose prefix; windows of {cfg.window} frames "
+                f"every {cfg.stride}, every frame supervised")
 
     @torch.no_grad()
     def infer(self, R: torch.Tensor, a: torch.Tensor) -> torch.Tensor:

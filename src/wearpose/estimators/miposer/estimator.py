@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Mapping
 
 import numpy as np
 import torch
@@ -183,6 +183,20 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
         from wearpose.estimators.miposer.train import train_miposer
 
         return train_miposer(self, *args, **kwargs)
+
+    @classmethod
+    def training_data_description(cls, config: Mapping[str, Any]) -> str | None:
+        """The card sentence (:meth:`Estimator.training_data_description`) of
+        :func:`wearpose.estimators.miposer.data.build_split` and the training windows."""
+        cfg = MiposerConfig.from_dict(dict(config))
+        wrists = "left-wrist" if cfg.wrists == 1 else "both wrists'"
+        noise = {"default": "default noise: headset VIO drift, wrist EM noise and dropped frames",
+                 "none": "no noise"}[cfg.train_noise]
+        return (f"kit {cfg.kit} (headset VIO + {wrists} EM relative to the head-worn source, wearpose.sensors.simulate, "
+                f"{noise}, a random subject's EM sensor offsets per clip) after a {cfg.tpose_s:g} s T-pose per clip "
+                f"blended into it over {cfg.blend_s:g} s, calibrated with calibration.calibrate('miposer-tpose'); "
+                f"{cfg.rate:g} Hz" + (", dropped samples held at the last valid value" if cfg.train_noise == "default" else "")
+                + f"; windows of {cfg.window} frames every {cfg.stride}")
 
     # ------------------------------------------------------------------ network
     @torch.no_grad()

@@ -36,7 +36,7 @@ from __future__ import annotations
 import time
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 import torch
@@ -46,8 +46,9 @@ from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFram
 from wearpose.estimators.checkpoint import NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.data import hold_invalid
 from wearpose.estimators.pip.config import PipConfig
-from wearpose.estimators.pip.data import LEAF_JOINTS, imu_features
+from wearpose.estimators.pip.data import EDGE_FRAMES, LEAF_JOINTS, imu_features
 from wearpose.estimators.pip.model import NumpyStepper, PipNet
+from wearpose.estimators.pip.sitting import SIT_HOLD_S
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import rot6d_to_matrix
 
@@ -59,6 +60,11 @@ def physics_available() -> bool:
     except ImportError:
         return False
     return all(hasattr(ph, n) for n in ("PhysicsCharacter", "PhysicsConfig", "PhysicsOptimizer"))
+
+
+def _span(r: tuple[float, float]) -> str:
+    """``(low, high)`` as ``"low-high"``."""
+    return f"{r[0]:g}-{r[1]:g}"
 
 
 @register_estimator("pip")
@@ -132,6 +138,40 @@ class PipEstimator(NetworkCheckpointing, Estimator):
         from wearpose.estimators.pip.train import train_pip
 
         return train_pip(self, *args, **kwargs)
+
+    @classmethod
+    def training_data_description(cls, config: Mapping[str, Any]) -> str | None:
+        """The card sentence (:meth:`Estimator.training_data_description`) of
+        :func:`wearpose.estimators.pip.data.build_split` on the train split and the training
+        windows: corpus clips, then the augmented copies and synthetic sitting clips the config
+        asks for (no clip counts of the corpus: the card has those)."""
+        cfg = PipConfig.from_dict(dict(config))
+        noise = {"default": "default IMU noise", "none": "no IMU noise"}[cfg.train_noise]
+        text = (f"virtual IMUs, kit {cfg.kit} (wearpose.sensors.simulate, imu_orientation='segment' = bone orientations "
+                f"as after a T-pose calibration, TransPose-style smoothed free accelerations, {noise}) at {cfg.rate:g} Hz, "
+                f"{EDGE_FRAMES} frames cut at each clip end; targets: leaf/all joint positions, root-relative rotations, "
+                f"Eq. 14 joint velocities, foot contacts")
+        if cfg.max_train_clips > 0:
+            text += f"; only {cfg.max_train_clips} train clips, spread evenly over the sorted split"
+        extra = ["the left/right mirror image of every clip"] if cfg.aug_mirror else []
+        if cfg.aug_speed_copies > 0:
+            n = cfg.aug_speed_copies
+            extra.append(f"{'one copy' if n == 1 else f'{n} copies'} played at a speed drawn log-uniformly from "
+                         f"{_span(cfg.aug_speed_range)}x" + (" (mirrored with probability 1/2)" if cfg.aug_mirror else ""))
+        if extra:
+            text += ("; plus augmented copies of the same train clips (same sources and licences): "
+                     + " and ".join(extra) + ", wearpose.motion.augment, simulated after augmenting")
+        if cfg.sitting_clips > 0:
+            held = (f"balanced standing/seated holds of {_span(SIT_HOLD_S)} s"
+                    if tuple(cfg.sitting_stand_s) == SIT_HOLD_S else
+                    f"standing holds of {_span(cfg.sitting_stand_s)} s and seated holds of {_span(SIT_HOLD_S)} s")
+            text += (f"; and {cfg.sitting_clips} synthetic sitting clips with {held} "
+                     f"(wearpose.estimators.pip.sitting; generated here, no licence restriction)")
+        text += f"; training windows of {cfg.seq_len} frames every {cfg.window_stride}"
+        if cfg.min_window > 0:
+            text += (f", a clip of {cfg.min_window} to {cfg.seq_len - 1} frames as one padded window and a long "
+                     f"clip's tail the stride leaves out as a window of its own")
+        return text
 
     # ------------------------------------------------------------------ initial state
     @torch.no_grad()
