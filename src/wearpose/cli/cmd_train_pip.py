@@ -36,6 +36,8 @@ def train_pip_cmd(
     window_stride: Optional[int] = typer.Option(None, min=1, help="Override the stride between windows, frames."),
     min_window: Optional[int] = typer.Option(None, min=0, help="Clips of at least N frames but shorter than the window "
                                                                 "train as one padded window (0: left out)."),
+    sitting_window: Optional[int] = typer.Option(None, min=0, help="Windows of N frames (every N/2) for the synthetic "
+                                                                    "sitting clips (0: as the corpus clips)."),
     lr: Optional[float] = typer.Option(None, help="Override the learning rate."),
     init_from: Optional[Path] = typer.Option(None, help="Start from this checkpoint's weights (fine-tuning; fresh optimiser)."),
     checkpoint_every: int = typer.Option(100, min=1, help="Save last.pt every N optimiser steps (and every epoch)."),
@@ -61,7 +63,8 @@ def train_pip_cmd(
                                             sitting_clips=sitting_clips, lr=lr, aug_mirror=mirror or None,
                                             aug_speed_copies=speed_copies or None,
                                             sitting_stand_s=SIT_HOLD_S if balanced_sitting else None,
-                                            seq_len=seq_len, window_stride=window_stride, min_window=min_window)
+                                            seq_len=seq_len, window_stride=window_stride, min_window=min_window,
+                                            sitting_window=sitting_window)
     if hidden is not None:
         cfg = cfg.override(init_widths=(hidden, 2 * hidden))
     out = out or Path("runs") / f"pip_{config}{'' if learned_init else '_noinit'}"

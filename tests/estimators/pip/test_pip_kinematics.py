@@ -57,7 +57,8 @@ def test_presets_and_config_errors() -> None:
     with pytest.raises(ConfigError):
         PipConfig.from_dict({"hidden": 8, "nope": 1})
     for bad in ({"aug_speed_range": (1.25, 0.8)}, {"aug_speed_range": (0.0, 1.0)}, {"aug_speed_copies": -1},
-                {"sitting_stand_s": (4.0, 1.0)}, {"min_window": -1}, {"min_window": 201}):
+                {"sitting_stand_s": (4.0, 1.0)}, {"min_window": -1}, {"min_window": 201},
+                {"sitting_window": 1}):
         with pytest.raises(ConfigError, match=next(iter(bad))):
             PipConfig(**bad)
 
@@ -129,6 +130,7 @@ def test_cumulative_velocity_loss() -> None:
 
 def test_padded_windows_cover_short_clips_and_tails() -> None:
     from wearpose.estimators.pip.data import TENSORS, PipData
+    from wearpose.estimators.pip.sitting import sitting_clip_id
 
     lengths = [5, 12, 30]  # shorter than min_len, shorter than seq_len, longer with a tail
     F = sum(lengths)
@@ -153,6 +155,12 @@ def test_padded_windows_cover_short_clips_and_tails() -> None:
     skipped = [tuple(bb["x"][:, 0, 0].long().tolist()) for bb in data.iter_batches(20, 8, 1, torch.Generator().manual_seed(3),
                                                                                     min_len=6, skip=1)]
     assert skipped == got[1:]
+    # sitting_len: synthetic sitting clips get their own window length (stride half of it)
+    sit = PipData(**{k: torch.arange(F, dtype=torch.float32)[:, None].repeat(1, 2) for k in TENSORS},
+                  starts=torch.tensor([0, 5, 17]), lengths=torch.tensor(lengths),
+                  clip_ids=["a", "b", sitting_clip_id("train", 0)], fingerprint="x", settings={})
+    assert sit.windows(20, 8, min_len=6, sitting_len=10).tolist() == [[5, 12], [17, 10], [22, 10], [27, 10], [32, 10],
+                                                                       [37, 10]]
 
 
 def test_padding_does_not_change_the_loss() -> None:

@@ -44,7 +44,10 @@ class PipConfig(ConfigIO):
     windows of exactly ``seq_len`` frames, clips shorter than that are not trained on; N > 0: a
     clip of N to ``seq_len`` - 1 frames is one padded, masked window, and a long clip's tail the
     stride leaves out gets a window of its own -- what lets long windows, the LSTM's memory
-    of a sit-down over many seconds, coexist with the corpus's short clips), ``train_noise`` IMU
+    of a sit-down over many seconds, coexist with the corpus's short clips), ``sitting_window``
+    (0: the synthetic sitting clips are windowed like the corpus; N > 0: windows of N frames
+    every N // 2 for them, e.g. long windows for motion and short ones for sitting),
+    ``train_noise`` IMU
     error model (``default`` / ``none``), ``max_train_clips`` (0 = whole train split),
     ``val_clips`` (validation clips per epoch, 0 = all), ``seed``, ``sitting_clips`` synthetic
     sitting clips (:mod:`~wearpose.estimators.pip.sitting`; the corpus has none) added to the
@@ -80,6 +83,7 @@ class PipConfig(ConfigIO):
     seq_len: int = 200
     window_stride: int = 200
     min_window: int = 0
+    sitting_window: int = 0
     train_noise: str = "default"
     max_train_clips: int = 0
     val_clips: int = 0
@@ -107,6 +111,8 @@ class PipConfig(ConfigIO):
             raise ConfigError(f"PipConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
         if self.seq_len < 2 or self.window_stride < 1:
             raise ConfigError("PipConfig: seq_len >= 2 and window_stride >= 1 required")
+        if self.sitting_window < 0 or self.sitting_window == 1:
+            raise ConfigError(f"PipConfig.sitting_window: expected 0 or >= 2 frames, got {self.sitting_window!r}")
         if not 0 <= self.min_window <= self.seq_len:
             raise ConfigError(f"PipConfig.min_window: expected 0 <= min_window <= seq_len ({self.seq_len}), "
                               f"got {self.min_window!r}")

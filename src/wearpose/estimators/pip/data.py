@@ -37,6 +37,7 @@ from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.estimators.checkpoint import fingerprint
 from wearpose.estimators.empose.data import clip_seed, num_batches
 from wearpose.estimators.pip.config import PipConfig
+from wearpose.estimators.pip.sitting import SITTING_PREFIX
 from wearpose.geometry import matrix_to_rot6d
 
 DATA_VERSION = 2
@@ -168,17 +169,22 @@ class PipData:
     def num_frames(self) -> int:
         return int(self.x.shape[0])
 
-    def windows(self, seq_len: int, stride: int, min_len: int = 0) -> torch.Tensor:
+    def windows(self, seq_len: int, stride: int, min_len: int = 0, sitting_len: int = 0) -> torch.Tensor:
         """``(W, 2)`` (first frame, length) of the training windows.
 
         ``min_len == 0``: every window of exactly ``seq_len`` frames starting every ``stride``
         frames inside one clip (a clip shorter than ``seq_len`` gives none). ``min_len > 0``: as
         well, one more window ending at the clip's last frame when the stride leaves a tail out,
         and a clip of ``min_len <= L < seq_len`` frames is one window of length ``L`` (padded and
-        masked in :meth:`batch`), so every frame of such clips is trained on.
+        masked in :meth:`batch`), so every frame of such clips is trained on. ``sitting_len > 0``:
+        the synthetic sitting clips (:func:`~wearpose.estimators.pip.sitting.sitting_clip_id`) are
+        cut into windows of ``sitting_len`` frames every ``sitting_len // 2`` instead.
         """
         out = []
-        for s, L in zip(self.starts.tolist(), self.lengths.tolist()):
+        for cid, s, L in zip(self.clip_ids, self.starts.tolist(), self.lengths.tolist()):
+            if sitting_len > 0 and cid.startswith(SITTING_PREFIX):
+                out += [(f, sitting_len) for f in range(s, s + L - sitting_len + 1, max(1, sitting_len // 2))]
+                continue
             if L >= seq_len:
                 firsts = list(range(s, s + L - seq_len + 1, max(1, stride)))
                 if min_len > 0 and firsts[-1] != s + L - seq_len:
@@ -199,7 +205,8 @@ class PipData:
         return {**{k: getattr(self, k)[idx] for k in TENSORS}, "mask": mask}
 
     def iter_batches(self, seq_len: int, stride: int, batch_size: int, generator: torch.Generator | None = None,
-                     shuffle: bool = True, skip: int = 0, min_len: int = 0) -> Iterator[dict[str, torch.Tensor]]:
+                     shuffle: bool = True, skip: int = 0, min_len: int = 0, sitting_len: int = 0
+                     ) -> Iterator[dict[str, torch.Tensor]]:
         """Batches of :meth:`windows` (shuffled by ``generator``), skipping the first ``skip`` batches.
 
         With windows of several lengths (``min_len > 0``) a shuffled batch would be padded to
@@ -207,10 +214,10 @@ class PipData:
         groups of 32 batches, cut into batches, and the batches shuffled (same ``generator``):
         the padding stays small and the order is still random and reproducible.
         """
-        w = self.windows(seq_len, stride, min_len)
+        w = self.windows(seq_len, stride, min_len, sitting_len)
         order = torch.randperm(len(w), generator=generator) if shuffle else torch.arange(len(w))
         n = num_batches(len(w), batch_size)
-        if min_len > 0 and shuffle:
+        if (min_len > 0 or sitting_len > 0) and shuffle:
             group = 32 * batch_size
             order = torch.cat([g[torch.argsort(w[g, 1], stable=True)] for g in order.split(group)]) if len(w) else order
             bo = torch.randperm(n, generator=generator)

@@ -190,6 +190,10 @@ def heldout_sitting_clip(i: int, body: Any, fps: float = 60.0, seed: int = 0) ->
     return m.slice(0, first + n)
 
 
+#: Clip-id prefix of every synthetic sitting clip.
+SITTING_PREFIX = "synthetic/sitting/"
+
+
 def sitting_clip_id(split: str, i: int) -> str:
     """Id of synthetic sitting clip ``i`` of ``split`` (its seed derives from it)."""
-    return f"synthetic/sitting/{split}/{i:04d}"
+    return f"{SITTING_PREFIX}{split}/{i:04d}"

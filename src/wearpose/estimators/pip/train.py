@@ -22,7 +22,7 @@ class PipTask(EmposeTask):
     val_metric = "val_joints_mm"
 
     def window_options(self) -> dict[str, Any]:
-        return {"min_len": self.cfg.min_window}
+        return {"min_len": self.cfg.min_window, "sitting_len": self.cfg.sitting_window}
 
     def loss(self, batch: dict[str, torch.Tensor], device: torch.device):
         b = {k: v.to(device) for k, v in batch.items()}
@@ -42,7 +42,7 @@ class PipTask(EmposeTask):
         self.model.eval()
         tot, n, pe, ae, acc, ve = 0.0, 0, [], [], [], []
         for b in self.val_data.iter_batches(self.cfg.seq_len, self.cfg.seq_len, max(self.cfg.batch_size, 32), shuffle=False,
-                                            min_len=self.cfg.min_window):
+                                            min_len=self.cfg.min_window, sitting_len=self.cfg.sitting_window):
             b = {k: v.to(device) for k, v in b.items()}
             out, _ = run_windows(self.model, b)
             loss, _ = pip_loss(out, b, self.cfg)
