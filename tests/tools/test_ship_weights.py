@@ -77,7 +77,9 @@ def test_pip_unbalanced_sitting_and_min_window() -> None:
     text = get_estimator("pip").training_data_description(cfg.to_dict())
     assert "20 synthetic sitting clips" in text and "standing holds of 1-4 s" in text and "balanced" not in text
     assert "2 copies" in text and "mirror" not in text
-    assert "60 to 199 frames as one padded window" in text
+    assert "60 to 199 frames as one padded window" in text and "sitting clips in windows" not in text
+    mixed = get_estimator("pip").training_data_description(replace(cfg, sitting_window=50).to_dict())
+    assert "sitting clips in windows of 50 frames every 25" in mixed
 
 
 def test_empose_sentence() -> None:

@@ -171,6 +171,9 @@ class PipEstimator(NetworkCheckpointing, Estimator):
         if cfg.min_window > 0:
             text += (f", a clip of {cfg.min_window} to {cfg.seq_len - 1} frames as one padded window and a long "
                      f"clip's tail the stride leaves out as a window of its own")
+        if cfg.sitting_clips > 0 and cfg.sitting_window > 0:
+            text += (f"; the synthetic sitting clips in windows of {cfg.sitting_window} frames every "
+                     f"{cfg.sitting_window // 2} instead")
         return text
 
     # ------------------------------------------------------------------ initial state
