@@ -53,8 +53,9 @@ def train_pip_cmd(
     Augmented data (3x the corpus: mirrored copies and one speed-changed copy of every clip):
     wearpose train pip --config cpu --threads 1 --mirror --speed-copies 1 --out runs/pip_aug
 
-    Long windows (20 s, short clips padded): wearpose train pip --config cpu --threads 1
-    --seq-len 1200 --window-stride 600 --min-window 60 --out runs/pip_long
+    Long windows (20 s, short clips padded; 200 frames for the sitting clips), as the shipped
+    pip_cpu: wearpose train pip --config cpu --threads 1 --mirror --speed-copies 1 --sitting-clips 150
+    --balanced-sitting --seq-len 1200 --window-stride 600 --min-window 60 --sitting-window 200 --out runs/pip_mix
     """
     from wearpose.estimators.pip import PipConfig, PipEstimator, train_pip
     from wearpose.estimators.pip.sitting import SIT_HOLD_S

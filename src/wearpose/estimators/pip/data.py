@@ -209,10 +209,12 @@ class PipData:
                      ) -> Iterator[dict[str, torch.Tensor]]:
         """Batches of :meth:`windows` (shuffled by ``generator``), skipping the first ``skip`` batches.
 
-        With windows of several lengths (``min_len > 0``) a shuffled batch would be padded to
-        its longest window almost always; so the shuffled windows are sorted by length within
-        groups of 32 batches, cut into batches, and the batches shuffled (same ``generator``):
-        the padding stays small and the order is still random and reproducible.
+        With windows of several lengths (``min_len > 0`` or ``sitting_len > 0``) a shuffled batch
+        would be padded to its longest window almost always; so the shuffled windows are sorted
+        by length within groups of 32 batches, cut into batches, and the batches shuffled (same
+        ``generator``): the padding stays small and the order is still random and reproducible.
+        As without bucketing, the ``len(windows) % batch_size`` windows left over (here the
+        longest of the last group) sit out the epoch.
         """
         w = self.windows(seq_len, stride, min_len, sitting_len)
         order = torch.randperm(len(w), generator=generator) if shuffle else torch.arange(len(w))
