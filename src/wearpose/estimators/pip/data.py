@@ -105,6 +105,12 @@ def root_frame_targets(pose: torch.Tensor, joints: torch.Tensor, fps: float, cfg
             "rot6": matrix_to_rot6d(glob[:, 1:]).flatten(1), "vel": vel.flatten(1), "contact": contact}
 
 
+def edge_cut(T: int, trim: int) -> slice | None:
+    """The frames of a ``T``-frame clip kept after cutting ``trim`` at both ends (None: keep all;
+    a clip of at most ``2 * trim + 2`` frames is not cut)."""
+    return slice(trim, T - trim) if trim > 0 and T > 2 * trim + 2 else None
+
+
 def simulate_clip(motion: Any, cfg: PipConfig, body: Any, seed: int, noise: str | None = None,
                   trim: int = EDGE_FRAMES) -> dict[str, Any]:
     """Simulate one clip for PIP (module doc, steps 1-4).
@@ -134,11 +140,10 @@ def simulate_clip(motion: Any, cfg: PipConfig, body: Any, seed: int, noise: str 
     pose, betas, trans = m.pose.float(), m.betas.float(), m.trans.float()
     with torch.no_grad():
         joints = body(pose, betas, trans, return_vertices=False).joints.float()
-    T = pose.shape[0]
-    if trim > 0 and T > 2 * trim + 2:
-        cut = slice(trim, T - trim)
+    cut = edge_cut(pose.shape[0], trim)
+    if cut is not None:
         acc, ori, pose, trans, joints = acc[cut], ori[cut], pose[cut], trans[cut], joints[cut]
-        m = m.slice(trim, T - trim)
+        m = m.slice(cut.start, cut.stop)
     tg = root_frame_targets(pose, joints, cfg.rate, cfg)
     return {"x": imu_features(acc, ori, cfg.acc_scale), **tg, "acc": acc, "ori": ori, "pose": pose, "trans": trans,
             "betas": betas, "world_joints": joints, "motion": m, "sim": sim}

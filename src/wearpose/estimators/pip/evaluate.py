@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from wearpose.estimators.empose.data import clip_seed
-from wearpose.estimators.pip.data import EDGE_FRAMES, simulate_clip
+from wearpose.estimators.pip.data import EDGE_FRAMES, edge_cut, simulate_clip
 
 #: Travelled-distance thresholds of the translation error curve, m.
 DISTANCES = tuple(float(d) for d in range(0, 21, 2))
@@ -49,9 +49,8 @@ def clip_travel_m(motion: Any, rate: float, trim: int = EDGE_FRAMES) -> float:
 
     m = motion if abs(motion.fps - rate) < 1e-9 else resample(motion, rate)
     trans = m.trans.float()
-    if trim > 0 and trans.shape[0] > 2 * trim + 2:
-        trans = trans[trim:trans.shape[0] - trim]
-    return horizontal_path_m(trans)
+    cut = edge_cut(trans.shape[0], trim)
+    return horizontal_path_m(trans if cut is None else trans[cut])
 
 
 #: finite-difference stride of the ZMP metric, frames at 60 fps (see :func:`zmp_of`)

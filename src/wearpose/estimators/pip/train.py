@@ -42,7 +42,7 @@ class PipTask(EmposeTask):
         self.model.eval()
         tot, n, pe, ae, acc, ve = 0.0, 0, [], [], [], []
         for b in self.val_data.iter_batches(self.cfg.seq_len, self.cfg.seq_len, max(self.cfg.batch_size, 32), shuffle=False,
-                                            min_len=self.cfg.min_window, sitting_len=self.cfg.sitting_window):
+                                            **self.window_options()):
             b = {k: v.to(device) for k, v in b.items()}
             out, _ = run_windows(self.model, b)
             loss, _ = pip_loss(out, b, self.cfg)
