@@ -13,6 +13,10 @@ With ``--arm-postures`` also the fixed sit-down with the arms swung forward / el
 same postures standing still throughout ("standing still", errors against the standing pose):
 does the arm posture, rather than the history or the learned initial state, decide "seated"?
 
+``--transitions lean``: the held-out clips and the fixed sit-down sit down / stand up with trunk
+lean and the knees forward (:func:`wearpose.estimators.pip.sitting.lean_transition`) instead of
+the default slerp; the seated holds are the same frames either way.
+
 Run: ``taskset -c 0 python benchmarks/pip_sitting.py --hours 4.63 --pair LABEL FULL NOINIT [...]
 [--synthetic 20 --synthetic-hours 0.5] [--arm-postures]``.
 Writes ``benchmarks/results/pip_sitting.json`` (the series every 10 min included).
@@ -40,6 +44,8 @@ def main() -> int:
                     choices=("learned init", "w/o learned init"), help="which model of each pair to run")
     ap.add_argument("--arm-postures", action="store_true", help="the fixed sit-down with three arm postures")
     ap.add_argument("--skip-fixed", action="store_true", help="skip the fixed sit-down of --hours")
+    ap.add_argument("--transitions", default="slerp", choices=("slerp", "lean"),
+                    help="how the synthetic clips and the fixed sequence sit down (wearpose.estimators.pip.sitting)")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "pip_sitting.json")
     a = ap.parse_args()
     torch.set_num_threads(1)
@@ -50,7 +56,7 @@ def main() -> int:
     from wearpose.motion import MotionSequence
 
     body, rows, synth, summary, arms = BodyModel(), [], [], [], []
-    clips = [heldout_sitting_clip(i, body) for i in range(a.synthetic)]
+    clips = [heldout_sitting_clip(i, body, transitions=a.transitions) for i in range(a.synthetic)]
     for label, full, noinit in a.pair:
         for init, path in [(i, p) for i, p in (("learned init", full), ("w/o learned init", noinit)) if i in a.models]:
             est = PipEstimator.load(path, body=body, physics=False)
@@ -72,7 +78,7 @@ def main() -> int:
                 print("synthetic: " + ", ".join(f"{k} {v:.1f}" if isinstance(v, float) else f"{k} {v}"
                                                 for k, v in summary[-1].items() if k != "checkpoint"), flush=True)
             for fwd, elbow in ((0.0, 0.0), (20.0, 45.0), (40.0, 80.0)) if a.arm_postures else ():
-                seq = sitting_sequence(body, base=arms_forward(fwd, elbow))
+                seq = sitting_sequence(body, base=arms_forward(fwd, elbow), transitions=a.transitions)
                 # the same posture standing still the whole time: errors against the standing pose
                 still = MotionSequence(seq.pose[:1].repeat(seq.num_frames, 1, 1, 1), seq.betas,
                                        seq.trans[:1].repeat(seq.num_frames, 1), seq.fps)
@@ -84,13 +90,14 @@ def main() -> int:
                     print(f"arms {fwd:g}/{elbow:g} deg, {arms[-1]['model']}, {start}: upper legs "
                           f"{s['upper_leg_error_at_end_deg']:.1f} deg after 1 min", flush=True)
             for start in ("standing", "seated") if not a.skip_fixed else ():
-                s = sitting_drift(est, hours=a.hours, start=start)
+                s = sitting_drift(est, hours=a.hours, start=start, seq=sitting_sequence(body, transitions=a.transitions))
                 s.update(model=f"{label}, {init}", checkpoint=path)
                 rows.append(s)
                 print(f"{s['model']} {start}: upper legs {s['upper_leg_error_at_start_deg']:.1f} -> "
                       f"{s['upper_leg_error_at_end_deg']:.1f} deg, all joints {s['error_at_start_deg']:.2f} -> "
                       f"{s['error_at_end_deg']:.2f} deg, drift {s['drift_total_deg']:.2f} deg", flush=True)
-    a.out.write_text(json.dumps({"command": "python " + " ".join(sys.argv), "hours": a.hours, "rows": rows,
+    a.out.write_text(json.dumps({"command": "python " + " ".join(sys.argv), "hours": a.hours,
+                                 "transitions": a.transitions, "rows": rows,
                                  "synthetic_hours": a.synthetic_hours if clips else None,
                                  "synthetic_summary": summary, "synthetic_rows": synth, "arm_postures": arms,
                                  "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=2))

@@ -29,6 +29,8 @@ def train_pip_cmd(
     sitting_clips: Optional[int] = typer.Option(None, help="Add N synthetic sitting clips to train (N/10 to val)."),
     balanced_sitting: bool = typer.Option(False, "--balanced-sitting",
                                           help="Synthetic sitting clips stand as long as they sit (3-20 s holds)."),
+    sitting_transitions: Optional[str] = typer.Option(None, help="How the synthetic sitting clips sit down / stand up: "
+                                                                 "slerp (no lean) or lean (trunk lean, knees forward)."),
     mirror: bool = typer.Option(False, "--mirror", help="Add the left/right mirror image of every training clip."),
     speed_copies: int = typer.Option(0, min=0, help="Add N copies of every training clip played 0.8-1.25x as fast "
                                                      "(PipConfig.aug_speed_range)."),
@@ -65,7 +67,7 @@ def train_pip_cmd(
                                             aug_speed_copies=speed_copies or None,
                                             sitting_stand_s=SIT_HOLD_S if balanced_sitting else None,
                                             seq_len=seq_len, window_stride=window_stride, min_window=min_window,
-                                            sitting_window=sitting_window)
+                                            sitting_window=sitting_window, sitting_transitions=sitting_transitions)
     if hidden is not None:
         cfg = cfg.override(init_widths=(hidden, 2 * hidden))
     out = out or Path("runs") / f"pip_{config}{'' if learned_init else '_noinit'}"

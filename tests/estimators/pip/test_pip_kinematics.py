@@ -360,6 +360,56 @@ def test_synthetic_sitting_is_ambiguous_for_the_imus(body) -> None:
         assert all(3 * 60 <= n <= 20 * 60 for n in stands)
 
 
+def test_lean_transitions_change_only_the_transitions(body) -> None:
+    from wearpose.body.skeleton import JOINT_INDEX
+    from wearpose.estimators.pip.sitting import sitting_motion, sitting_sequence
+
+    ank = [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]
+    seen = set()
+    for seed in range(4):
+        a = sitting_motion(torch.Generator().manual_seed(seed), body)
+        b = sitting_motion(torch.Generator().manual_seed(seed), body, transitions="lean")
+        assert a.meta["segments"] == b.meta["segments"]
+        j = body(b.pose, b.betas, b.trans, return_vertices=False).joints
+        assert (j[:, ank].mean(1) - j[0, ank].mean(0)).norm(dim=-1).max() < 1e-4  # feet still planted
+        shank = j[:, ank[0]] - j[:, JOINT_INDEX["left_knee"]]
+        shank = shank / shank.norm(dim=-1, keepdim=True)
+        up = b.pose[:, 0, :, 1]  # the pelvis' up axis in the world
+        for name, first, n in b.meta["segments"]:
+            seen.add(name)
+            sl = slice(first, first + n)
+            if name in ("sit", "stand"):  # holds: the same frames as the slerp clip, still ambiguous
+                assert torch.equal(a.pose[sl], b.pose[sl])
+                continue
+            # transition: the pelvis pitches >= 15 deg away from its hold orientation, the knees
+            # travel forward (the shank leaves the vertical by >= 8 deg, ankle behind the knee)
+            pitch = torch.rad2deg(torch.acos((up[sl] * up[first - 1 if first else first + n]).sum(-1).clamp(-1, 1)))
+            assert pitch.max() > 14.0
+            tilt = torch.rad2deg(torch.acos((shank[sl] @ shank[0]).clamp(-1, 1)))
+            assert tilt.max() > 7.0 and tilt[0] < 1.0 and tilt[-1] < 1.0
+            mid = first + int(n * 0.5)
+            fwd = j[mid, JOINT_INDEX["left_knee"]] - j[mid, ank[0]]
+            heading = b.pose[mid, 0][:, 2] * torch.tensor([1.0, 0.0, 1.0])  # pelvis forward, horizontal
+            assert float(fwd @ heading / heading.norm()) > 0.02
+    assert {"down", "up"} <= seen
+    with pytest.raises(ValueError, match="transitions"):
+        sitting_motion(torch.Generator().manual_seed(0), body, transitions="jump")
+    s, le = sitting_sequence(body), sitting_sequence(body, transitions="lean")
+    assert torch.equal(s.pose[-60:], le.pose[-60:]) and not torch.equal(s.pose[60:150], le.pose[60:150])
+
+
+def test_sitting_transitions_config_cache_and_card(body) -> None:
+    from wearpose.estimators.pip.data import _sitting_settings
+
+    with pytest.raises(ConfigError, match="sitting_transitions"):
+        PipConfig(sitting_transitions="jump")
+    base, lean = PipConfig(sitting_clips=4), PipConfig(sitting_clips=4, sitting_transitions="lean")
+    assert "sitting_transitions" not in _sitting_settings(base, body)  # the slerp clips keep their cache
+    assert _sitting_settings(lean, body)["sitting_transitions"] == "lean"
+    assert "trunk lean" in PipEstimator.training_data_description(lean.to_dict())
+    assert "trunk lean" not in PipEstimator.training_data_description(base.to_dict())
+
+
 def test_sitting_drift_reports_series_and_upper_legs(body) -> None:
     from wearpose.estimators.pip.evaluate import sitting_drift
 

@@ -22,7 +22,7 @@ from typing import Any
 
 from wearpose.errors import ConfigError
 from wearpose.estimators.configio import ConfigIO
-from wearpose.estimators.pip.sitting import STAND_HOLD_S
+from wearpose.estimators.pip.sitting import STAND_HOLD_S, TRANSITIONS
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,10 @@ class PipConfig(ConfigIO):
     ``val_clips`` (validation clips per epoch, 0 = all), ``seed``, ``sitting_clips`` synthetic
     sitting clips (:mod:`~wearpose.estimators.pip.sitting`; the corpus has none) added to the
     train split (and a tenth as many, at least 4, to val); 0 = corpus only; ``sitting_stand_s``
-    the range of their standing holds, s (seated holds: 3-20 s; ``(3, 20)`` = balanced).
+    the range of their standing holds, s (seated holds: 3-20 s; ``(3, 20)`` = balanced);
+    ``sitting_transitions`` how they sit down and stand up (``slerp``: pelvis fixed, no lean, the
+    sitting clips every model up to session 7 saw; ``lean``: trunk lean and knees forward, see
+    :mod:`~wearpose.estimators.pip.sitting`).
     Augmentation of the *train* split's corpus clips (:mod:`wearpose.motion.augment`; the
     sensors are simulated from the augmented motion): ``aug_mirror`` adds the left/right mirror
     image of every clip; ``aug_speed_copies`` adds that many copies of every clip played at a
@@ -90,6 +93,7 @@ class PipConfig(ConfigIO):
     seed: int = 0
     sitting_clips: int = 0
     sitting_stand_s: tuple[float, float] = STAND_HOLD_S
+    sitting_transitions: str = "slerp"
     aug_mirror: bool = False
     aug_speed_copies: int = 0
     aug_speed_range: tuple[float, float] = (0.8, 1.25)
@@ -122,6 +126,9 @@ class PipConfig(ConfigIO):
         if len(self.sitting_stand_s) != 2 or not 0.0 < self.sitting_stand_s[0] <= self.sitting_stand_s[1]:
             raise ConfigError(f"PipConfig.sitting_stand_s: expected (low, high) seconds with 0 < low <= high, "
                               f"got {self.sitting_stand_s!r}")
+        if self.sitting_transitions not in TRANSITIONS:
+            raise ConfigError(f"PipConfig.sitting_transitions: expected one of {', '.join(TRANSITIONS)}, "
+                              f"got {self.sitting_transitions!r}")
         if self.aug_speed_copies < 0:
             raise ConfigError(f"PipConfig.aug_speed_copies: expected >= 0, got {self.aug_speed_copies!r}")
         if len(self.init_widths) != 2:

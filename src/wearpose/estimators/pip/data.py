@@ -331,21 +331,33 @@ def concat_data(a: PipData, b: PipData) -> PipData:
                    settings={**a.settings, **b.settings})
 
 
+def _sitting_settings(cfg: PipConfig, body: Any) -> dict[str, Any]:
+    """What the synthetic sitting clips' fingerprint (cache) depends on; a setting at its default
+    is left out, so the clips of older configs keep their cache."""
+    from wearpose.estimators.pip.sitting import STAND_HOLD_S
+
+    settings = {**data_settings(cfg, body), "sitting_version": 2}
+    if tuple(cfg.sitting_stand_s) != STAND_HOLD_S:
+        settings["sitting_stand_s"] = list(cfg.sitting_stand_s)
+    if cfg.sitting_transitions != "slerp":
+        settings["sitting_transitions"] = cfg.sitting_transitions
+    return settings
+
+
 def _build_sitting(split: str, n: int, cfg: PipConfig, body: Any, root: Path) -> PipData:
     """``n`` synthetic sitting clips (:func:`~wearpose.estimators.pip.sitting.sitting_motion`),
     seeds in a per-split namespace, simulated like corpus clips; cached under ``root``."""
-    from wearpose.estimators.pip.sitting import STAND_HOLD_S, sitting_clip_id, sitting_motion
+    from wearpose.estimators.pip.sitting import sitting_clip_id, sitting_motion
 
     ids = [sitting_clip_id(split, i) for i in range(n)]
-    settings = {**data_settings(cfg, body), "sitting_version": 2}
-    if tuple(cfg.sitting_stand_s) != STAND_HOLD_S:  # keeps the fingerprint (cache) of the default clips
-        settings["sitting_stand_s"] = list(cfg.sitting_stand_s)
+    settings = _sitting_settings(cfg, body)
     fp = fingerprint(ids, {**settings, "split": split})
 
     def one(cid: str) -> dict[str, Any]:
         seed = clip_seed(cid, cfg.seed, "pip-sitting")
         return simulate_clip(sitting_motion(torch.Generator().manual_seed(seed), body, cfg.rate,
-                                            stand_s=tuple(cfg.sitting_stand_s)), cfg, body, seed)
+                                            stand_s=tuple(cfg.sitting_stand_s),
+                                            transitions=cfg.sitting_transitions), cfg, body, seed)
 
     return _simulate_cached(root / f"{split}-sitting-{fp[:16]}.pt", ids, fp, settings, one)
 

@@ -165,6 +165,8 @@ class PipEstimator(NetworkCheckpointing, Estimator):
             held = (f"balanced standing/seated holds of {_span(SIT_HOLD_S)} s"
                     if tuple(cfg.sitting_stand_s) == SIT_HOLD_S else
                     f"standing holds of {_span(cfg.sitting_stand_s)} s and seated holds of {_span(SIT_HOLD_S)} s")
+            if cfg.sitting_transitions == "lean":
+                held += ", sitting down and standing up with trunk lean and the knees forward"
             text += (f"; and {cfg.sitting_clips} synthetic sitting clips with {held} "
                      f"(wearpose.estimators.pip.sitting; generated here, no licence restriction)")
         text += f"; training windows of {cfg.seq_len} frames every {cfg.window_stride}"

@@ -18,7 +18,15 @@ already seated, with
 - a slow sway (< 2 deg, 0.1-0.5 Hz) on the spine, neck and arms during the holds (people do not
   hold perfectly still; the IMU noise model adds sensor noise on top);
 - feet planted: the translation keeps the midpoint of the two ankles fixed, so the pelvis
-  moves down and back by itself.
+  moves down and back by itself;
+- transitions (``transitions``): ``"slerp"`` (sitting version 2, what every model up to the
+  session-7 ``pip_cpu`` saw) slerps stand -> sit with the pelvis orientation fixed, no trunk lean
+  and the shanks vertical throughout, leaving ~1 s of 1-3 m/s^2 pelvis/head acceleration as the
+  only sign of a sit-down; ``"lean"`` shapes each sit-down / stand-up like a person's
+  (:func:`lean_transition`): the pelvis pitches forward 15-40 deg and the spine flexes a further
+  5-20 deg (the head partly counter-rotates), the knees travel forward over the feet (shanks tilt
+  8-20 deg), all peaking mid-transition and back to zero at its ends, so the holds are the same
+  frames as with ``"slerp"`` (same seed) and stay ambiguous; only the transition tells.
 
 Everything is drawn from a ``torch.Generator`` seeded by the caller.
 """
@@ -109,16 +117,58 @@ SIT_HOLD_S: tuple[float, float] = (3.0, 20.0)
 STAND_HOLD_S: tuple[float, float] = (1.0, 4.0)
 
 
+#: Kinds of synthetic sit-down / stand-up (module doc); the first is the default.
+TRANSITIONS: tuple[str, ...] = ("slerp", "lean")
+
+
+def _check_transitions(transitions: str) -> None:
+    if transitions not in TRANSITIONS:
+        raise ValueError(f"sitting transitions: expected one of {TRANSITIONS}, got {transitions!r}")
+
+
+def _bump(n: int, peak: float) -> torch.Tensor:
+    """``(n,)`` 0 -> 1 -> 0 with zero slope at both ends and the maximum at fraction ``peak``
+    (sin^2 over a time axis bent piecewise linearly so its middle lands on ``peak``)."""
+    u = torch.linspace(0.0, 1.0, n)
+    w = torch.where(u <= peak, 0.5 * u / peak, 0.5 + 0.5 * (u - peak) / (1.0 - peak))
+    return torch.sin(math.pi * w) ** 2
+
+
+def lean_transition(pose: torch.Tensor, first: int, n: int, pelvis_deg: float, spine_deg: float, shank_deg: float,
+                    neck_factor: float = 0.4, peak: float = 0.5) -> None:
+    """In place on local rotations ``pose`` ``(T, 24, 3, 3)`` (root = the pelvis' world
+    orientation): over frames ``first .. first + n`` pitch the pelvis forward by up to
+    ``pelvis_deg`` (the hips flex by as much, so the thighs keep their world direction), flex the
+    spine by a further ``spine_deg`` (spread over spine1-3) while the neck takes back
+    ``neck_factor`` of the trunk lean, and tilt the shanks back by ``shank_deg`` (knees ahead of
+    the feet); every angle follows :func:`_bump` (0 at both ends, maximum at ``peak``)."""
+    b = _bump(n, peak)
+    sl = slice(first, first + n)
+    rad = math.pi / 180.0
+    # trunk forward = +X rotation of an upward segment; thigh/shank forward = -X of a downward one
+    pose[sl, 0] = pose[sl, 0] @ rotation_x(b * pelvis_deg * rad)
+    for side in ("left", "right"):
+        hip, knee = JOINT_INDEX[f"{side}_hip"], JOINT_INDEX[f"{side}_knee"]
+        pose[sl, hip] = rotation_x(-b * pelvis_deg * rad) @ pose[sl, hip]
+        pose[sl, knee] = rotation_x(b * shank_deg * rad) @ pose[sl, knee]
+    for name in ("spine1", "spine2", "spine3"):
+        pose[sl, JOINT_INDEX[name]] = rotation_x(b * spine_deg / 3.0 * rad) @ pose[sl, JOINT_INDEX[name]]
+    pose[sl, JOINT_INDEX["neck"]] = rotation_x(-b * neck_factor * (pelvis_deg + spine_deg) * rad) @ pose[sl, JOINT_INDEX["neck"]]
+
+
 def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tuple[float, float] = SIT_HOLD_S,
-                   stand_s: tuple[float, float] = STAND_HOLD_S) -> Any:
+                   stand_s: tuple[float, float] = STAND_HOLD_S, transitions: str = "slerp") -> Any:
     """One synthetic sitting clip (module doc) as a :class:`~wearpose.motion.MotionSequence`
     at ``fps`` with zero betas; ``meta["segments"]`` lists ``(name, first_frame, frames)``.
     Seated holds last ``hold_s`` seconds, standing holds ``stand_s``: with ``stand_s = hold_s``
     still standing and still sitting with the same upper-body posture are equally common, so a
     still posture alone does not tell them apart (with the default short stands a network
-    learns "arms bent forward and still = seated", see docs/pip.md, "Long sitting")."""
+    learns "arms bent forward and still = seated", see docs/pip.md, "Long sitting").
+    ``transitions``: :data:`TRANSITIONS` (module doc); the ``"lean"`` shapes are drawn after
+    everything else, so the same seed gives the same clip outside the transitions."""
     from wearpose.motion import MotionSequence
 
+    _check_transitions(transitions)
     stand = _upper_body(g)
     hip = _u(g, 75.0, 100.0)
     sit = sitting_pose(hip, hip, base=stand)  # shanks vertical, as when standing: the IMUs cannot tell
@@ -147,6 +197,12 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
     pose = pose @ _sway(g, T, fps)
     tilt = rotation_x(torch.tensor(math.radians(_u(g, -5.0, 5.0))))
     pose[:, 0] = rotation_y(torch.tensor(_u(g, -math.pi, math.pi))) @ tilt
+    if transitions == "lean":
+        for name, first, n in segs:
+            if name in ("down", "up"):  # standing up leans further forward than sitting down
+                lean_transition(pose, first, n, pelvis_deg=_u(g, 15.0, 30.0) if name == "down" else _u(g, 20.0, 40.0),
+                                spine_deg=_u(g, 5.0, 20.0), shank_deg=_u(g, 8.0, 20.0),
+                                neck_factor=_u(g, 0.2, 0.6), peak=_u(g, 0.35, 0.65))
     betas = torch.zeros(10)
     with torch.no_grad():
         j = body(pose, betas, torch.zeros(T, 3), return_vertices=False).joints.float()
@@ -157,11 +213,15 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
 
 
 def sitting_sequence(body: Any, seconds_stand: float = 1.0, seconds_down: float = 1.5, fps: float = 60.0,
-                     base: torch.Tensor | None = None) -> Any:
+                     base: torch.Tensor | None = None, transitions: str = "slerp") -> Any:
     """Deterministic stand (arms down, or the posture ``base`` ``(24, 3, 3)``) -> sit down (90/90
-    deg) -> one second seated: the start of the long-sitting test (Fig. 6 / Fig. 9)."""
+    deg) -> one second seated: the start of the long-sitting test (Fig. 6 / Fig. 9).
+    ``transitions="lean"``: the sit-down leans like the middle of :func:`sitting_motion`'s ranges
+    (pelvis 22.5, spine 12.5, shanks 14 deg, neck 0.4, peak mid-way)."""
     from wearpose.calibration import calibration_pose
     from wearpose.motion import MotionSequence
+
+    _check_transitions(transitions)
 
     stand = calibration_pose("ipose").float() if base is None else base.float()
     sit = sitting_pose(base=stand)
@@ -169,6 +229,8 @@ def sitting_sequence(body: Any, seconds_stand: float = 1.0, seconds_down: float 
     s = torch.cat([torch.zeros(n0), 0.5 - 0.5 * torch.cos(torch.linspace(0, math.pi, n1)), torch.ones(int(fps))])
     T = len(s)
     pose = slerp_matrix(stand.expand(T, 24, 3, 3), sit.expand(T, 24, 3, 3), s[:, None].expand(T, 24))
+    if transitions == "lean":
+        lean_transition(pose, n0, n1, pelvis_deg=22.5, spine_deg=12.5, shank_deg=14.0)
     with torch.no_grad():
         j = body(pose, torch.zeros(10), torch.zeros(T, 3), return_vertices=False).joints.float()
     ankles = j[:, [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]].mean(1)
@@ -177,15 +239,16 @@ def sitting_sequence(body: Any, seconds_stand: float = 1.0, seconds_down: float 
     return MotionSequence(pose, torch.zeros(10), trans, fps, {"clip": "synthetic/sit-down"})
 
 
-def heldout_sitting_clip(i: int, body: Any, fps: float = 60.0, seed: int = 0) -> Any:
+def heldout_sitting_clip(i: int, body: Any, fps: float = 60.0, seed: int = 0, transitions: str = "slerp") -> Any:
     """Synthetic sitting clip ``i`` of the *test* namespace (``synthetic/sitting/test/<i>``, seeded
     like the train/val clips of :func:`wearpose.estimators.pip.data.build_split`, which never
     draws test ids), cut after its seated hold: it ends seated (input for
-    :func:`~wearpose.estimators.pip.evaluate.sitting_drift`'s ``seq``)."""
+    :func:`~wearpose.estimators.pip.evaluate.sitting_drift`'s ``seq``); ``transitions`` as in
+    :func:`sitting_motion`."""
     from wearpose.estimators.empose.data import clip_seed
 
     m = sitting_motion(torch.Generator().manual_seed(clip_seed(sitting_clip_id("test", i), seed, "pip-sitting")),
-                       body, fps)
+                       body, fps, transitions=transitions)
     _, first, n = next(sg for sg in m.meta["segments"] if sg[0] == "sit")
     return m.slice(0, first + n)
 
