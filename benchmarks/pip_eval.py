@@ -4,7 +4,7 @@ error vs travelled distance (Fig. 3), and the long-sitting drift test (Fig. 9).
 Run::
 
     python benchmarks/pip_eval.py --full runs/pip_cpu/best.pt --noinit runs/pip_cpu_noinit/best.pt \\
-        [--limit N] [--sit-hours H]
+        [--limit N] [--sit-hours H] [--sit-transitions lean]
 
 Rows: ``PIP`` (learned init, physics, dual PD), ``w/o learned init`` (the model trained without
 I_PL / I_VA, physics + dual PD), ``single PD`` (physics with one PD controller), ``w/o physics``
@@ -119,7 +119,7 @@ def markdown(res: dict) -> str:
                   "| upper legs max [deg] | drift total [deg] | drift/hour [deg] |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
         for s in res["sitting"]:
-            lines.append(f"| {s['model']} | {s['start']} | {s['hours']:g} | {_fmt(s['error_at_start_deg'])} | "
+            lines.append(f"| {s['model']} | {s['start']}{' (lean)' if s.get('transitions') == 'lean' else ''} | {s['hours']:g} | {_fmt(s['error_at_start_deg'])} | "
                          f"{_fmt(s['error_at_end_deg'])} | {_fmt(s.get('upper_leg_error_at_start_deg'))} | "
                          f"{_fmt(s.get('upper_leg_error_at_end_deg'))} | {_fmt(s.get('upper_leg_error_max_deg'))} | "
                          f"{_fmt(s['drift_total_deg'])} | {_fmt(s['drift_per_hour_deg'])} |")
@@ -139,6 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--sit-hours", type=float, default=1.0, help="length of the still-sitting input (0 = skip)")
+    ap.add_argument("--sit-transitions", default="slerp", choices=("slerp", "lean"),
+                    help="how the fixed sit-down sits down (wearpose.estimators.pip.sitting.sitting_sequence)")
     ap.add_argument("--sit-extra", nargs=3, action="append", default=[], metavar=("LABEL", "FULL", "NOINIT"),
                     help="another learned-init / no-init checkpoint pair for the sitting test only")
     ap.add_argument("--no-physics", action="store_true", help="kinematics rows only")
@@ -149,6 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     from wearpose.body import BodyModel
     from wearpose.estimators.pip.estimator import PipEstimator, physics_available
     from wearpose.estimators.pip.evaluate import evaluate_variants, sitting_drift
+    from wearpose.estimators.pip.sitting import sitting_sequence
 
     body = BodyModel()
 
@@ -188,8 +191,9 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             est = load(path, physics=False)
             for start in ("standing", "seated"):
-                s = sitting_drift(est, hours=a.sit_hours, start=start)
-                s["model"] = model
+                seq = sitting_sequence(est.body, transitions=a.sit_transitions)
+                s = sitting_drift(est, hours=a.sit_hours, start=start, seq=seq)
+                s.update(model=model, transitions=a.sit_transitions)
                 sitting.append(s)
                 print(f"  sitting {model} {start}: {s}", file=sys.stderr, flush=True)
     res["sitting"] = sitting
