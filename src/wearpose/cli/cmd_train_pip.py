@@ -31,6 +31,9 @@ def train_pip_cmd(
                                           help="Synthetic sitting clips stand as long as they sit (3-20 s holds)."),
     sitting_transitions: Optional[str] = typer.Option(None, help="How the synthetic sitting clips sit down / stand up: "
                                                                  "slerp (no lean) or lean (trunk lean, knees forward)."),
+    sitting_hanging_arms: Optional[float] = typer.Option(None, min=0.0, max=1.0,
+                                                         help="Fraction of the synthetic sitting clips whose arms "
+                                                              "hang nearly straight."),
     mirror: bool = typer.Option(False, "--mirror", help="Add the left/right mirror image of every training clip."),
     speed_copies: int = typer.Option(0, min=0, help="Add N copies of every training clip played 0.8-1.25x as fast "
                                                      "(PipConfig.aug_speed_range)."),
@@ -55,9 +58,10 @@ def train_pip_cmd(
     Augmented data (3x the corpus: mirrored copies and one speed-changed copy of every clip):
     wearpose train pip --config cpu --threads 1 --mirror --speed-copies 1 --out runs/pip_aug
 
-    Long windows (20 s, short clips padded; 200 frames for the sitting clips), as the shipped
-    pip_cpu: wearpose train pip --config cpu --threads 1 --mirror --speed-copies 1 --sitting-clips 150
-    --balanced-sitting --seq-len 1200 --window-stride 600 --min-window 60 --sitting-window 200 --out runs/pip_mix
+    Long windows (20 s, short clips padded; 200 frames for the sitting clips) and sit-downs with
+    trunk lean, as the shipped pip_cpu: wearpose train pip --config cpu --threads 1 --mirror
+    --speed-copies 1 --sitting-clips 150 --balanced-sitting --sitting-transitions lean --seq-len 1200
+    --window-stride 600 --min-window 60 --sitting-window 200 --out runs/pip_lean
     """
     from wearpose.estimators.pip import PipConfig, PipEstimator, train_pip
     from wearpose.estimators.pip.sitting import SIT_HOLD_S
@@ -67,7 +71,8 @@ def train_pip_cmd(
                                             aug_speed_copies=speed_copies or None,
                                             sitting_stand_s=SIT_HOLD_S if balanced_sitting else None,
                                             seq_len=seq_len, window_stride=window_stride, min_window=min_window,
-                                            sitting_window=sitting_window, sitting_transitions=sitting_transitions)
+                                            sitting_window=sitting_window, sitting_transitions=sitting_transitions,
+                                            sitting_hanging_arms=sitting_hanging_arms)
     if hidden is not None:
         cfg = cfg.override(init_widths=(hidden, 2 * hidden))
     out = out or Path("runs") / f"pip_{config}{'' if learned_init else '_noinit'}"

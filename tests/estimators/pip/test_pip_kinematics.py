@@ -398,6 +398,29 @@ def test_lean_transitions_change_only_the_transitions(body) -> None:
     assert torch.equal(s.pose[-60:], le.pose[-60:]) and not torch.equal(s.pose[60:150], le.pose[60:150])
 
 
+def test_hanging_arms_sitting_clips(body) -> None:
+    from wearpose.body.skeleton import JOINT_INDEX
+    from wearpose.calibration import calibration_pose
+    from wearpose.estimators.pip.sitting import sitting_motion
+
+    ipose = calibration_pose("ipose").float()
+    arm_joints = [JOINT_INDEX[f"{s}_{j}"] for s in ("left", "right") for j in ("shoulder", "elbow")]
+    others = [j for j in range(24) if j not in arm_joints]
+
+    def angle_deg(R: torch.Tensor) -> torch.Tensor:
+        return torch.rad2deg(torch.acos(((torch.diagonal(R, dim1=-2, dim2=-1).sum(-1) - 1) / 2).clamp(-1, 1)))
+
+    bent = 0
+    for seed in range(3):
+        a = sitting_motion(torch.Generator().manual_seed(seed), body, transitions="lean")
+        b = sitting_motion(torch.Generator().manual_seed(seed), body, transitions="lean", hanging_arms=1.0)
+        assert torch.equal(a.pose[:, others], b.pose[:, others])  # only the arms change
+        for j in arm_joints:  # near the I-pose in every frame (<= 8 + 8 deg swing, 15 elbow, 1.5 sway)
+            assert angle_deg(ipose[j].T @ b.pose[:, j]).max() < 20.0
+        bent += int(angle_deg(a.pose[:, JOINT_INDEX["left_elbow"]]).max() > 20.0)
+    assert bent >= 1  # the default posture is not already hanging straight
+
+
 def test_sitting_transitions_config_cache_and_card(body) -> None:
     from wearpose.estimators.pip.data import _sitting_settings
 
@@ -408,6 +431,12 @@ def test_sitting_transitions_config_cache_and_card(body) -> None:
     assert _sitting_settings(lean, body)["sitting_transitions"] == "lean"
     assert "trunk lean" in PipEstimator.training_data_description(lean.to_dict())
     assert "trunk lean" not in PipEstimator.training_data_description(base.to_dict())
+    with pytest.raises(ConfigError, match="sitting_hanging_arms"):
+        PipConfig(sitting_hanging_arms=1.5)
+    arms = PipConfig(sitting_clips=4, sitting_hanging_arms=0.3)
+    assert "sitting_hanging_arms" not in _sitting_settings(lean, body)
+    assert _sitting_settings(arms, body)["sitting_hanging_arms"] == 0.3
+    assert "30% of them with the arms hanging" in PipEstimator.training_data_description(arms.to_dict())
 
 
 def test_sitting_drift_reports_series_and_upper_legs(body) -> None:

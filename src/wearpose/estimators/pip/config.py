@@ -55,7 +55,8 @@ class PipConfig(ConfigIO):
     the range of their standing holds, s (seated holds: 3-20 s; ``(3, 20)`` = balanced);
     ``sitting_transitions`` how they sit down and stand up (``slerp``: pelvis fixed, no lean, the
     sitting clips every model up to session 7 saw; ``lean``: trunk lean and knees forward, see
-    :mod:`~wearpose.estimators.pip.sitting`).
+    :mod:`~wearpose.estimators.pip.sitting`); ``sitting_hanging_arms`` the fraction of them whose
+    arms hang nearly straight (0: the random arm posture only).
     Augmentation of the *train* split's corpus clips (:mod:`wearpose.motion.augment`; the
     sensors are simulated from the augmented motion): ``aug_mirror`` adds the left/right mirror
     image of every clip; ``aug_speed_copies`` adds that many copies of every clip played at a
@@ -94,6 +95,7 @@ class PipConfig(ConfigIO):
     sitting_clips: int = 0
     sitting_stand_s: tuple[float, float] = STAND_HOLD_S
     sitting_transitions: str = "slerp"
+    sitting_hanging_arms: float = 0.0
     aug_mirror: bool = False
     aug_speed_copies: int = 0
     aug_speed_range: tuple[float, float] = (0.8, 1.25)
@@ -129,6 +131,9 @@ class PipConfig(ConfigIO):
         if self.sitting_transitions not in TRANSITIONS:
             raise ConfigError(f"PipConfig.sitting_transitions: expected one of {', '.join(TRANSITIONS)}, "
                               f"got {self.sitting_transitions!r}")
+        if not 0.0 <= self.sitting_hanging_arms <= 1.0:
+            raise ConfigError(f"PipConfig.sitting_hanging_arms: expected a fraction in [0, 1], "
+                              f"got {self.sitting_hanging_arms!r}")
         if self.aug_speed_copies < 0:
             raise ConfigError(f"PipConfig.aug_speed_copies: expected >= 0, got {self.aug_speed_copies!r}")
         if len(self.init_widths) != 2:

@@ -341,6 +341,8 @@ def _sitting_settings(cfg: PipConfig, body: Any) -> dict[str, Any]:
         settings["sitting_stand_s"] = list(cfg.sitting_stand_s)
     if cfg.sitting_transitions != "slerp":
         settings["sitting_transitions"] = cfg.sitting_transitions
+    if cfg.sitting_hanging_arms > 0.0:
+        settings["sitting_hanging_arms"] = cfg.sitting_hanging_arms
     return settings
 
 
@@ -357,7 +359,8 @@ def _build_sitting(split: str, n: int, cfg: PipConfig, body: Any, root: Path) ->
         seed = clip_seed(cid, cfg.seed, "pip-sitting")
         return simulate_clip(sitting_motion(torch.Generator().manual_seed(seed), body, cfg.rate,
                                             stand_s=tuple(cfg.sitting_stand_s),
-                                            transitions=cfg.sitting_transitions), cfg, body, seed)
+                                            transitions=cfg.sitting_transitions,
+                                            hanging_arms=cfg.sitting_hanging_arms), cfg, body, seed)
 
     return _simulate_cached(root / f"{split}-sitting-{fp[:16]}.pt", ids, fp, settings, one)
 

@@ -167,6 +167,8 @@ class PipEstimator(NetworkCheckpointing, Estimator):
                     f"standing holds of {_span(cfg.sitting_stand_s)} s and seated holds of {_span(SIT_HOLD_S)} s")
             if cfg.sitting_transitions == "lean":
                 held += ", sitting down and standing up with trunk lean and the knees forward"
+            if cfg.sitting_hanging_arms > 0.0:
+                held += f", {cfg.sitting_hanging_arms:.0%} of them with the arms hanging nearly straight"
             text += (f"; and {cfg.sitting_clips} synthetic sitting clips with {held} "
                      f"(wearpose.estimators.pip.sitting; generated here, no licence restriction)")
         text += f"; training windows of {cfg.seq_len} frames every {cfg.window_stride}"

@@ -157,7 +157,8 @@ def lean_transition(pose: torch.Tensor, first: int, n: int, pelvis_deg: float, s
 
 
 def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tuple[float, float] = SIT_HOLD_S,
-                   stand_s: tuple[float, float] = STAND_HOLD_S, transitions: str = "slerp") -> Any:
+                   stand_s: tuple[float, float] = STAND_HOLD_S, transitions: str = "slerp",
+                   hanging_arms: float = 0.0) -> Any:
     """One synthetic sitting clip (module doc) as a :class:`~wearpose.motion.MotionSequence`
     at ``fps`` with zero betas; ``meta["segments"]`` lists ``(name, first_frame, frames)``.
     Seated holds last ``hold_s`` seconds, standing holds ``stand_s``: with ``stand_s = hold_s``
@@ -165,7 +166,12 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
     still posture alone does not tell them apart (with the default short stands a network
     learns "arms bent forward and still = seated", see docs/pip.md, "Long sitting").
     ``transitions``: :data:`TRANSITIONS` (module doc); the ``"lean"`` shapes are drawn after
-    everything else, so the same seed gives the same clip outside the transitions."""
+    everything else, so the same seed gives the same clip outside the transitions.
+    ``hanging_arms``: probability that the clip's arms hang nearly straight (swung forward 0-8
+    deg, outward -3-8, elbows 0-15) instead of the default posture's 0-50 / -5-20 / 0-90 deg,
+    in both holds alike (the random posture rarely comes near the calibration I-pose, and the
+    corpus stands with straight arms all the time, so a network learns "straight arms =
+    standing"); drawn after the transitions, so 0 leaves every clip as it was."""
     from wearpose.motion import MotionSequence
 
     _check_transitions(transitions)
@@ -194,7 +200,8 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
     s = torch.cat(s_parts)
     T = len(s)
     pose = slerp_matrix(stand.expand(T, 24, 3, 3), sit.expand(T, 24, 3, 3), s[:, None].expand(T, 24))
-    pose = pose @ _sway(g, T, fps)
+    sway = _sway(g, T, fps)
+    pose = pose @ sway
     tilt = rotation_x(torch.tensor(math.radians(_u(g, -5.0, 5.0))))
     pose[:, 0] = rotation_y(torch.tensor(_u(g, -math.pi, math.pi))) @ tilt
     if transitions == "lean":
@@ -203,6 +210,14 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
                 lean_transition(pose, first, n, pelvis_deg=_u(g, 15.0, 30.0) if name == "down" else _u(g, 20.0, 40.0),
                                 spine_deg=_u(g, 5.0, 20.0), shank_deg=_u(g, 8.0, 20.0),
                                 neck_factor=_u(g, 0.2, 0.6), peak=_u(g, 0.35, 0.65))
+    if hanging_arms > 0.0 and _u(g, 0.0, 1.0) < hanging_arms:
+        from wearpose.calibration import calibration_pose
+
+        arms = calibration_pose("ipose").float()  # arms hanging straight, swung from there
+        for side in ("left", "right"):
+            _pose_arm(arms, side, _u(g, 0.0, 8.0), _u(g, -3.0, 8.0), _u(g, 0.0, 15.0))
+            for j in (JOINT_INDEX[f"{side}_shoulder"], JOINT_INDEX[f"{side}_elbow"]):
+                pose[:, j] = arms[j] @ sway[:, j]  # the arms are the same standing and seated
     betas = torch.zeros(10)
     with torch.no_grad():
         j = body(pose, betas, torch.zeros(T, 3), return_vertices=False).joints.float()
