@@ -119,7 +119,8 @@ def markdown(res: dict) -> str:
                   "| upper legs max [deg] | drift total [deg] | drift/hour [deg] |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
         for s in res["sitting"]:
-            lines.append(f"| {s['model']} | {s['start']}{' (lean)' if s.get('transitions') == 'lean' else ''} | {s['hours']:g} | {_fmt(s['error_at_start_deg'])} | "
+            start = s["start"] + (" (lean)" if s.get("transitions") == "lean" else "")
+            lines.append(f"| {s['model']} | {start} | {s['hours']:g} | {_fmt(s['error_at_start_deg'])} | "
                          f"{_fmt(s['error_at_end_deg'])} | {_fmt(s.get('upper_leg_error_at_start_deg'))} | "
                          f"{_fmt(s.get('upper_leg_error_at_end_deg'))} | {_fmt(s.get('upper_leg_error_max_deg'))} | "
                          f"{_fmt(s['drift_total_deg'])} | {_fmt(s['drift_per_hour_deg'])} |")
