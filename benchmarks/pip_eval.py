@@ -187,12 +187,12 @@ def main(argv: list[str] | None = None) -> int:
         pairs = [("learned init", a.full), ("w/o learned init", a.noinit)]
         for label, full, noinit in a.sit_extra:
             pairs += [(f"{label}, learned init", full), (f"{label}, w/o learned init", noinit)]
+        seq = sitting_sequence(body, transitions=a.sit_transitions)  # one fixed sit-down for every model
         for model, path in pairs:
             if path is None or not Path(path).is_file():
                 continue
             est = load(path, physics=False)
             for start in ("standing", "seated"):
-                seq = sitting_sequence(est.body, transitions=a.sit_transitions)
                 s = sitting_drift(est, hours=a.sit_hours, start=start, seq=seq)
                 s.update(model=model, transitions=a.sit_transitions)
                 sitting.append(s)

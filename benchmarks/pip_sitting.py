@@ -57,6 +57,7 @@ def main() -> int:
 
     body, rows, synth, summary, arms = BodyModel(), [], [], [], []
     clips = [heldout_sitting_clip(i, body, transitions=a.transitions) for i in range(a.synthetic)]
+    fixed = sitting_sequence(body, transitions=a.transitions)  # the fixed sit-down, the same for every model
     for label, full, noinit in a.pair:
         for init, path in [(i, p) for i, p in (("learned init", full), ("w/o learned init", noinit)) if i in a.models]:
             est = PipEstimator.load(path, body=body, physics=False)
@@ -90,7 +91,7 @@ def main() -> int:
                     print(f"arms {fwd:g}/{elbow:g} deg, {arms[-1]['model']}, {start}: upper legs "
                           f"{s['upper_leg_error_at_end_deg']:.1f} deg after 1 min", flush=True)
             for start in ("standing", "seated") if not a.skip_fixed else ():
-                s = sitting_drift(est, hours=a.hours, start=start, seq=sitting_sequence(body, transitions=a.transitions))
+                s = sitting_drift(est, hours=a.hours, start=start, seq=fixed)
                 s.update(model=f"{label}, {init}", checkpoint=path)
                 rows.append(s)
                 print(f"{s['model']} {start}: upper legs {s['upper_leg_error_at_start_deg']:.1f} -> "

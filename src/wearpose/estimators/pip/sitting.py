@@ -153,7 +153,8 @@ def lean_transition(pose: torch.Tensor, first: int, n: int, pelvis_deg: float, s
         pose[sl, knee] = rotation_x(b * shank_deg * rad) @ pose[sl, knee]
     for name in ("spine1", "spine2", "spine3"):
         pose[sl, JOINT_INDEX[name]] = rotation_x(b * spine_deg / 3.0 * rad) @ pose[sl, JOINT_INDEX[name]]
-    pose[sl, JOINT_INDEX["neck"]] = rotation_x(-b * neck_factor * (pelvis_deg + spine_deg) * rad) @ pose[sl, JOINT_INDEX["neck"]]
+    neck = JOINT_INDEX["neck"]
+    pose[sl, neck] = rotation_x(-b * neck_factor * (pelvis_deg + spine_deg) * rad) @ pose[sl, neck]
 
 
 def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tuple[float, float] = SIT_HOLD_S,
