@@ -111,6 +111,17 @@ def _sway(g: torch.Generator, T: int, fps: float) -> torch.Tensor:
     return R
 
 
+def _planted_trans(body: Any, pose: torch.Tensor, betas: torch.Tensor) -> torch.Tensor:
+    """Root translation ``(T, 3)`` m that keeps the midpoint of the two ankles where it is in
+    frame 0 and puts frame 0's lower foot on y = 0, for local rotations ``pose`` ``(T, 24, 3, 3)``."""
+    with torch.no_grad():
+        j = body(pose, betas, torch.zeros(pose.shape[0], 3), return_vertices=False).joints.float()
+    ankles = j[:, [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]].mean(1)
+    trans = ankles[0] - ankles
+    trans[:, 1] += float(-j[0, [JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"]], 1].min())
+    return trans
+
+
 #: Seconds of a synthetic clip's seated hold (low, high).
 SIT_HOLD_S: tuple[float, float] = (3.0, 20.0)
 #: Seconds of its standing holds by default (low, high); ``SIT_HOLD_S`` = balanced.
@@ -220,11 +231,7 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
             for j in (JOINT_INDEX[f"{side}_shoulder"], JOINT_INDEX[f"{side}_elbow"]):
                 pose[:, j] = arms[j] @ sway[:, j]  # the arms are the same standing and seated
     betas = torch.zeros(10)
-    with torch.no_grad():
-        j = body(pose, betas, torch.zeros(T, 3), return_vertices=False).joints.float()
-    ankles = j[:, [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]].mean(1)
-    trans = ankles[0] - ankles  # the ankles' midpoint stays where it starts
-    trans[:, 1] += float(-j[0, [JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"]], 1].min())  # feet on y = 0
+    trans = _planted_trans(body, pose, betas)
     return MotionSequence(pose, betas, trans, fps, {"clip": "synthetic/sitting", "segments": segs})
 
 
@@ -247,11 +254,7 @@ def sitting_sequence(body: Any, seconds_stand: float = 1.0, seconds_down: float 
     pose = slerp_matrix(stand.expand(T, 24, 3, 3), sit.expand(T, 24, 3, 3), s[:, None].expand(T, 24))
     if transitions == "lean":
         lean_transition(pose, n0, n1, pelvis_deg=22.5, spine_deg=12.5, shank_deg=14.0)
-    with torch.no_grad():
-        j = body(pose, torch.zeros(10), torch.zeros(T, 3), return_vertices=False).joints.float()
-    ankles = j[:, [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]].mean(1)
-    trans = ankles[0] - ankles
-    trans[:, 1] += float(-j[0, [JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"]], 1].min())
+    trans = _planted_trans(body, pose, torch.zeros(10))
     return MotionSequence(pose, torch.zeros(10), trans, fps, {"clip": "synthetic/sit-down"})
 
 
