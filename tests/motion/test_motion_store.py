@@ -83,6 +83,21 @@ def test_prepare_with_manifest(corpus: Path, tmp_path: Path) -> None:
     assert r3["converted"] == 1 and r3["skipped"] == 1
 
 
+def test_prepare_a_subset_per_split_and_named_clips(corpus: Path, tmp_path: Path) -> None:
+    # One clip of each (split, source): the first clip id of the test split is the broken one.
+    r = prepare_corpus(corpus, tmp_path / "c1", progress=False, workers=1, rest_joints=REST, per_split=1)
+    assert r["converted"] == 1 and sorted(r["failures"]) == ["bandai/s2/broken", "bandai/s2/gone"]
+    assert CorpusStore(tmp_path / "c1").clips() == ["bandai/s1/walk"]
+    r = prepare_corpus(corpus, tmp_path / "c2", progress=False, workers=1, rest_joints=REST, per_split=0,
+                       clips=["bandai/s2/wave"])
+    assert r["converted"] == 1 and not r["failures"] and CorpusStore(tmp_path / "c2").clips() == ["bandai/s2/wave"]
+    with pytest.raises(ConfigError, match=r"\['bandai/s9/nope'\] are not in the corpus"):
+        prepare_corpus(corpus, tmp_path / "c3", progress=False, workers=1, rest_joints=REST, clips=["bandai/s9/nope"])
+    with pytest.raises(ConfigError, match="per_split = -1"):
+        prepare_corpus(corpus, tmp_path / "c4", progress=False, workers=1, rest_joints=REST, per_split=-1)
+
+
+@pytest.mark.budget(20)  # two spawned workers: 6.6 s measured
 def test_prepare_parallel_and_resampled(corpus: Path, tmp_path: Path) -> None:
     cache = tmp_path / "cache60"
     r = prepare_corpus(corpus, cache, fps=60.0, progress=False, workers=2, rest_joints=REST)

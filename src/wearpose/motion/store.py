@@ -16,7 +16,7 @@ import json
 import multiprocessing
 import os
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
@@ -86,6 +86,24 @@ def _read_manifest(data: Path) -> list[dict[str, Any]]:
     return out
 
 
+def _clip_id(row: dict[str, Any]) -> str:
+    return f"{row['source']}/{row['subject']}/{row['clip']}"
+
+
+def _first_per_split(rows: list[dict[str, Any]], n: int, named: Collection[str]) -> list[dict[str, Any]]:
+    """The rows of the first ``n`` clip ids (sorted) of each (split, source) and of every id in ``named``."""
+    if n < 0:
+        raise ConfigError(f"per_split = {n}: expected a clip count >= 0")
+    known = {_clip_id(r) for r in rows}
+    missing = sorted(set(named) - known)
+    if missing:
+        raise ConfigError(f"clips {missing} are not in the corpus; expected clip ids such as {min(known, default='?')}")
+    keep = set(named)
+    for group in {(r["split"], r["source"]) for r in rows}:
+        keep.update(sorted(_clip_id(r) for r in rows if (r["split"], r["source"]) == group)[:n])
+    return [r for r in rows if _clip_id(r) in keep]
+
+
 def _scan_folders(folders: Sequence[Path]) -> list[dict[str, Any]]:
     out = []
     for root in folders:
@@ -146,7 +164,8 @@ def _write_json(path: Path, obj: Any) -> None:
 def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, cache_dir: str | Path | None = None,
                    fps: float | None = None, progress: bool = True, workers: int | None = None,
                    rest_joints: torch.Tensor | None = None, limit: int | None = None,
-                   joint_map: str | Path | None = None) -> dict[str, Any]:
+                   joint_map: str | Path | None = None, per_split: int | None = None,
+                   clips: Collection[str] = ()) -> dict[str, Any]:
     """Convert every corpus clip to a MotionSequence file in ``cache_dir`` and write the index.
 
     Args:
@@ -163,6 +182,10 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
         rest_joints: ``(24, 3)`` SMPL rest joints, metres (default: the body model at betas = 0,
             else the SMPL-like template).
         limit: convert only the first ``limit`` clips (for quick checks).
+        per_split: convert only the first ``per_split`` clip ids (sorted) of each split of each
+            source (and ``clips``): a small store with every split and source of the full one.
+        clips: convert only these clip ids (and the ``per_split`` ones); an id that is not in
+            the corpus is an error.
         joint_map: YAML joint map for the BVH/AMC of manifest-less folders (see
             :func:`wearpose.motion.mapping.load_joint_map`).
 
@@ -183,6 +206,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
         jobs_src = _scan_folders(folders)
     if joint_map is not None and not Path(joint_map).is_file():
         raise ConfigError(f"joint map {joint_map} does not exist")
+    if per_split is not None or clips:
+        jobs_src = _first_per_split(jobs_src, per_split or 0, clips)
     if limit is not None:
         jobs_src = jobs_src[:limit]
     cache = default_cache_dir(cache_dir)
@@ -206,7 +231,7 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
     todo: list[dict[str, Any]] = []
     seen: set[str] = set()
     for r in jobs_src:
-        cid = f"{r['source']}/{r['subject']}/{r['clip']}"
+        cid = _clip_id(r)
         if cid in seen:
             failures[cid] = f"duplicate clip id (second file {r['file']})"
             continue
