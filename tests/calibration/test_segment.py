@@ -223,18 +223,14 @@ def test_from_dict_fuzz_only_raises_calibration_error(body):
 
 
 @pytest.mark.corpus
-def test_tpose_on_corpus_clip(body, record_property):
+def test_tpose_on_corpus_clip(body, record_property, corpus_store):
     """1 s T-pose, then a real clip (CMU), skin-frame IMUs in a yawed and tilted world."""
     from calib_testutils import tpose_then
     from wearpose.motion import CorpusStore
 
-    try:
-        store = CorpusStore()
-        clips = store.clips(split="test", source="cmu_daz")
-    except Exception as exc:  # noqa: BLE001 - no prepared corpus on this machine
-        pytest.skip(f"no prepared motion corpus: {exc}")
-    if not clips:
-        pytest.skip("no cmu_daz test clips in the prepared corpus")
+    store = CorpusStore(corpus_store)
+    clips = store.clips(split="test", source="cmu_daz")
+    assert clips, f"no cmu_daz test clips in {corpus_store}"
     motion = tpose_then(store.load(clips[0]))
     sim = simulate(motion, "imu6", body, seed=3, noise="none", imu_orientation="site")
     rec = sim_to_recording(sim, world=C_WORLD, raw_imu=True)

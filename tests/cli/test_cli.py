@@ -9,19 +9,8 @@ import pytest
 from typer.testing import CliRunner
 
 from wearpose.cli import app
-from wearpose.motion import data_dir
 
 runner = CliRunner()
-
-
-def _has_corpus() -> bool:
-    try:
-        return (data_dir() / "manifest.csv").is_file()
-    except Exception:
-        return False
-
-
-needs_corpus = pytest.mark.skipif(not _has_corpus(), reason="motion corpus not found (set WEARPOSE_DATA)")
 
 
 @pytest.mark.parametrize("cmd", [["info"], ["demo"], ["view"], ["export"], ["data", "prepare"], ["data", "info"]])
@@ -43,8 +32,7 @@ def test_info_json_reports_the_embedded_asset(tmp_path: Path) -> None:
 
 
 @pytest.mark.corpus
-@needs_corpus
-def test_data_prepare_and_info_on_a_few_clips(tmp_path: Path) -> None:
+def test_data_prepare_and_info_on_a_few_clips(tmp_path: Path, corpus_root: Path) -> None:
     env = {"WEARPOSE_CACHE": str(tmp_path / "store")}
     res = runner.invoke(app, ["data", "prepare", "--limit", "3", "--workers", "1", "--json"], env=env)
     assert res.exit_code == 0, res.output
@@ -55,8 +43,7 @@ def test_data_prepare_and_info_on_a_few_clips(tmp_path: Path) -> None:
 
 
 @pytest.mark.corpus
-@needs_corpus
-def test_demo_round_trip_is_lossless(tmp_path: Path) -> None:
+def test_demo_round_trip_is_lossless(tmp_path: Path, corpus_store: Path) -> None:
     from wearpose.cli.demo import run_roundtrip_demo
 
     r = run_roundtrip_demo("cmu_daz/05/05_01", tmp_path, max_seconds=1.0)
@@ -75,8 +62,7 @@ def test_view_of_a_missing_clip_fails_clearly(tmp_path: Path) -> None:
 
 
 @pytest.mark.corpus
-@needs_corpus
-def test_sensor_demo_with_shipped_weights(tmp_path: Path) -> None:
+def test_sensor_demo_with_shipped_weights(tmp_path: Path, corpus_store: Path) -> None:
     """The main job: simulated 12 EM sensors on a held-out clip -> shipped LGD-RNN -> pose."""
     from wearpose.cli.demo import run_sensor_demo
     from wearpose.weights import card

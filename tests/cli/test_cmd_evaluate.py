@@ -86,7 +86,7 @@ def test_unseen_subjects_are_wider_than_the_training_prior() -> None:
 
 
 @pytest.mark.corpus
-def test_shipped_weights_on_two_test_clips() -> None:
+def test_shipped_weights_on_two_test_clips(corpus_store: Path) -> None:
     """The shipped LGD-RNN (a checkpoint from before the ablation options existed) through the
     command on the real corpus: finite, plausible figures."""
     res = runner.invoke(app, ["evaluate", "empose12_cpu", "--clips", "2", "--json"])

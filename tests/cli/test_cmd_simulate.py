@@ -29,9 +29,10 @@ def test_simulate_without_a_store_fails_clearly(tmp_path: Path) -> None:
     assert "wearpose data prepare" in str(res.exception) or "prepare" in res.output
 
 
+@pytest.mark.budget(25)  # two spawned workers: 10 s measured
 @pytest.mark.corpus
-def test_simulate_cli_two_workers_matches_one_process(tmp_path: Path) -> None:
-    cache, ids = make_mini_store(tmp_path / "corpus")
+def test_simulate_cli_two_workers_matches_one_process(tmp_path: Path, corpus_root: Path) -> None:
+    cache, ids = make_mini_store(tmp_path / "corpus", corpus_root)
     out = tmp_path / "cli"
     res = runner.invoke(app, ["simulate", "--kit", "em6", "--split", "all", "--out", str(out), "--cache", str(cache),
                               "--seed", "3", "--workers", "2", "--limit", "2", "--json"])

@@ -14,15 +14,6 @@ from wearpose.cli import app
 runner = CliRunner()
 
 
-def _has_store() -> bool:
-    try:
-        from wearpose.motion import CorpusStore
-
-        return len(CorpusStore().clips(split="train")) > 0 and len(CorpusStore().clips(split="val")) > 0
-    except Exception:
-        return False
-
-
 def test_train_help_has_an_example() -> None:
     res = runner.invoke(app, ["train", "--help"])
     assert res.exit_code == 0 and "empose" in res.output, res.output
@@ -36,8 +27,8 @@ def test_train_rejects_unknown_method(tmp_path: Path) -> None:
     assert res.exit_code != 0 and "no-such-method" in res.output
 
 
-@pytest.mark.skipif(not _has_store(), reason="no prepared corpus store (wearpose data prepare)")
-def test_tiny_cli_run_on_the_corpus(tmp_path: Path) -> None:
+@pytest.mark.corpus
+def test_tiny_cli_run_on_the_corpus(tmp_path: Path, corpus_store: Path) -> None:
     n = torch.get_num_threads()
     try:
         res = runner.invoke(app, ["train", "empose", "--config", "tiny", "--limit", "3", "--epochs", "1", "--threads", "1",
@@ -56,8 +47,8 @@ def test_train_rejects_unknown_or_misplaced_ablation(tmp_path: Path) -> None:
     assert res.exit_code != 0 and "LGD-RNN" in res.output, res.output
 
 
-@pytest.mark.skipif(not _has_store(), reason="no prepared corpus store (wearpose data prepare)")
-def test_tiny_ablation_run_trains_the_ablated_config(tmp_path: Path) -> None:
+@pytest.mark.corpus
+def test_tiny_ablation_run_trains_the_ablated_config(tmp_path: Path, corpus_store: Path) -> None:
     n = torch.get_num_threads()
     try:
         res = runner.invoke(app, ["train", "empose", "--config", "tiny", "--ablation", "pos_only", "--limit", "2",

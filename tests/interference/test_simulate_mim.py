@@ -240,7 +240,7 @@ def test_shipped_forecaster_beats_holding_on_a_swing():
 
 
 @pytest.mark.corpus
-def test_nbeats_training_pipeline_tiny(tmp_path):
+def test_nbeats_training_pipeline_tiny(tmp_path, corpus_store):
     from wearpose.interference.nbeats import NBeatsConfig, load_forecaster, train
 
     res = train(NBeatsConfig.preset("tiny"), tmp_path, max_train_clips=3, log=lambda s: None)

@@ -7,7 +7,6 @@ import pytest
 import torch
 
 from wearpose.body import BodyModel
-from wearpose.errors import WearposeError
 from wearpose.motion import CorpusStore
 from wearpose.physics import PhysicsCharacter, PhysicsConfig, PhysicsOptimizer, kinematic_reference
 
@@ -15,12 +14,9 @@ CLIP = "bandai/bandai-B/dataset-2_walk_feminine_003"  # test split (bandai-B)
 
 
 @pytest.fixture(scope="module")
-def walk():
-    try:
-        store = CorpusStore()
-        seq = store.load(CLIP)
-    except (WearposeError, KeyError, OSError) as exc:
-        pytest.skip(f"prepared corpus or clip {CLIP} not available: {exc}")
+def walk(corpus_root):
+    store = CorpusStore(corpus_root)
+    seq = store.load(CLIP)
     assert store.entry(CLIP)["split"] == "test"
     body = BodyModel()
     return seq.slice(0, 120), body  # 4 s at 30 fps -> 240 frames at 60 fps

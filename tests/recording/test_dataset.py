@@ -28,8 +28,8 @@ def test_noncommercial_licences():
 
 
 @pytest.fixture(scope="module")
-def mini(tmp_path_factory):
-    return make_mini_store(tmp_path_factory.mktemp("corpus"))
+def mini(tmp_path_factory, corpus_root):
+    return make_mini_store(tmp_path_factory.mktemp("corpus"), corpus_root)
 
 
 @pytest.fixture(scope="module")

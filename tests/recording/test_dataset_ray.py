@@ -23,11 +23,11 @@ def test_ray_executor_without_ray_names_the_extra(tmp_path, monkeypatch):
 
 @pytest.mark.corpus
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="Ray is an optional extra (pip install 'wearpose[ray]')")
-def test_ray_executor_writes_the_same_recordings_as_the_local_one(tmp_path, monkeypatch):
+def test_ray_executor_writes_the_same_recordings_as_the_local_one(tmp_path, monkeypatch, corpus_root):
     import ray
 
     monkeypatch.setenv("RAY_AUTH_MODE", "disabled")  # local test cluster: no token file
-    cache, ids = make_mini_store(tmp_path / "corpus")
+    cache, ids = make_mini_store(tmp_path / "corpus", corpus_root)
     local = simulate_corpus(tmp_path / "local", "imu6", None, cache_dir=cache, seed=3, workers=1, progress=False)
     try:
         res = simulate_corpus(tmp_path / "ray", "imu6", None, cache_dir=cache, seed=3, workers=2, executor="ray",

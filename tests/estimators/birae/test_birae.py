@@ -471,15 +471,6 @@ def test_demo_runs_with_given_weights(trained, tmp_path: Path, monkeypatch) -> N
 
 
 # --------------------------------------------------------------------------- CLI
-def _has_store() -> bool:
-    try:
-        from wearpose.motion import CorpusStore
-
-        return len(CorpusStore().clips(split="train")) > 0 and len(CorpusStore().clips(split="val")) > 0
-    except Exception:
-        return False
-
-
 def test_train_birae_help_and_bad_representation(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
@@ -493,8 +484,7 @@ def test_train_birae_help_and_bad_representation(tmp_path: Path) -> None:
 
 
 @pytest.mark.corpus
-@pytest.mark.skipif(not _has_store(), reason="no prepared corpus store (wearpose data prepare)")
-def test_tiny_cli_run_on_the_corpus(tmp_path: Path) -> None:
+def test_tiny_cli_run_on_the_corpus(tmp_path: Path, corpus_store: Path) -> None:
     import json
 
     from typer.testing import CliRunner

@@ -26,13 +26,7 @@ def test_bad_arguments(tmp_path: Path, args, hint) -> None:
 
 
 @pytest.mark.corpus
-def test_tiny_run_on_the_corpus(tmp_path: Path) -> None:
-    try:
-        from wearpose.motion import CorpusStore
-
-        CorpusStore()
-    except Exception:
-        pytest.skip("no prepared corpus store")
+def test_tiny_run_on_the_corpus(tmp_path: Path, corpus_store: Path) -> None:
     res = runner.invoke(app, ["train", "miposer", "--config", "tiny", "--limit", "2", "--epochs", "1", "--threads", "1",
                               "--out", str(tmp_path / "run"), "--json"])
     assert res.exit_code == 0, res.output

@@ -16,19 +16,14 @@ def test_kit_dispatch() -> None:
 
 
 @pytest.mark.corpus
-def test_demo_writes_timeline_viewer_and_metrics(tmp_path: Path) -> None:
+def test_demo_writes_timeline_viewer_and_metrics(tmp_path: Path, corpus_store: Path) -> None:
     pytest.importorskip("matplotlib")
     from wearpose.estimators.miposer.demo import run_demo
     from wearpose.weights import list_weights
 
     if "miposer_cpu" not in list_weights():
         pytest.skip("no shipped miposer_cpu weights")
-    try:
-        r = run_demo("cmu_daz/05/05_01", tmp_path, max_seconds=1.0)
-    except Exception as exc:  # no prepared corpus
-        if "corpus" in str(exc) or "clip" in str(exc):
-            pytest.skip(str(exc))
-        raise
+    r = run_demo("cmu_daz/05/05_01", tmp_path, max_seconds=1.0)
     assert {"clip", "frames", "fps", "html", "title", "metrics"} <= set(r)
     assert Path(r["timeline"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "viewer.html" in Path(r["html"]).read_text() and Path(r["viewer"]).is_file()

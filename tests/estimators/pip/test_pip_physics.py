@@ -51,18 +51,8 @@ def test_single_pd_option_reaches_the_optimizer(est) -> None:
     assert est._physics_optimizer().config.dual_pd is True
 
 
-def _has_corpus() -> bool:
-    try:
-        from wearpose.motion import CorpusStore
-
-        return len(CorpusStore().clips(split="test")) > 0
-    except Exception:
-        return False
-
-
 @pytest.mark.corpus
-@pytest.mark.skipif(not _has_corpus(), reason="no prepared corpus store")
-def test_demo_on_a_test_clip(body, tmp_path) -> None:
+def test_demo_on_a_test_clip(body, tmp_path, corpus_store) -> None:
     from wearpose.estimators.pip.demo import run_demo
     from wearpose.motion import CorpusStore
 
