@@ -90,6 +90,7 @@ def test_posedirs_apply_pose_correctives() -> None:
     np.testing.assert_allclose(zero.vertices.numpy(), body.v_template.numpy(), atol=1e-12)
 
 
+@pytest.mark.budget(30)  # finite differences through the full mesh: 15 s measured
 def test_gradcheck_float64(body: BodyModel) -> None:
     aa = (torch.randn(2, 72, dtype=torch.float64) * 0.3).requires_grad_()
     betas = torch.randn(2, 10, dtype=torch.float64, requires_grad=True)

@@ -66,6 +66,7 @@ def _wait(proc: subprocess.Popen, timeout: float) -> int | None:
         return None
 
 
+@pytest.mark.budget(30)  # two processes, a browser-less viewer and a signal: 14 s measured
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_view_live_exits_on_a_signal_while_connected(tmp_path: Path, sig: int) -> None:
     server, viewer = _start(tmp_path)
@@ -77,6 +78,7 @@ def test_view_live_exits_on_a_signal_while_connected(tmp_path: Path, sig: int) -
         _wait(server, 10)
 
 
+@pytest.mark.budget(30)  # 14 s measured
 def test_view_live_stops_by_itself_when_its_server_stops(tmp_path: Path) -> None:
     server, viewer = _start(tmp_path)
     server.terminate()
