@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
 from pathlib import Path
 
+import psutil
 import pytest
 import torch
 
@@ -23,57 +23,55 @@ from wearpose.estimators.train import shard_batch
 WORKER = Path(__file__).with_name("ddp_worker.py")
 
 
-def _has_store() -> bool:
-    try:
-        from wearpose.motion import CorpusStore
-
-        return len(CorpusStore().clips(split="train")) > 0 and len(CorpusStore().clips(split="val")) > 0
-    except Exception:
-        return False
-
-
 def _env() -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k not in ("WORLD_SIZE", "RANK", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT")}
     env["OMP_NUM_THREADS"] = "1"
     return env
 
 
-def _run(nproc: int, *args: str, out: Path, timeout: float = 300.0, attempts: int = 2) -> None:
-    """Run the worker with ``nproc`` processes; ``out`` is its run directory (unique per call).
+def _run(nproc: int, *args: str, out: Path, timeout: float = 60.0) -> None:
+    """Run the worker with ``nproc`` processes (``out``: its run directory, unique per call).
 
-    A 2-process gloo run on this 2-core machine hung once in a few dozen CI runs (both ranks past
-    their first step, then no progress for 10 min; it did not reproduce in repeated runs). A hang
-    is therefore retried once from an empty ``out``; a second hang, a non-zero exit or a wrong
-    result still fails the test.
+    A run takes 5-20 s here. One that has not finished after ``timeout`` s is a hang: every
+    process of the run dumps its Python stacks (``PYTHONFAULTHANDLER``, on SIGABRT), the whole
+    tree is killed and the test fails with the output of torchrun and its workers.
     """
     if nproc == 1:  # the plain single-process path, no torchrun at all
         cmd = [sys.executable, *args]
     else:
         cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", f"--nproc_per_node={nproc}", *args]
-    for attempt in range(1, attempts + 1):
-        shutil.rmtree(out, ignore_errors=True)
-        # Own process group: on a timeout the whole group (torchrun and its workers) is killed, so a
-        # rank waiting in a collective for a dead partner cannot outlive the test.
-        proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                start_new_session=True)
+    env = {**_env(), "PYTHONFAULTHANDLER": "1"}
+    # Own session: the tree can be found and killed as a whole whatever the test's outcome.
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        output, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        top = psutil.Process(proc.pid)
+        tree = [top, *top.children(recursive=True)]
+        alive = [_describe(p) for p in tree]
+        _signal_all(tree[1:], signal.SIGABRT)  # workers first: torchrun would tear them down itself
+        psutil.wait_procs(tree[1:], timeout=5)
+        _signal_all(tree, signal.SIGKILL)
+        output, _ = proc.communicate(timeout=10)
+        raise AssertionError(f"hung: not finished after {timeout:g} s: {' '.join(cmd)}\nalive: {alive}\n"
+                             f"output (stacks of the hung processes at the end):\n{output[-8000:]}") from None
+    assert proc.returncode == 0, output[-6000:]
+
+
+def _describe(p: psutil.Process) -> str:
+    try:
+        return f"pid {p.pid} {p.status()}: {' '.join(p.cmdline()[-3:])}"
+    except psutil.Error:
+        return f"pid {p.pid} (gone)"
+
+
+def _signal_all(procs: list[psutil.Process], sig: int) -> None:
+    for p in procs:
         try:
-            stdout, stderr = proc.communicate(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            # torchrun may start its workers in sessions of their own: they survive killpg and keep
-            # our pipes open, so find them by their unique run directory.
-            subprocess.run(["pkill", "-9", "-f", str(out)], check=False)
-            try:
-                stdout, stderr = proc.communicate(timeout=30)
-            except subprocess.TimeoutExpired:
-                stdout, stderr = "", ""
-            if attempt < attempts:
-                print(f"attempt {attempt} timed out after {timeout:g} s, retrying: {' '.join(cmd)}", file=sys.stderr)
-                continue
-            raise AssertionError(f"timed out after {timeout:g} s, {attempts} attempts: {' '.join(cmd)}\n"
-                                 f"{stderr[-3000:]}") from None
-        assert proc.returncode == 0, stdout[-3000:] + stderr[-3000:]
-        return
+            p.send_signal(sig)
+        except psutil.Error:  # already gone
+            pass
 
 
 def _log(out: Path) -> tuple[list[float], list[dict]]:
@@ -102,6 +100,7 @@ def test_shard_batch_rejects_bad_batches() -> None:
         shard_batch({"a": torch.zeros(4), "b": torch.zeros(3)}, 0, 2)
 
 
+@pytest.mark.budget(40)  # two runs, one under torchrun: 18 s measured
 def test_two_process_ddp_equals_one_process_on_a_synthetic_task(tmp_path: Path) -> None:
     _run(1, str(WORKER), "synthetic", str(tmp_path / "one"), out=tmp_path / "one")
     _run(2, str(WORKER), "synthetic", str(tmp_path / "two"), out=tmp_path / "two")
@@ -113,9 +112,9 @@ def test_two_process_ddp_equals_one_process_on_a_synthetic_task(tmp_path: Path) 
     assert one[-1] < 0.5 * one[0]  # it trained
 
 
+@pytest.mark.budget(100)  # four runs, two under torchrun: 51 s measured
 @pytest.mark.corpus
-@pytest.mark.skipif(not _has_store(), reason="no prepared corpus store (wearpose data prepare)")
-def test_two_process_ddp_matches_one_process_on_the_empose_tiny_config(tmp_path: Path) -> None:
+def test_two_process_ddp_matches_one_process_on_the_empose_tiny_config(tmp_path: Path, corpus_store: Path) -> None:
     cache = tmp_path / "cache"
     curves = {}
     for kind in ("empose-nobn", "empose"):
@@ -135,9 +134,9 @@ def test_two_process_ddp_matches_one_process_on_the_empose_tiny_config(tmp_path:
     assert len(va) == 3 and vb == pytest.approx(va, rel=0.10) and va[-1] < va[0]
 
 
+@pytest.mark.budget(40)  # 15 s measured
 @pytest.mark.corpus
-@pytest.mark.skipif(not _has_store(), reason="no prepared corpus store (wearpose data prepare)")
-def test_wearpose_train_runs_unchanged_under_torchrun(tmp_path: Path) -> None:
+def test_wearpose_train_runs_unchanged_under_torchrun(tmp_path: Path, corpus_store: Path) -> None:
     out = tmp_path / "run"
     _run(2, "-m", "wearpose.cli", "train", "empose", "--config", "tiny", "--limit", "2", "--epochs", "1",
          "--threads", "1", "--out", str(out), "--json", out=out)
