@@ -294,6 +294,12 @@ def train(task: TrainTask, s: TrainSettings, console: Any = None) -> dict[str, A
     if log is not None:
         log.close()
     if distributed:
+        # Teardown in dependency order. The DDP wrapper's reducer holds the process group; left
+        # alive until train() returns, it was destroyed *after* destroy_process_group, and that
+        # destructor sometimes blocked for good: one rank stayed alive after training, the other
+        # had exited (issue 20; caught with faulthandler: the rank sat in the caller's line of
+        # train(), no Python frame below). Drop it first, then wait for every rank, then destroy.
+        del ddp
         dist.barrier()
         if own_group:
             dist.destroy_process_group()
