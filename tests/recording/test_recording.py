@@ -94,6 +94,38 @@ def test_to_canonical_converts_every_declared_convention():
     assert rec.sensor("wrist").info.acc_unit == "g"
 
 
+def test_declared_as_is_the_inverse_of_to_canonical():
+    s, R, a, w = _declared_imu()
+    can = Recording([s, em_stream()]).to_canonical()
+    dec = can.declared_as(position_unit="mm", gyro_unit="deg/s", acc_unit="g", acc_frame="sensor",
+                          acc_gravity="included", world_up="z_up")
+    # The same file a device in those conventions writes (the hand-built one above) ...
+    d = dec.sensor("wrist")
+    assert d.info == s.info
+    np.testing.assert_allclose(d.acceleration, s.acceleration, atol=1e-6)
+    np.testing.assert_allclose(d.orientation, s.orientation, atol=1e-9)
+    np.testing.assert_allclose(d.angular_velocity, s.angular_velocity, atol=1e-9)
+    e = dec.sensor(em_stream().info.name)
+    assert e.info.position_unit == "mm" and e.info.world_up == "z_up" and not e.info.is_canonical
+    # ... and back: the canonical data, masks and NaNs of dropped frames as they were.
+    back = dec.to_canonical()
+    for name in can.names:
+        for ch, x in can.sensor(name).channels().items():
+            np.testing.assert_allclose(getattr(back.sensor(name), ch), x, atol=1e-5, err_msg=f"{name} {ch}")
+        np.testing.assert_array_equal(back.sensor(name).valid, can.sensor(name).valid)
+    with pytest.raises(RecordingError, match="needs a canonical recording"):
+        dec.declared_as(position_unit="cm")
+
+
+def test_declared_as_sensor_frame_needs_orientation():
+    n = 20
+    info = SensorInfo("m", "mimu", rate=50)
+    s = SensorStream(info, np.arange(n) / 50, np.ones(n, bool), acceleration=np.zeros((n, 3)),
+                     angular_velocity=np.zeros((n, 3)), magnetic_field=np.ones((n, 3)))
+    with pytest.raises(RecordingError, match="sensor 'm': sensor-frame acceleration needs an 'orientation'"):
+        Recording([s]).declared_as(acc_frame="sensor")
+
+
 def test_to_canonical_mimu_without_orientation_keeps_sensor_frame():
     n = 50
     info = SensorInfo("m", "mimu", rate=50, acc_unit="g", acc_frame="sensor", acc_gravity="included")

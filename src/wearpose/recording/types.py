@@ -561,6 +561,62 @@ class Recording:
             meta["converted_to_canonical"] = sorted(set(meta.get("converted_to_canonical", [])) | set(converted))
         return Recording(out, self.ground_truth, self.ground_truth_start, copy.deepcopy(self.subject), meta)
 
+    def declared_as(self, position_unit: str = "m", gyro_unit: str = "rad/s", acc_unit: str = "m/s2",
+                    acc_frame: str = "world", acc_gravity: str = "removed", world_up: str = "y_up") -> Recording:
+        """The inverse of :meth:`to_canonical`: a canonical recording's data rewritten in the given
+        conventions, each declared in the sensors' info (``declared_as(...).to_canonical()``
+        gives the data back to float precision).
+
+        What a device or a file in those conventions would hold: positions in ``position_unit``,
+        angular velocity in ``gyro_unit``, accelerometer readings (``acc_gravity="included"``:
+        specific force, +1 g up at rest) in ``acc_unit`` and ``acc_frame``, everything in a
+        ``world_up`` world. A convention only applies to sensors carrying its channel;
+        ``acc_frame="sensor"`` needs ``orientation``.
+
+        Raises:
+            RecordingError: the recording is not canonical, or sensor-frame acceleration is asked
+                of a sensor without orientation.
+        """
+        if not self.is_canonical:
+            raise RecordingError("declared_as needs a canonical recording; call to_canonical() first")
+        C = Z_UP_TO_Y_UP.numpy().astype(np.float64)
+        g = np.asarray(GRAVITY, dtype=np.float64)
+        out = []
+        for s in self.sensors:
+            ch = {k: (None if v is None else v.astype(np.float64)) for k, v in s.channels().items()}
+            new: dict[str, str] = {}
+            R, acc, pos = ch.get("orientation"), ch.get("acceleration"), ch.get("position")
+            # Steps of to_canonical undone in reverse order: gravity, up axis, acceleration frame, units.
+            if acc is not None:
+                if acc_gravity == "included":
+                    acc = acc - g
+                new.update(acc_gravity=acc_gravity, acc_unit=acc_unit, acc_frame=acc_frame)
+            if world_up == "z_up":
+                R = None if R is None else C.T @ R
+                pos = None if pos is None else pos @ C
+                acc = None if acc is None else acc @ C
+                new["world_up"] = world_up
+            if acc is not None:
+                if acc_frame == "sensor":
+                    if R is None:
+                        raise RecordingError(f"sensor {s.info.name!r}: sensor-frame acceleration needs an "
+                                             "'orientation' channel to rotate with")
+                    acc = np.einsum("nji,nj->ni", R, acc)  # a_S = R_WS^T a_W
+                ch["acceleration"] = acc / G if acc_unit == "g" else acc
+            if pos is not None:
+                ch["position"] = pos / _POSITION_SCALE[position_unit]
+                new["position_unit"] = position_unit
+            if ch.get("angular_velocity") is not None:
+                if gyro_unit == "deg/s":
+                    ch["angular_velocity"] = np.rad2deg(ch["angular_velocity"])
+                new["gyro_unit"] = gyro_unit
+            if R is not None:
+                ch["orientation"] = R
+            ch = {k: v.astype(getattr(s, k).dtype) for k, v in ch.items() if v is not None}
+            out.append(SensorStream(replace(s.info, **new), s.timestamps.copy(), s.valid.copy(), **ch))
+        return Recording(out, self.ground_truth, self.ground_truth_start, copy.deepcopy(self.subject),
+                         copy.deepcopy(self.meta))
+
     # ------------------------------------------------------------------ stacking
     def on_common_grid(self, names: Iterable[str] | None = None) -> CommonGrid:
         """Stack sensors into ``(T, S, ...)`` arrays when they share one time grid.
