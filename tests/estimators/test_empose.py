@@ -19,7 +19,7 @@ from wearpose.estimators import (
     CheckpointMismatchError, PoseTrack, get_estimator, iter_frames, load_checkpoint, save_checkpoint,
 )
 from wearpose.estimators.empose import EmposeConfig, EmposeEstimator, VirtualSensors, lgd_loss
-from wearpose.estimators.empose.data import build_split, hold_invalid, recording_from_clip, simulate_clip
+from wearpose.estimators.empose.data import build_split, recording_from_clip, simulate_clip
 from wearpose.estimators.empose.estimator import _sites
 from wearpose.estimators.empose.model import PRED_JOINTS, UNOBSERVED_JOINTS, sensor_features
 from wearpose.estimators.empose.train import evaluate_empose, train_empose
@@ -74,19 +74,6 @@ def test_virtual_sensors_reproduce_the_simulator(body: BodyModel) -> None:
     # Offsets matter: identity offsets do not explain the data.
     p0, _, _ = vs(r["pose"], r["betas"].expand(T, 10), torch.eye(3).expand(T, S, 3, 3), torch.zeros(T, S, 3))
     assert (p0 - r["position"]).norm(dim=-1).mean() > 5e-3
-
-
-def test_hold_invalid_keeps_last_valid_value() -> None:
-    T, S = 6, 2
-    p = torch.arange(T * S * 3, dtype=torch.float32).reshape(T, S, 3)
-    R = torch.eye(3).expand(T, S, 3, 3).clone()
-    valid = torch.ones(T, S, dtype=torch.bool)
-    valid[0, 0] = valid[2:4, 0] = False
-    valid[:, 1] = False
-    hp, hR = hold_invalid(p, R, valid)
-    assert torch.equal(hp[0, 0], p[1, 0]) and torch.equal(hp[2, 0], p[1, 0]) and torch.equal(hp[3, 0], p[1, 0])
-    assert torch.equal(hp[4, 0], p[4, 0])
-    assert torch.equal(hp[:, 1], torch.zeros(T, 3)) and torch.equal(hR[:, 1], torch.eye(3).expand(T, 3, 3))
 
 
 # --------------------------------------------------------------------------- config / registry / types

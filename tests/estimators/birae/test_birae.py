@@ -18,7 +18,6 @@ from wearpose.estimators.birae import BiraeConfig, BiraeEstimator, BiRAE, nll_lo
 from wearpose.estimators.birae.data import (
     SCENARIOS, augmentation_noise, build_split, make_recording, sensor_orientations, synthesize,
 )
-from wearpose.estimators.birae.estimator import hold_last_valid
 from wearpose.estimators.birae.representations import (
     angular_rate, features, input_dim, pose_to_target, relative_orientations, target_to_pose,
 )
@@ -218,13 +217,6 @@ def test_scenarios_disturb_heading_as_declared() -> None:
     assert float(mag["yaw_error"].abs().max()) > math.radians(1.0)
     assert clean["R_rel"].shape == (clean["target"].shape[0], 5, 3, 3)
     assert augmentation_noise(tiny()).mag_rate == 0.0  # training never sees magnetic disturbance
-
-
-def test_hold_last_valid() -> None:
-    R = rand_R(8, 4).reshape(4, 2, 3, 3)
-    v = torch.tensor([[False, True], [True, True], [False, True], [True, False]])
-    out = hold_last_valid(R, v)
-    assert torch.equal(out[0, 0], R[1, 0]) and torch.equal(out[2, 0], R[1, 0]) and torch.equal(out[3, 1], R[2, 1])
 
 
 # --------------------------------------------------------------------------- training and estimator

@@ -50,25 +50,9 @@ from wearpose.estimators.birae.representations import (
 )
 from wearpose.estimators.birae.uncertainty import combine, mc_predict
 from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
+from wearpose.estimators.inputs import InputSpec, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.body.skeleton import MAJOR_JOINTS, NUM_JOINTS
-
-
-def hold_last_valid(R: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-    """Replace dropped orientations ``(T, S, 3, 3)`` (``valid`` ``(T, S)``) by the last valid one
-    (the first valid one before any; identity for a sensor never valid)."""
-    T, S = valid.shape
-    if bool(valid.all()):
-        return R.clone()
-    idx = torch.arange(T).unsqueeze(1).expand(T, S)
-    last = torch.where(valid, idx, torch.full_like(idx, -1)).cummax(0).values
-    first = torch.where(valid.any(0), valid.float().argmax(0), torch.zeros(S, dtype=torch.long))
-    src = torch.where(last >= 0, last, first.unsqueeze(0).expand(T, S))
-    out = R[src, torch.arange(S).unsqueeze(0).expand(T, S)].clone()
-    never = ~valid.any(0)
-    if bool(never.any()):
-        out[:, never] = torch.eye(3, dtype=R.dtype)
-    return out
 
 
 @register_estimator("birae")
@@ -179,22 +163,16 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
         return finetune(self, motions, out_dir, **kwargs)
 
     # ------------------------------------------------------------------ inputs
+    @property
+    def input_spec(self) -> InputSpec:
+        """What :meth:`estimate` reads: the kit's MIMU (or IMU) orientations ``R_WS``, any rate."""
+        return InputSpec.from_kit("BiRAE", self.kit_name, ("orientation",), sensor_names=tuple(self.sensor_names),
+                                  kinds={"mimu": ("mimu", "imu"), "imu": ("mimu", "imu")})
+
     def _inputs(self, recording: Any) -> tuple[torch.Tensor, torch.Tensor, float, np.ndarray]:
-        missing = [n for n in self.sensor_names if n not in recording.names]
-        if missing:
-            raise ShapeError(f"recording lacks sensors {missing} of kit {self.kit_name!r} (has {list(recording.names)})")
-        for n in self.sensor_names:
-            info = recording.sensor(n).info
-            if info.kind not in ("mimu", "imu"):
-                raise ShapeError(f"sensor {n!r}: BiRAE needs MIMU (or IMU) orientations, got kind {info.kind!r}")
-            if recording.sensor(n).orientation is None:
-                raise ShapeError(f"sensor {n!r}: no 'orientation' channel; BiRAE needs R_WS per frame")
-        grid = recording.on_common_grid(self.sensor_names)
-        valid = torch.as_tensor(grid.valid)
-        R = torch.as_tensor(np.nan_to_num(grid.channels["orientation"]), dtype=torch.float32)
-        ts = grid.timestamps
+        x = prepare(recording, self.input_spec)
         fps = float(recording.sensor(self.sensor_names[0]).info.rate)
-        return hold_last_valid(R, valid), valid.all(1), fps, ts
+        return x.channels["orientation"], x.valid.all(1), fps, x.timestamps
 
     def _features(self, R_world: torch.Tensor, fps: float) -> torch.Tensor:
         Rr = relative_orientations(R_world)

@@ -13,7 +13,7 @@ Per clip (sorted clip ids of one split of :class:`~wearpose.motion.CorpusStore`)
    ground-truth root orientation is expressed in the same source frame,
    ``R_root^n(t) = R_src(t)^T R_root(t)``, and the root translation set to zero;
 4. dropped EM frames (NaN, ``valid`` False) are held at the sensor's last valid value
-   (:func:`hold_invalid`), the same policy the estimator applies at run time.
+   (:func:`wearpose.estimators.inputs.hold_last_valid`), the same policy the estimator applies at run time.
 
 Everything is stored frame-concatenated in one tensor file under
 ``<cache>/estimators/empose/<split>-<fingerprint[:16]>.pt`` keyed by the fingerprint of the clip
@@ -35,6 +35,7 @@ import torch
 
 from wearpose.estimators.checkpoint import fingerprint
 from wearpose.estimators.empose.config import EmposeConfig
+from wearpose.estimators.inputs import hold_last_valid
 from wearpose.geometry import matrix_to_rot6d, rot6d_to_matrix
 
 DATA_VERSION = 1
@@ -45,39 +46,13 @@ def clip_seed(clip_id: str, seed: int, namespace: str = "train") -> int:
     return (zlib.crc32(f"{namespace}:{clip_id}".encode()) + 7919 * int(seed)) % (2 ** 31 - 1)
 
 
-def hold_invalid(position: torch.Tensor, orientation: torch.Tensor, valid: torch.Tensor
-                 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Replace dropped samples by the sensor's last valid one (first valid one before it).
-
-    Args:
-        position: ``(T, S, 3)``; orientation: ``(T, S, 3, 3)``; valid: ``(T, S)`` bool.
-
-    Returns:
-        filled copies; a sensor never valid gets position 0 and identity orientation.
-    """
-    T, S = valid.shape
-    if bool(valid.all()):
-        return position.clone(), orientation.clone()
-    idx = torch.arange(T).unsqueeze(1).expand(T, S)
-    last = torch.where(valid, idx, torch.full_like(idx, -1)).cummax(0).values  # last valid index so far
-    first = torch.where(valid.any(0), valid.float().argmax(0), torch.zeros(S, dtype=torch.long))
-    src = torch.where(last >= 0, last, first.unsqueeze(0).expand(T, S))
-    cols = torch.arange(S).unsqueeze(0).expand(T, S)
-    p, R = position[src, cols].clone(), orientation[src, cols].clone()
-    never = ~valid.any(0)
-    if bool(never.any()):
-        p[:, never] = 0.0
-        R[:, never] = torch.eye(3, dtype=R.dtype)
-    return p, R
-
-
 def frame_measurements(frame: Any, sensor_names: Sequence[str],
                        last: tuple[torch.Tensor, torch.Tensor] | None
                        ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """One :class:`~wearpose.estimators.base.SensorFrame` as EM input in kit order, online.
 
     Dropped samples are held at ``last`` (the previous returned values), or neutral (zero
-    position, identity orientation) before any: the online twin of :func:`hold_invalid`.
+    position, identity orientation) before any: the online twin of :func:`wearpose.estimators.inputs.hold_last_valid`.
 
     Returns:
         ``p`` ``(S, 3)`` m, ``R`` ``(S, 3, 3)`` (source frame), ``valid`` ``(S,)`` bool.
@@ -264,7 +239,7 @@ def build_split(split: str, cfg: EmposeConfig, body: Any, *, store: Any = None, 
     total = 0
     for c, cid in enumerate(ids):
         r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed))
-        p, R = hold_invalid(r["position"], r["orientation"], r["valid"])
+        p, R = hold_last_valid(r["position"], r["valid"]), hold_last_valid(r["orientation"], r["valid"])
         T = p.shape[0]
         cols["position"].append(p)
         cols["orientation"].append(R)

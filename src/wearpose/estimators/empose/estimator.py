@@ -26,8 +26,9 @@ from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.config import EmposeConfig
-from wearpose.estimators.empose.data import frame_measurements, hold_invalid
+from wearpose.estimators.empose.data import frame_measurements
 from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, module_version, sensor_features
+from wearpose.estimators.inputs import InputSpec, prepare
 from wearpose.estimators.registry import register_estimator
 
 
@@ -178,32 +179,19 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         """Subject offsets for :meth:`step`: ``R`` ``(S, 3, 3)``, ``t`` ``(S, 3)`` m (kit order)."""
         self._offsets = (torch.as_tensor(R, dtype=torch.float32), torch.as_tensor(t, dtype=torch.float32))
 
-    def _check_recording(self, recording: Any) -> Any:
-        missing = [n for n in self.sensor_names if n not in recording.names]
-        if missing:
-            raise ShapeError(f"recording lacks sensors {missing} of kit {self.kit_name!r} "
-                             f"(has {list(recording.names)})")
-        for n in self.sensor_names:
-            info = recording.sensor(n).info
-            if info.kind != "em6dof" or (info.reference or "source") != "source":
-                raise ShapeError(f"sensor {n!r}: EM-POSE needs kind 'em6dof' relative to the EM source, got kind "
-                                 f"{info.kind!r} reference {info.reference!r}")
-            if abs(float(info.rate) - self.fps) > 1e-3 * self.fps:
-                raise ShapeError(f"sensor {n!r} runs at {info.rate} Hz; this checkpoint was trained at {self.fps} Hz "
-                                 f"(resample the recording first)")
-        return recording.on_common_grid(self.sensor_names)
+    @property
+    def input_spec(self) -> InputSpec:
+        """What :meth:`estimate` reads: the kit's EM sensors relative to the source, at the trained rate."""
+        return InputSpec.from_kit("EM-POSE", self.kit_name, ("position", "orientation"),
+                                  sensor_names=tuple(self.sensor_names), rates={"em6dof": self.fps},
+                                  reference="source")
 
     def _measurements(self, recording: Any, hold: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Kit sensors of a checked recording on a common grid: positions ``(T, S, 3)`` m,
-        orientations ``(T, S, 3, 3)`` (dropped samples held at the last valid value when ``hold``,
-        NaN otherwise) and ``valid`` ``(T, S)``."""
-        grid = self._check_recording(recording)
-        valid = torch.as_tensor(grid.valid)
-        p = torch.as_tensor(grid.channels["position"], dtype=torch.float32)
-        R = torch.as_tensor(grid.channels["orientation"], dtype=torch.float32)
-        if hold:
-            p, R = hold_invalid(p, R, valid)
-        return p, R, valid
+        """Kit sensors of a recording (:func:`~wearpose.estimators.inputs.prepare`): positions
+        ``(T, S, 3)`` m, orientations ``(T, S, 3, 3)`` (dropped samples held at the last valid
+        value when ``hold``, NaN otherwise) and ``valid`` ``(T, S)``."""
+        x = prepare(recording, self.input_spec, hold=hold)
+        return x.channels["position"], x.channels["orientation"], x.valid
 
     # ------------------------------------------------------------------ offline
     @torch.no_grad()

@@ -31,6 +31,7 @@ from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFram
 from wearpose.estimators.checkpoint import NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.baselines import OfflineOnlyError
 from wearpose.estimators.empose.data import clip_seed
+from wearpose.estimators.inputs import InputSpec, prepare
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.estimators.miposer.data import MiposerData, cached_split
 from wearpose.estimators.miposer.model import decode_pose, heading_frame, ik_loss
@@ -199,13 +200,11 @@ class ImuPoserEstimator(NetworkCheckpointing, Estimator):
 
     def estimate(self, recording: Any) -> PoseTrack:
         """Offline estimate from a recording with the kit's three IMUs (canonical form, 60 Hz)."""
-        missing = [n for n in self.sensor_names if n not in recording.names]
-        if missing:
-            raise ShapeError(f"recording lacks sensors {missing} of kit {KIT!r} (has {list(recording.names)})")
-        grid = recording.to_canonical().on_common_grid(self.sensor_names)
-        R = torch.as_tensor(np.asarray(grid.channels["orientation"]), dtype=torch.float32)
-        a = torch.nan_to_num(torch.as_tensor(np.asarray(grid.channels["acceleration"]), dtype=torch.float32))
-        valid = torch.as_tensor(grid.valid).all(1)
+        spec = InputSpec.from_kit("IMUPoser", KIT, ("orientation", "acceleration"),
+                                  sensor_names=tuple(self.sensor_names), rates={"imu": self.fps})
+        x = prepare(recording, spec, hold=False)  # masked samples as NaN rotations, zero acceleration
+        R, a = x.channels["orientation"], torch.nan_to_num(x.channels["acceleration"])
+        valid = x.valid.all(1)
         return PoseTrack(self.infer(R, a), torch.zeros(10), None, valid, self.fps,
                          extras={"frame": "world", "method": self.name})
 

@@ -38,7 +38,8 @@ import torch
 from wearpose.calibration import CalibrationResult, apply_miposer, calibrate, em_to_world
 from wearpose.errors import ShapeError
 from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.empose.data import clip_seed, hold_invalid, num_batches
+from wearpose.estimators.empose.data import clip_seed, num_batches
+from wearpose.estimators.inputs import hold_last_valid
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.geometry import matrix_to_rot6d
 from wearpose.recording.tpose import tpose_then
@@ -76,7 +77,7 @@ def raw_inputs(recording: Any, kit: str, rate: float = 60.0) -> dict[str, torch.
     with the headset pose (:func:`wearpose.calibration.em_to_world`); 120 Hz EM samples are
     taken at the headset's 60 Hz instants (exact in simulation; a sample further than
     :data:`GRID_TOLERANCE_S` counts as dropped). Dropped samples are held at the last valid one
-    (:func:`~wearpose.estimators.empose.data.hold_invalid`).
+    (:func:`~wearpose.estimators.inputs.hold_last_valid`).
 
     Returns:
         ``{"t": (T,) s, "R": (T, S, 3, 3), "p": (T, S, 3) m, "valid": (T, S)}``, head first.
@@ -105,7 +106,7 @@ def raw_inputs(recording: Any, kit: str, rate: float = 60.0) -> dict[str, torch.
         ps.append(ep)
         vs.append(v)
     R, p, valid = torch.stack(Rs, 1), torch.stack(ps, 1), torch.stack(vs, 1)
-    p, R = hold_invalid(p, R, valid)
+    p, R = hold_last_valid(p, valid), hold_last_valid(R, valid)
     return {"t": torch.as_tensor(ts), "R": R, "p": p, "valid": valid}
 
 

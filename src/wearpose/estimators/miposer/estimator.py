@@ -39,10 +39,12 @@ import torch
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
+from wearpose.estimators.inputs import InputSpec, canonical_input
 from wearpose.estimators.miposer.config import MiposerConfig
 from wearpose.estimators.miposer.data import calibrated_inputs, kit_streams, raw_inputs, uncalibrated
 from wearpose.estimators.miposer.model import AvatarPoserNet, decode_pose, head_anchored_translation, window_features
 from wearpose.estimators.registry import register_estimator
+from wearpose.sensors import get_kit
 
 
 def resolve_calibration(recording: Any, calibration: Any, window: tuple[float, float] | None, body: Any) -> Any:
@@ -83,13 +85,14 @@ def frames(recording: Any, kit: str = "miposer", rate: float = 60.0) -> Iterator
     """Replay a MI-Poser recording as 60 Hz :class:`SensorFrame` s for :meth:`MiposerEstimator.step`.
 
     Sensors (names): the headset and the wrist EM sensors of ``kit``; channels ``position``
-    ``(S, 3)``, ``orientation`` ``(S, 3, 3)`` as recorded (headset in its world, EM relative to
-    the source), plus ``angular_velocity`` / ``acceleration`` ``(S, 3)`` of each wrist's
-    co-located IMU (NaN for the headset and when the kit has no IMU).
+    ``(S, 3)``, ``orientation`` ``(S, 3, 3)`` in canonical form (headset in its world, EM relative
+    to the source; declared units and up axes converted), plus ``angular_velocity`` /
+    ``acceleration`` ``(S, 3)`` of each wrist's co-located IMU (NaN for the headset and when the
+    kit has no IMU).
     """
     from wearpose.estimators.miposer.data import _pick
-    from wearpose.sensors import get_kit
 
+    recording = recording if recording.is_canonical else recording.to_canonical()
     vio, em = kit_streams(recording, kit)
     h = recording.sensor(vio)
     ts = np.asarray(h.timestamps, dtype=np.float64)
@@ -222,8 +225,15 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
         return torch.cat(rots), torch.cat(trans)
 
     # ------------------------------------------------------------------ offline
-    def _check(self, recording: Any) -> None:
-        kit_streams(recording, self.kit_name)
+    @property
+    def input_spec(self) -> InputSpec:
+        """What :meth:`estimate` reads: the headset pose at the trained rate and the wrist EM
+        poses (relative to the head-worn source, or in the world), any EM rate. The kit's wrist
+        IMUs (MIM's input) are optional and converted with the rest."""
+        k = get_kit(self.kit_name)
+        names = tuple(s.name for s in k.sensors if s.kind in ("vio", "em6dof"))
+        return InputSpec.from_kit("MI-Poser", self.kit_name, ("position", "orientation"), sensor_names=names,
+                                  rates={"vio": self.fps})
 
     def estimate(self, recording: Any, calibration: Any = None,
                  calibration_window: tuple[float, float] | None = None, imu: dict[str, Any] | None = None) -> PoseTrack:
@@ -238,7 +248,7 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
                 EM samples, relative to the source (default: derived from the recording,
                 :func:`~wearpose.estimators.miposer.mim.relative_imu`).
         """
-        self._check(recording)
+        recording = canonical_input(recording, self.input_spec)
         extras: dict[str, Any] = {"frame": "calibrated", "method": self.name, "mim": self.mim}
         if self.mim:
             from wearpose.estimators.miposer.mim import mitigate_recording

@@ -44,7 +44,7 @@ import torch
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import NetworkCheckpointing, load_checkpoint
-from wearpose.estimators.empose.data import hold_invalid
+from wearpose.estimators.inputs import InputSpec, canonical_input, hold_last_valid
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.data import EDGE_FRAMES, LEAF_JOINTS, imu_features
 from wearpose.estimators.pip.model import NumpyStepper, PipNet
@@ -213,17 +213,16 @@ class PipEstimator(NetworkCheckpointing, Estimator):
         return self._init
 
     # ------------------------------------------------------------------ inputs
+    @property
+    def input_spec(self) -> InputSpec:
+        """What :meth:`estimate` reads: the kit's IMUs (or MIMUs) with orientation and
+        acceleration at the trained rate."""
+        return InputSpec.from_kit("PIP", self.kit_name, ("orientation", "acceleration"),
+                                  sensor_names=tuple(self.sensor_names), kinds={"imu": ("imu", "mimu"), "mimu": ("imu", "mimu")},
+                                  rates={"imu": self.fps, "mimu": self.fps})
+
     def _bone_recording(self, recording: Any) -> Any:
-        missing = [n for n in self.sensor_names if n not in recording.names]
-        if missing:
-            raise ShapeError(f"recording lacks sensors {missing} of kit {self.kit_name!r} (has {list(recording.names)})")
-        rec = recording.to_canonical()
-        for n in self.sensor_names:
-            s = rec.sensor(n)
-            if s.kind not in ("imu", "mimu") or s.orientation is None or s.acceleration is None:
-                raise ShapeError(f"sensor {n!r}: PIP needs an IMU with orientation and acceleration, got kind {s.kind!r}")
-            if abs(float(s.info.rate) - self.fps) > 1e-3 * self.fps:
-                raise ShapeError(f"sensor {n!r} runs at {s.info.rate} Hz; PIP was trained at {self.fps:g} Hz (resample first)")
+        rec = canonical_input(recording, self.input_spec)
         meta = rec.meta or {}
         if meta.get("orientation_frame") == "segment":
             return rec
@@ -245,7 +244,7 @@ class PipEstimator(NetworkCheckpointing, Estimator):
         valid = torch.as_tensor(grid.valid)
         acc = torch.as_tensor(np.nan_to_num(grid.channels["acceleration"]), dtype=torch.float32)
         ori = torch.as_tensor(grid.channels["orientation"], dtype=torch.float32)
-        acc, ori = hold_invalid(acc, ori, valid)
+        acc, ori = hold_last_valid(acc, valid), hold_last_valid(ori, valid)
         subj = recording.subject or {}
         if subj.get("betas") is not None:
             self.betas = torch.as_tensor(np.asarray(subj["betas"], dtype=np.float32)).reshape(10)

@@ -1,0 +1,162 @@
+"""The one place a recording becomes estimator input.
+
+Every estimator states what it reads as an :class:`InputSpec` (its kit's sensors, the kinds it
+accepts, the channels it needs, the rates it was trained at) and calls :func:`canonical_input`
+or :func:`prepare`. In order, they:
+
+1. check that the recording has every kit sensor, of an accepted kind and reference frame,
+   carrying every needed channel, at the trained rate -- one :class:`~wearpose.errors.ShapeError`
+   naming the sensor, the field and the expected form;
+2. convert every declared convention to canonical form (:meth:`Recording.to_canonical`:
+   mm/cm, deg/s, g, sensor-frame acceleration with gravity, Z-up world), so that a recording
+   written in a device's own units gives the same estimate as its canonical copy;
+3. (:func:`prepare`) stack the kit's sensors on their common time grid and treat masked samples
+   as the method says: held at the sensor's last valid sample (:func:`hold_last_valid`) or left
+   NaN. A dropped sample is never interpolated.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from wearpose.errors import ShapeError
+from wearpose.recording import Recording
+from wearpose.sensors import get_kit
+
+#: Rates agree when within this fraction of the trained rate.
+RATE_TOLERANCE = 1e-3
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """What an estimator reads from a recording.
+
+    Attributes:
+        method: the method's name, for messages (``"EM-POSE"``).
+        kit: the kit name (``"em12"``).
+        sensor_names: the kit sensors read, in input (column) order.
+        kinds: sensor kind -> the recording kinds accepted for it (default: the kit kind only).
+        channels: channels every kit sensor must carry, after canonical conversion.
+        rates: sensor kind -> the rate (Hz) the weights were trained at; kinds not listed may run
+            at any rate.
+        reference: EM sensors' required reference frame (``"source"``), or ``None`` for either.
+    """
+
+    method: str
+    kit: str
+    sensor_names: tuple[str, ...]
+    channels: tuple[str, ...]
+    kinds: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    rates: Mapping[str, float] = field(default_factory=dict)
+    reference: str | None = None
+
+    @classmethod
+    def from_kit(cls, method: str, kit: str, channels: tuple[str, ...], *,
+                 sensor_names: tuple[str, ...] | None = None, kinds: Mapping[str, tuple[str, ...]] | None = None,
+                 rates: Mapping[str, float] | None = None, reference: str | None = None) -> InputSpec:
+        """The spec of ``kit``'s sensors (all of them unless ``sensor_names``)."""
+        k = get_kit(kit)
+        names = tuple(sensor_names) if sensor_names is not None else tuple(k.sensor_names)
+        return cls(method, kit, names, tuple(channels), dict(kinds or {}), dict(rates or {}), reference)
+
+    def kit_kind(self, name: str) -> str:
+        """The kind kit sensor ``name`` has in the kit."""
+        for s in get_kit(self.kit).sensors:
+            if s.name == name:
+                return s.kind
+        raise ShapeError(f"{self.method} reads sensor {name!r}, which kit {self.kit!r} does not have")
+
+
+@dataclass
+class PreparedInput:
+    """Kit sensors of a canonical recording on their common grid.
+
+    Attributes:
+        recording: the whole recording in canonical form (other sensors included).
+        names: ``S`` sensor names, input order.
+        timestamps: ``(T,)`` s.
+        valid: ``(T, S)`` bool.
+        channels: the spec's channels, ``(T, S, ...)`` float32 tensors in canonical units;
+            masked samples held at the last valid one (``hold=True``) or NaN.
+    """
+
+    recording: Recording
+    names: tuple[str, ...]
+    timestamps: np.ndarray
+    valid: torch.Tensor
+    channels: dict[str, torch.Tensor]
+
+
+def check_input(recording: Recording, spec: InputSpec) -> None:
+    """Raise :class:`ShapeError` unless ``recording`` carries what ``spec`` reads (module doc, 1)."""
+    missing = [n for n in spec.sensor_names if n not in recording.names]
+    if missing:
+        raise ShapeError(f"recording lacks sensors {missing} of kit {spec.kit!r}: {spec.method} reads "
+                         f"{list(spec.sensor_names)}; the recording has {list(recording.names)}")
+    for name in spec.sensor_names:
+        s = recording.sensor(name)
+        kit_kind = spec.kit_kind(name)
+        accepted = spec.kinds.get(kit_kind, (kit_kind,))
+        if s.kind not in accepted:
+            raise ShapeError(f"sensor {name!r}: kind {s.kind!r}; {spec.method} (kit {spec.kit!r}) needs "
+                             f"kind {' or '.join(repr(k) for k in accepted)}")
+        if s.kind == "em6dof" and spec.reference is not None and s.info.reference != spec.reference:
+            raise ShapeError(f"sensor {name!r}: reference {s.info.reference!r}; {spec.method} needs EM poses "
+                             f"relative to the {spec.reference!r}")
+        lacking = [c for c in spec.channels if getattr(s, c) is None]
+        if lacking:
+            raise ShapeError(f"sensor {name!r}: no {lacking} channel; {spec.method} needs "
+                             f"{list(spec.channels)} for every kit sensor")
+        rate = spec.rates.get(kit_kind)
+        if rate is not None and abs(float(s.info.rate) - rate) > RATE_TOLERANCE * rate:
+            raise ShapeError(f"sensor {name!r} runs at {s.info.rate:g} Hz; {spec.method} was trained at "
+                             f"{rate:g} Hz (resample the recording first, e.g. wearpose estimate does)")
+
+
+def canonical_input(recording: Recording, spec: InputSpec) -> Recording:
+    """``recording`` checked against ``spec`` and in canonical form (module doc, steps 1-2).
+
+    A recording that is canonical already is returned as it is (no copy)."""
+    check_input(recording, spec)
+    return recording if recording.is_canonical else recording.to_canonical()
+
+
+def prepare(recording: Recording, spec: InputSpec, hold: bool = True) -> PreparedInput:
+    """Steps 1-3 of the module doc: the kit sensors' channels as ``(T, S, ...)`` float32 tensors."""
+    rec = canonical_input(recording, spec)
+    grid = rec.on_common_grid(spec.sensor_names)
+    valid = torch.as_tensor(grid.valid)
+    chans = {c: torch.as_tensor(grid.channels[c], dtype=torch.float32) for c in spec.channels}
+    if hold:
+        chans = {c: hold_last_valid(x, valid) for c, x in chans.items()}
+    return PreparedInput(rec, tuple(grid.names), grid.timestamps, valid, chans)
+
+
+def hold_last_valid(x: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """Replace masked samples by the sensor's last valid one (its first valid one before any).
+
+    Args:
+        x: ``(T, S, ...)`` samples (masked ones may be NaN).
+        valid: ``(T, S)`` bool.
+
+    Returns:
+        a filled copy; a sensor never valid gets identity rotations for ``(..., 3, 3)`` input and
+        zeros otherwise.
+    """
+    T, S = valid.shape
+    if bool(valid.all()):
+        return x.clone()
+    idx = torch.arange(T).unsqueeze(1).expand(T, S)
+    last = torch.where(valid, idx, torch.full_like(idx, -1)).cummax(0).values  # last valid index so far
+    first = torch.where(valid.any(0), valid.float().argmax(0), torch.zeros(S, dtype=torch.long))
+    src = torch.where(last >= 0, last, first.unsqueeze(0).expand(T, S))
+    out = x[src, torch.arange(S).unsqueeze(0).expand(T, S)].clone()
+    never = ~valid.any(0)
+    if bool(never.any()):
+        rot = x.shape[2:] == (3, 3)
+        out[:, never] = torch.eye(3, dtype=x.dtype) if rot else torch.zeros(x.shape[2:], dtype=x.dtype)
+    return out
