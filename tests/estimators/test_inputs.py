@@ -94,3 +94,13 @@ def test_kind_channel_rate_and_reference_are_checked(imu_rec: Recording) -> None
         canonical_input(imu_rec, InputSpec.from_kit("EM-POSE", "em12", ("orientation",), sensor_names=("head",)))
     with pytest.raises(ShapeError, match="reads sensor 'nope', which kit 'imu6' does not have"):
         _spec(sensor_names=("nope",)).kit_kind("nope")
+
+
+def test_online_frames_of_a_declared_copy_equal_the_canonical(imu_rec: Recording) -> None:
+    from wearpose.estimators import iter_frames
+
+    names = list(imu_rec.names)
+    for fa, fb in zip(iter_frames(imu_rec, names), iter_frames(imu_rec.declared_as(**DECLARED), names)):
+        assert fa.timestamp == fb.timestamp and np.array_equal(fa.valid, fb.valid)
+        for c in ("orientation", "acceleration", "angular_velocity"):
+            np.testing.assert_allclose(fb.channels[c], fa.channels[c], atol=2e-5, equal_nan=True)

@@ -113,7 +113,10 @@ class SensorFrame:
 
 
 def iter_frames(recording: Any, names: Sequence[str] | None = None) -> Iterator[SensorFrame]:
-    """Replay a recording (sensors on one grid) as :class:`SensorFrame` s, in time order."""
+    """Replay a recording (sensors on one grid) as :class:`SensorFrame` s, in time order, in
+    canonical form (declared units and frames converted, as offline input is)."""
+    if not recording.is_canonical:
+        recording = recording.to_canonical()
     grid = recording.on_common_grid(names)
     for t in range(len(grid.timestamps)):
         yield SensorFrame(float(grid.timestamps[t]), grid.names, grid.valid[t],
