@@ -294,16 +294,31 @@ def train(task: TrainTask, s: TrainSettings, console: Any = None) -> dict[str, A
     if log is not None:
         log.close()
     if distributed:
-        # Teardown in dependency order. The DDP wrapper's reducer holds the process group; left
-        # alive until train() returns, it was destroyed *after* destroy_process_group, and that
-        # destructor sometimes blocked for good: one rank stayed alive after training, the other
-        # had exited (issue 20; caught with faulthandler: the rank sat in the caller's line of
-        # train(), no Python frame below). Drop it first, then wait for every rank, then destroy.
-        del ddp
-        dist.barrier()
-        if own_group:
-            dist.destroy_process_group()
+        del ddp  # its reducer holds the process group: the group must not die with it (below)
+        _teardown_process_group(own_group)
     return {"best": best, "history": history, "out_dir": str(out), "steps": gstep}
+
+
+def _teardown_process_group(own_group: bool) -> None:
+    """Wait for every rank, then destroy the process group (when ``train`` created it).
+
+    Why the wait before destroying (issue 20): in torch 2.13, ``~ProcessGroupGloo`` takes the
+    group's work mutex on the thread that drops the last reference, with the GIL held, while a
+    gloo worker thread that has just completed a collective holds that mutex and waits for the
+    GIL to free the work's Python-owned tensors: a lock-order deadlock. It was caught with
+    ``py-spy dump --native`` (1 run in 30 of a 2-rank EM-POSE run, main thread in
+    ``Reducer::~Reducer -> ~ProcessGroupGloo -> pthread_mutex_lock``, worker in
+    ``~AsyncBarrierWork -> decref_pyobject -> gil_scoped_acquire``); the group died with the DDP
+    wrapper when ``train`` returned, right after the final barrier. So the group is dropped only
+    once the workers are idle: a sleep releases the GIL to them after the barrier (they need it
+    for microseconds; 0.2 s leaves room for a loaded machine).
+    """
+    import torch.distributed as dist
+
+    dist.barrier()
+    time.sleep(0.2)
+    if own_group:
+        dist.destroy_process_group()
 
 
 # --------------------------------------------------------------------------- run setup of the estimators
