@@ -109,6 +109,7 @@ class BodyModel(nn.Module):
             self.register_buffer("posedirs", f(asset.posedirs))  # (207, V*3)
         self.parents = PARENTS
         self._vertex_faces: list[np.ndarray] | None = None
+        self._support_ids: torch.Tensor | None = None
 
     @staticmethod
     def _resolve(source: str | Path | BodyAsset | None, num_betas: int) -> BodyAsset:
@@ -233,6 +234,54 @@ class BodyModel(nn.Module):
             verts = normals = None
         un = lambda x: None if x is None else x.reshape(*batch, *x.shape[1:])  # noqa: E731
         return BodyOutput(joints=un(J), global_rot=un(G), rest_joints=un(J_rest), vertices=un(verts), normals=un(normals))
+
+    def lowest_height(self, pose: torch.Tensor, betas: torch.Tensor | None = None, trans: torch.Tensor | None = None,
+                      chunk: int = 256) -> torch.Tensor:
+        """Height (y, m) of the body's lowest point per frame, cheaply enough for hours of motion.
+
+        Each vertex is moved rigidly with its dominant joint (LBS blending and pose correctives
+        ignored: about a centimetre near the joints), so only the vertical row of each joint's
+        rotation is needed: ``y_v = J_p,y + (G_p r_v)_y`` with ``r_v`` the vertex's rest offset
+        from its joint ``p``. Only vertices on the convex hull of
+        their part can be lowest (a rigid part's lowest point is on its hull): about a tenth of
+        the mesh.
+
+        Args:
+            pose: ``(T, 24, 3, 3)`` local rotations; betas: ``(S,)``; trans: ``(T, 3)`` m or None.
+
+        Returns:
+            ``(T,)`` lowest height per frame, m (world y, Y up).
+        """
+        R, b, t, _ = self._batch(pose, betas, trans)
+        ids = self._support_vertices()
+        part = self.weights.argmax(1)[ids]  # dominant joint of each candidate vertex
+        v_shaped = self.v_template[ids] + torch.einsum("vcs,s->vc", self.shapedirs[ids], b[0])
+        J_rest = self.rest_joints(b[0])
+        offset = v_shaped - J_rest[part]  # (V', 3), rest pose, m
+        out = []
+        for a in range(0, R.shape[0], chunk):
+            G, J = forward_kinematics(R[a:a + chunk], J_rest.expand(R[a:a + chunk].shape[0], -1, -1), self.parents)
+            up = G[:, :, 1, :]  # (N, 24, 3): the world-y row of each joint's rotation
+            y = J[:, part, 1] + (up[:, part] * offset).sum(-1)  # (N, V)
+            out.append(y.amin(-1) + t[a:a + chunk, 1])
+        return torch.cat(out) if out else torch.zeros(0, dtype=self.dtype)
+
+    def _support_vertices(self) -> torch.Tensor:
+        """Ids of the vertices on the convex hull of their dominant joint's vertex set (rest pose)."""
+        if getattr(self, "_support_ids", None) is None:
+            from scipy.spatial import ConvexHull, QhullError
+
+            part = self.weights.argmax(1).cpu().numpy()
+            v = self.v_template.detach().cpu().double().numpy()
+            keep: list[np.ndarray] = []
+            for j in np.unique(part):
+                idx = np.flatnonzero(part == j)
+                try:
+                    keep.append(idx[ConvexHull(v[idx]).vertices] if len(idx) > 4 else idx)
+                except QhullError:  # a flat or tiny part (test assets): keep all its vertices
+                    keep.append(idx)
+            self._support_ids = torch.as_tensor(np.sort(np.concatenate(keep)), device=self.device)
+        return self._support_ids
 
     # ------------------------------------------------------------------ sensor sites
     def _faces_of(self, v: int) -> np.ndarray:
