@@ -33,7 +33,7 @@ def test_estimate_writes_a_motion_that_reads_back(em12_30: Path, tmp_path: Path)
     res = runner.invoke(app, ["estimate", str(em12_30), "--model", "empose12_cpu", "--out", str(out), "--json"])
     assert res.exit_code == 0, res.output
     r = json.loads(res.stdout)
-    assert r["frames"] == 30 and r["fps"] == 30.0 and r["frame"] == "em_source" and r["written"] == str(out)
+    assert r["frames"] == 30 and r["fps"] == 30.0 and r["frame"] == "world" and r["estimated_frame"] == "em_source" and r["written"] == str(out)
     seq = load_motion(str(out))  # AMASS-style npz, as `wearpose export` writes
     assert seq.num_frames == 30 and seq.pose.shape == (30, 24, 3, 3)
 
@@ -235,3 +235,56 @@ def test_declared_units_and_frames_give_the_same_estimate(model: str, tmp_path: 
             if np.issubdtype(a[k].dtype, np.floating) and a[k].size}
     record_property("max_abs_difference", json.dumps(diff))
     assert diff and max(diff.values()) < 1e-4, diff
+
+
+# --------------------------------------------------------------------------- exports in the world
+DEMO_MODELS = {"em12": "empose12_cpu", "em6": "empose6_cpu", "imu6": "pip_cpu", "mimu6": "birae6_cpu",
+               "miposer": "miposer_cpu"}
+
+
+@pytest.fixture(scope="module")
+def walk(corpus_root: Path):
+    from wearpose.motion import CorpusStore
+
+    seq = CorpusStore(corpus_root).load("cmu_daz/05/05_01")  # a held-out walk (test split), 60 fps
+    return seq.slice(0, int(2 * seq.fps))
+
+
+@pytest.mark.corpus
+@pytest.mark.budget(40)  # PIP's physics and MI-Poser's calibration on 3 s
+@pytest.mark.parametrize("kit", [*DEMO_MODELS, "em12-no-source-pose"])
+def test_exported_bvh_stands_on_the_floor(kit: str, walk, tmp_path: Path) -> None:
+    """Every demo kit's estimate of a walk, exported as BVH and read back: upright (pelvis above
+    the knees in every frame of the walk) with the lowest vertex on the floor (within 5 cm)."""
+    import warnings
+
+    import torch
+
+    from wearpose.body import BodyModel
+    from wearpose.cli.models import weights_setting
+    from wearpose.motion import resample
+    from wearpose.recording import CALIBRATION_WINDOW_KEY, prepend_tpose
+    from wearpose.sensors import simulate
+
+    name = kit.split("-")[0]
+    model = DEMO_MODELS[name]
+    fps = float(weights_setting(model)["fps"] or 60.0)
+    m, window = prepend_tpose(resample(walk, fps) if abs(walk.fps - fps) > 1e-6 else walk, 1.0)
+    body = BodyModel()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = simulate(m, name, body, seed=2, noise="none", rate=fps)
+    rec = Recording.from_simulation(res, m, meta={CALIBRATION_WINDOW_KEY: window})
+    if kit.endswith("no-source-pose"):
+        rec.meta.pop("em_source", None)
+    save_recording(rec, tmp_path / "rec.npz")
+    res = runner.invoke(app, ["estimate", str(tmp_path / "rec.npz"), "--model", model, "--out",
+                              str(tmp_path / "pose.bvh"), "--json"])
+    assert res.exit_code == 0, res.output
+    back = load_motion(str(tmp_path / "pose.bvh"))
+    out = body(back.pose, back.betas, back.trans, return_normals=False)
+    low = out.vertices[..., 1].amin(-1)  # (T,) lowest vertex per frame, m
+    walking = slice(int(round(window["prefix_s"] * back.fps)), back.num_frames)
+    assert abs(float(low[walking].min())) < 0.05, (kit, float(low.min()), json.loads(res.stdout)["placement"])
+    J = out.joints[walking]
+    assert bool((J[:, 0, 1] > J[:, 4:6, 1].max(-1).values).all()), kit  # pelvis above both knees

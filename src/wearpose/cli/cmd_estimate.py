@@ -48,6 +48,7 @@ def estimate(
     from wearpose.cli.models import check_pose_weights, fit_rate, recording_mismatch
     from wearpose.calibration import CalibrationError
     from wearpose.errors import InputFileError, ShapeError
+    from wearpose.estimators.run import place_in_world
     from wearpose.export import export_motion
     from wearpose.recording import load_recording, use_calibration_window
     from wearpose.stream import estimator_factory
@@ -78,13 +79,17 @@ def estimate(
         from wearpose.body import BodyModel
 
         body = BodyModel()
+    estimated_frame, estimated_trans = track.extras.get("frame", "world"), track.trans is not None
+    track = place_in_world(est, track, rec, body)  # upright, feet on the floor (as a user expects a file)
     path = export_motion(track.to_motion(), out, body)
     valid = float(track.valid.float().mean()) * 100 if track.num_frames else 0.0
     resampled = rec.meta.get("resampled") if note else None
     res: dict[str, Any] = {"recording": str(recording), "model": model, "frames": track.num_frames,
                            "fps": track.fps, "valid_pct": round(valid, 2),
-                           "frame": track.extras.get("frame", "world"),
-                           "translation": track.trans is not None, "written": str(path)}
+                           "frame": track.extras.get("frame", "world"), "estimated_frame": estimated_frame,
+                           "translation": estimated_trans,
+                           "placement": track.extras.get("placement", "as estimated"),
+                           "floor": track.extras.get("floor"), "written": str(path)}
     if resampled:
         res["resampled"] = resampled
     _emit(res, as_json, lambda r: console.print(_kv_table(f"estimate of {recording.name} by {model}", r)))
