@@ -157,6 +157,17 @@ def corpus_store(corpus_root: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return corpus_root
 
 
+@pytest.fixture(scope="session")
+def real_sensors() -> Path:
+    """``../shared/real-sensors`` (files logged by real devices, read-only); skips when absent."""
+    if "data" not in _FRESH:
+        pytest.skip("../shared absent: the real-sensor logs live in ../shared/real-sensors")
+    root = Path(_FRESH["data"]).parent / "real-sensors"
+    if not root.is_dir():
+        pytest.skip(f"{root} absent")
+    return root
+
+
 @pytest.fixture
 def one_torch_thread():
     """Run a test with one torch thread: suites of many tiny tensor ops are dominated by

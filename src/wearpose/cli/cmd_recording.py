@@ -18,7 +18,8 @@ from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console, error_text
 
-recording_app = typer.Typer(help="Import real sensor recordings from public datasets (DIP-IMU, TotalCapture, EM-POSE).\n\n"
+recording_app = typer.Typer(help="Import real sensor recordings: public datasets (DIP-IMU, TotalCapture, EM-POSE) "
+                                 "and device logs (x-IMU3).\n\n"
                                  "Example: wearpose recording import dip-imu DIP_IMU/s_09 --out recordings/",
                             no_args_is_help=True)
 app.add_typer(recording_app, name="recording")
@@ -28,6 +29,8 @@ FORMATS: dict[str, tuple[tuple[str, ...], str]] = {
     "dip-imu": ((".pkl",), "DIP-IMU .pkl (imu_ori, imu_acc, gt)"),
     "totalcapture": ((".sensors",), "TotalCapture *_Xsens.sensors / *_Xsens_AuxFields.sensors"),
     "empose": (("_clean.npz",), "EM-POSE *_clean.npz"),
+    # a log folder, not a file: one sub-folder per device (Inertial.csv, Quaternion.csv, Command.json)
+    "ximu3": ((), "x-IMU3 log folder (device sub-folders with Inertial.csv, Quaternion.csv)"),
 }
 
 
@@ -56,8 +59,13 @@ def _parse_sensors(fmt: str, sensors: str | None) -> Any:
 
 def _converter(fmt: str, sensors: Any, fps: float | None, ground_truth: bool) -> Callable[[Path], Any]:
     """One-argument converter with the options bound (options left unset keep the converter's default)."""
-    from wearpose.recording import from_dip_imu, from_empose, from_totalcapture
+    from wearpose.recording import from_dip_imu, from_empose, from_totalcapture, from_ximu3
 
+    if fmt == "ximu3":
+        if sensors is not None or fps is not None:
+            raise typer.BadParameter("ximu3 takes every device at its own rate; leave out --sensors and --fps",
+                                     param_hint="--sensors/--fps")
+        return from_ximu3
     kw: dict[str, Any] = {}
     if sensors is not None:
         kw["sensors"] = sensors
@@ -72,6 +80,8 @@ def _converter(fmt: str, sensors: Any, fps: float | None, ground_truth: bool) ->
 def _collect(fmt: str, paths: list[Path]) -> list[tuple[Path, Path]]:
     """``(input file, output path relative to --out)``: files as given, folders searched
     recursively for the format's files (their layout kept, e.g. ``s_09/01.npz``)."""
+    if fmt == "ximu3":
+        return _collect_logs(paths)
     suffixes = FORMATS[fmt][0]
     found: list[tuple[Path, Path]] = []
     for p in paths:
@@ -90,6 +100,18 @@ def _collect(fmt: str, paths: list[Path]) -> list[tuple[Path, Path]]:
     return out
 
 
+def _collect_logs(paths: list[Path]) -> list[tuple[Path, Path]]:
+    """x-IMU3 log folders (a folder with device sub-folders holding Inertial.csv) as given or
+    below the given folders, each -> ``<log folder name>.npz``."""
+    def is_log(d: Path) -> bool:
+        return d.is_dir() and any((c / "Inertial.csv").is_file() for c in d.iterdir() if c.is_dir())
+
+    logs: list[Path] = []
+    for p in paths:
+        logs += [p] if is_log(p) else sorted(d for d in p.rglob("*") if is_log(d))
+    return [(d, Path(d.name).with_suffix(".npz")) for d in logs]
+
+
 def _summary(rec: Any) -> dict[str, Any]:
     """Frames, sensors, rate and valid share of one converted recording."""
     import numpy as np
@@ -100,7 +122,8 @@ def _summary(rec: Any) -> dict[str, Any]:
             "sensor_names": list(rec.names), "kinds": sorted(set(rec.kinds)),
             "rate_hz": rates[0] if len(rates) == 1 else rates,
             "valid_pct": round(100.0 * float(valid.mean()), 2) if valid.size else 0.0,
-            "ground_truth": rec.ground_truth is not None}
+            "ground_truth": rec.ground_truth is not None,
+            **({"devices": rec.meta["import"]["devices"]} if "devices" in (rec.meta or {}).get("import", {}) else {})}
 
 
 def import_recordings(fmt: str, files: list[tuple[Path, Path]], out: Path, convert: Callable[[Path], Any],
@@ -132,7 +155,7 @@ def _report_table(res: dict[str, Any]) -> Table:
     t = Table(title=f"recording import ({res['format']}) -> {res['out']}: {res['converted']} converted, {res['failed']} failed")
     for c in ("file", "frames", "sensors", "rate (Hz)", "valid %", "ground truth", "status"):
         t.add_column(c, justify="right" if c in ("frames", "sensors", "rate (Hz)", "valid %") else "left",
-                     overflow="fold" if c == "file" else "ellipsis")
+                     overflow="fold" if c in ("file", "rate (Hz)") else "ellipsis")
     for r in res["files"]:
         name = escape(Path(r["file"]).name)
         if not r["ok"]:
@@ -144,10 +167,20 @@ def _report_table(res: dict[str, Any]) -> Table:
     return t
 
 
+def _device_table(row: dict[str, Any]) -> Table:
+    """Per device of a device log: rate, samples, lost samples (masked, not filled), clock start."""
+    t = Table(title=f"devices of {escape(Path(row['file']).name)}")
+    for c in ("device", "rate (Hz)", "samples", "lost", "clock start (us)"):
+        t.add_column(c, justify="left" if c == "device" else "right", overflow="fold")
+    for d in row["devices"]:
+        t.add_row(escape(d["device"]), f"{d['rate_hz']:.2f}", str(d["samples"]), str(d["lost"]), str(d["clock_start_us"]))
+    return t
+
+
 @recording_app.command("import")
 def recording_import(
-    fmt: str = typer.Argument(..., metavar="FORMAT", help="Source layout: dip-imu, totalcapture or empose."),
-    paths: list[Path] = typer.Argument(..., help="Dataset files or folders (searched recursively: *.pkl for dip-imu, *.sensors for totalcapture, *_clean.npz for empose)."),
+    fmt: str = typer.Argument(..., metavar="FORMAT", help="Source layout: dip-imu, totalcapture, empose or ximu3."),
+    paths: list[Path] = typer.Argument(..., help="Dataset files or folders (searched recursively: *.pkl for dip-imu, *.sensors for totalcapture, *_clean.npz for empose, log folders for ximu3)."),
     out: Path = typer.Option(Path("recordings"), "--out", help="Output folder: one Recording .npz per input file (folder layout kept)."),
     sensors: Optional[str] = typer.Option(None, help="Sensors to keep. dip-imu: six (default), all or indices into the 17; "
                                                      "empose: all (default), six or indices into the 12; "
@@ -192,6 +225,9 @@ def recording_import(
 
     def render(r: dict[str, Any]) -> None:
         console.print(_report_table(r))
+        for row in r["files"]:
+            if row.get("devices"):
+                console.print(_device_table(row))
         for row in r["files"]:
             if not row["ok"]:
                 err_console.print(f"[red]failed[/] {escape(row['error'])}")

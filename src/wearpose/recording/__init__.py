@@ -7,7 +7,7 @@ Public API:
 - :func:`load_recording` / :func:`save_recording` (also ``Recording.save``), format
   ``wearpose.recording`` v1 (``docs/formats.md``)
 - :func:`check_stream` / :func:`check_recording`: does the data look like its declared units?
-- converters: :func:`from_dip_imu`, :func:`from_totalcapture`, :func:`from_empose`,
+- converters: :func:`from_dip_imu`, :func:`from_totalcapture`, :func:`from_empose`, :func:`from_ximu3`,
   :func:`amass_ground_truth`
 - :func:`recording_from_simulation` (also ``Recording.from_simulation``): a
   :func:`wearpose.sensors.simulate` result as a recording
@@ -46,6 +46,7 @@ from wearpose.recording.converters import (
     from_dip_imu,
     from_empose,
     from_totalcapture,
+    from_ximu3,
 )
 
 __all__ = [
@@ -56,6 +57,6 @@ __all__ = [
     "recording_from_simulation",
     "decimate", "decimation_factor",
     "CALIBRATION_WINDOW_KEY", "prepend_tpose", "calibration_window", "use_calibration_window",
-    "from_dip_imu", "from_totalcapture", "from_empose", "amass_ground_truth",
+    "from_dip_imu", "from_totalcapture", "from_empose", "from_ximu3", "amass_ground_truth",
     "DIP_IMU_SENSORS", "DIP_IMU_SIX", "EMPOSE_SENSORS", "EMPOSE_SITES", "EMPOSE_SIX", "TOTALCAPTURE_SITES",
 ]

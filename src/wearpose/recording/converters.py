@@ -460,3 +460,136 @@ def amass_ground_truth(path: str | Path, rest_joints: torch.Tensor | None = None
     from wearpose.motion.amass import read_amass  # lazily: motion is the lower layer's reader
 
     return read_amass(path, rest_joints=rest_joints)
+
+
+# ----------------------------------------------------------------------------------- x-IMU3
+#: x-IMU3 device names (the ``name`` in each device folder's ``Command.json``, lower-cased) ->
+#: body site. Names that are not listed keep ``site=None`` (still imported).
+XIMU3_SITES: dict[str, str] = {
+    "pelvis": "pelvis", "head": "head", "sternum": "sternum",
+    "left upper leg": "left_thigh", "right upper leg": "right_thigh",
+    "left lower leg": "left_shin", "right lower leg": "right_shin",
+    "left foot": "left_foot", "right foot": "right_foot",
+    "left upper arm": "left_upper_arm", "right upper arm": "right_upper_arm",
+    "left forearm": "left_forearm", "right forearm": "right_forearm",
+    "left wrist": "left_wrist", "right wrist": "right_wrist",
+}
+#: A gap between two samples longer than this many nominal periods holds lost samples.
+XIMU3_GAP_PERIODS = 1.5
+
+
+def _ximu3_csv(path: Path, columns: int) -> np.ndarray:
+    """The numeric rows of an x-IMU3 CSV (one header line), ``(N, columns)``."""
+    if not path.is_file():
+        raise InputFileError(path, "file not found", "the x-IMU3 log's Inertial.csv and Quaternion.csv in each device folder")
+    try:
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    except ValueError as exc:
+        raise InputFileError(path, f"not numeric CSV ({exc})", f"a header line, then rows of {columns} numbers") from None
+    if data.shape[1] != columns or len(data) < 2:
+        raise InputFileError(path, f"{data.shape[1]} columns, {len(data)} rows", f"{columns} columns and at least 2 rows",
+                             field="header")
+    return data
+
+
+def _ximu3_grid(stamps_us: np.ndarray, path: Path, t0_us: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Slots on the device's nominal sample grid: ``(slot of each sample, timestamps (K,) s from
+    ``t0_us``, rate Hz)``. A lost sample gets a slot (masked) whose timestamp is the nominal one;
+    the samples keep their own stamps (the device's clock, microseconds)."""
+    dt = np.diff(stamps_us)
+    if np.any(dt <= 0):
+        i = int(np.flatnonzero(dt <= 0)[0]) + 2
+        raise InputFileError(path, f"timestamp of data row {i} is not after the one before", "increasing device timestamps (us)",
+                             field="Timestamp (us)")
+    period = float(np.median(dt))
+    slot = np.round((stamps_us - stamps_us[0]) / period).astype(np.int64)
+    if np.any(np.diff(slot) < 1):
+        raise InputFileError(path, "two samples fall in one sample period", "one sample per period of the device's rate",
+                             field="Timestamp (us)")
+    ts = (stamps_us[0] - t0_us + np.arange(slot[-1] + 1) * period) * 1e-6
+    ts[slot] = (stamps_us - t0_us) * 1e-6
+    return slot, ts, 1e6 / period
+
+
+#: Devices whose first samples lie further apart than this do not share a clock.
+XIMU3_SHARED_CLOCK_US = 1e6
+
+
+def _ximu3_first_stamp(folder: Path) -> float:
+    return float(_ximu3_csv(folder / "Inertial.csv", 7)[0, 0])
+
+
+def _ximu3_device(folder: Path, t0_us: float | None) -> tuple[SensorStream, dict[str, Any]]:
+    """One device folder -> its stream (kind ``imu``) and what the import found about it.
+    ``t0_us``: the shared clock's zero, or None to start this device's time at its first sample."""
+    import json
+
+    try:
+        cmd = json.loads((folder / "Command.json").read_text(encoding="utf-8"))
+        ping = next(c["ping"] for c in cmd if isinstance(c, dict) and "ping" in c)
+        name, serial = str(ping["name"]), str(ping.get("sn", ""))
+    except (OSError, ValueError, StopIteration, KeyError, TypeError):
+        name, serial = re.sub(r"\s+[0-9A-F]{8}\s*\(.*\)$", "", folder.name), ""
+    inertial = _ximu3_csv(folder / "Inertial.csv", 7)  # t (us), gyro (deg/s) x3, acc (g) x3
+    quat = _ximu3_csv(folder / "Quaternion.csv", 5)  # t (us), w, x, y, z
+    if not np.array_equal(inertial[:, 0], quat[:, 0]):
+        raise InputFileError(folder / "Quaternion.csv", "its timestamps differ from Inertial.csv's",
+                             "one Quaternion row per Inertial row, same timestamps (the device's own log)",
+                             field="Timestamp (us)")
+    slot, ts, rate = _ximu3_grid(inertial[:, 0], folder / "Inertial.csv", inertial[0, 0] if t0_us is None else t0_us)
+    K = len(ts)
+    valid = np.zeros(K, bool)
+    valid[slot] = True
+    gyro, acc, q = (np.full((K, n), np.nan) for n in (3, 3, 4))
+    gyro[slot], acc[slot], q[slot] = inertial[:, 1:4], inertial[:, 4:7], quat[:, 1:5]
+    key = re.sub(r"[^a-z0-9]+", "_", name.lower()).strip("_")
+    info = SensorInfo(key, "imu", site=XIMU3_SITES.get(name.lower()), rate=rate, acc_unit="g", acc_frame="sensor",
+                      acc_gravity="included", world_up="z_up", gyro_unit="deg/s")
+    try:
+        R = quaternions_to_matrices(q, f"{folder.name}/Quaternion.csv", valid)
+    except _Problem as p:
+        raise InputFileError(folder / "Quaternion.csv", p.problem, p.expected, field=p.field) from None
+    stream = _stream(folder / "Inertial.csv", "Inertial.csv", info, ts, valid, orientation=R, acceleration=acc,
+                     angular_velocity=gyro)
+    found = {"device": name, "serial": serial, "folder": folder.name, "samples": int(len(slot)), "slots": K,
+             "lost": int(K - len(slot)), "rate_hz": round(rate, 4), "clock_start_us": int(inertial[0, 0]),
+             "magnetometer": "not imported (own clock and rate; would need resampling)"}
+    return stream, found
+
+
+def from_ximu3(path: str | Path) -> Recording:
+    """An x-IMU3 log folder (the x-IMU3 software's layout: one sub-folder per device with
+    ``Inertial.csv``, ``Quaternion.csv``, ``Command.json``) -> a :class:`Recording` of kind-``imu``
+    sensors, one per device, named after the device (``"Left Lower Leg"`` -> ``left_lower_leg``).
+
+    Declared as the files hold it (x-io's CSV headers): gyroscope deg/s, accelerometer in g in the
+    sensor frame with gravity included, orientation the device AHRS's quaternion (w, x, y, z) in
+    its Earth frame (North-West-Up: Z up, ``world_up="z_up"``; heading is magnetic).
+    Each device stamps its own samples (microseconds). When the devices' first samples lie within
+    :data:`XIMU3_SHARED_CLOCK_US` of each other their clocks are taken as one (x-IMU3 devices
+    synchronise over the network; the shared log's first samples lie within 17 ms), time 0 at the
+    earliest first sample; otherwise each device's time starts at its own first sample (the
+    software starts all logs at once; left over: up to a sample period). ``meta["import"]`` says
+    which. A sample lost over UDP is a masked slot on the device's own grid (nominal timestamp),
+    never filled in.
+    ``Magnetometer.csv`` has its own clock and rate and is not imported (``meta`` says so).
+
+    Raises:
+        InputFileError: no device folder, a missing or malformed CSV (file, column, the fix).
+    """
+    root = Path(path)
+    devices = sorted(d for d in root.iterdir() if (d / "Inertial.csv").is_file()) if root.is_dir() else []
+    if not devices:
+        raise InputFileError(root, "no x-IMU3 device folders", "a folder holding one sub-folder per device, each with "
+                             "Inertial.csv and Quaternion.csv (the x-IMU3 software's log)")
+    starts = [_ximu3_first_stamp(d) for d in devices]
+    shared = max(starts) - min(starts) <= XIMU3_SHARED_CLOCK_US
+    streams, found = zip(*(_ximu3_device(d, min(starts) if shared else None) for d in devices))
+    names = [s.info.name for s in streams]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputFileError(root, f"two devices are both named {dup}", "one name per device (rename one in the x-IMU3 software)")
+    clock = ("shared device clock, t = 0 at the earliest first sample" if shared else
+             "device clocks differ: each device's t = 0 at its own first sample")
+    meta = {"source": "x-IMU3 log", "path": str(root), "import": {"devices": list(found), "clock": clock}}
+    return Recording(list(streams), meta=meta)
