@@ -16,6 +16,9 @@ from rich.markup import escape
 
 from wearpose.cli.app import _emit, _kv_table, app, console, err_console
 
+#: The weight-free estimator's name for --model.
+SEGMENTS = "segments"
+
 
 @app.command()
 def estimate(
@@ -38,8 +41,10 @@ def estimate(
     The recording must hold the sensors of the weights' kit (names as in the card) at the rate
     they were trained at, or at an integer multiple of it (decimated, with a warning line;
     --no-resample refuses); a recording that does not fit is refused with the kit, the rate and
-    a command that makes a fitting one. EM methods estimate relative to the EM source (the
-    result's `frame` says so).
+    a command that makes a fitting one. `--model segments` needs no weights: a dense kit's
+    segments take their calibrated sensors' orientations (any sensors on known sites with a
+    pelvis sensor, e.g. `wearpose recording import ximu3`). The motion is written upright with
+    its feet on the floor (the result's `placement` and `floor` say how).
 
     Example: wearpose estimate out/demo/recording.npz --model empose12_cpu --out out/estimate.bvh
     """
@@ -48,6 +53,7 @@ def estimate(
     from wearpose.cli.models import check_pose_weights, fit_rate, recording_mismatch
     from wearpose.calibration import CalibrationError
     from wearpose.errors import InputFileError, ShapeError
+    from wearpose.estimators import get_estimator
     from wearpose.estimators.run import place_in_world
     from wearpose.export import export_motion
     from wearpose.recording import load_recording, use_calibration_window
@@ -55,12 +61,15 @@ def estimate(
 
     if out.suffix not in (".bvh", ".npz", ".glb"):
         raise typer.BadParameter(f"{out}: expected a .bvh, .npz or .glb file name", param_hint="--out")
-    check_pose_weights(model)
     torch.set_num_threads(threads)
-    rec, note = fit_rate(recording, load_recording(recording), model, resample)
+    if model == SEGMENTS:  # no weights, any rate: nothing to fit
+        rec, note = load_recording(recording), None
+    else:
+        check_pose_weights(model)
+        rec, note = fit_rate(recording, load_recording(recording), model, resample)
     if note:
         err_console.print(f"[yellow]warning:[/] {escape(note)}", soft_wrap=True)
-    est = estimator_factory(model)()
+    est = get_estimator(SEGMENTS)() if model == SEGMENTS else estimator_factory(model)()
     use_calibration_window(est, rec)  # a recording that marks its T-pose (simulate --tpose) calibrates from it
     try:
         # A spinner on stderr: an hour of IMU data through PIP's physics takes minutes.

@@ -17,14 +17,15 @@ or :func:`prepare`. In order, they:
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
 
 from wearpose.errors import ShapeError
-from wearpose.recording import Recording
+from wearpose.recording import Recording, SensorStream
 from wearpose.sensors import get_kit
 
 #: Rates agree when within this fraction of the trained rate.
@@ -37,7 +38,8 @@ class InputSpec:
 
     Attributes:
         method: the method's name, for messages (``"EM-POSE"``).
-        kit: the kit name (``"em12"``).
+        kit: the kit name (``"em12"``), or ``None`` for sensors named by the recording (any kit);
+            then ``kinds["any"]`` lists the accepted kinds.
         sensor_names: the kit sensors read, in input (column) order.
         kinds: sensor kind -> the recording kinds accepted for it (default: the kit kind only).
         channels: channels every kit sensor must carry, after canonical conversion.
@@ -47,7 +49,7 @@ class InputSpec:
     """
 
     method: str
-    kit: str
+    kit: str | None
     sensor_names: tuple[str, ...]
     channels: tuple[str, ...]
     kinds: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
@@ -64,7 +66,9 @@ class InputSpec:
         return cls(method, kit, names, tuple(channels), dict(kinds or {}), dict(rates or {}), reference)
 
     def kit_kind(self, name: str) -> str:
-        """The kind kit sensor ``name`` has in the kit."""
+        """The kind kit sensor ``name`` has in the kit (``"any"`` without a kit)."""
+        if self.kit is None:
+            return "any"
         for s in get_kit(self.kit).sensors:
             if s.name == name:
                 return s.kind
@@ -100,7 +104,7 @@ def check_input(recording: Recording, spec: InputSpec) -> None:
     for name in spec.sensor_names:
         s = recording.sensor(name)
         kit_kind = spec.kit_kind(name)
-        accepted = spec.kinds.get(kit_kind, (kit_kind,))
+        accepted = spec.kinds.get(kit_kind, (kit_kind,) if spec.kit is not None else (s.kind,))
         if s.kind not in accepted:
             raise ShapeError(f"sensor {name!r}: kind {s.kind!r}; {spec.method} (kit {spec.kit!r}) needs "
                              f"kind {' or '.join(repr(k) for k in accepted)}")
@@ -160,3 +164,44 @@ def hold_last_valid(x: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
         rot = x.shape[2:] == (3, 3)
         out[:, never] = torch.eye(3, dtype=x.dtype) if rot else torch.zeros(x.shape[2:], dtype=x.dtype)
     return out
+
+
+def nearest_sample_grid(recording: Recording, names: tuple[str, ...], rate: float | None = None) -> Recording:
+    """The named sensors on one shared time grid, each grid instant taking the sensor's nearest
+    sample: for devices that stamp their own samples (x-IMU3, phones), whose grids differ by
+    milliseconds and drift apart by their clock rates.
+
+    Nothing is interpolated: a grid instant whose nearest sample is further than half that
+    sensor's period, is masked, or is nearer to another instant (a sample is used once) is
+    masked. The grid runs at ``rate`` (default: the median of the sensors' rates) over the span
+    every sensor covers.
+
+    Returns:
+        a recording of the named sensors sharing one ``timestamps`` array (``rate`` declared);
+        ``meta["grid"]`` says how it was made and how many instants each sensor lost to it.
+    """
+    streams = [recording.sensor(n) for n in names]
+    rate = float(rate or np.median([s.info.rate for s in streams]))
+    t0 = max(float(s.timestamps[0]) for s in streams)
+    t1 = min(float(s.timestamps[-1]) for s in streams)
+    if t1 <= t0:
+        raise ShapeError(f"sensors {list(names)} share no time span (latest start {t0:g} s, earliest end {t1:g} s)")
+    grid = t0 + np.arange(int(np.floor((t1 - t0) * rate + 1e-9)) + 1) / rate
+    out, lost = [], {}
+    for s in streams:
+        ts = np.asarray(s.timestamps, dtype=np.float64)
+        i = np.clip(np.searchsorted(ts, grid), 1, len(ts) - 1)
+        i = np.where(np.abs(ts[i - 1] - grid) <= np.abs(ts[i] - grid), i - 1, i)
+        dist = np.abs(ts[i] - grid)
+        ok = (dist <= 0.5 / float(s.info.rate)) & s.valid[i]
+        again = np.r_[False, i[1:] == i[:-1]]  # the same sample nearest to two instants: keep the closer
+        ok &= ~(again & (dist >= np.r_[np.inf, dist[:-1]]))
+        ok &= ~(np.r_[i[1:] == i[:-1], False] & (dist > np.r_[dist[1:], np.inf]))
+        ch = {c: np.where(ok.reshape(-1, *([1] * (x.ndim - 1))), x[i], np.nan).astype(x.dtype)
+              for c, x in s.channels().items()}
+        out.append(SensorStream(replace(s.info, rate=rate), grid.copy(), ok, **ch))
+        lost[s.info.name] = int((s.valid[i] & ~ok).sum())  # valid samples the grid could not use
+    meta = {**copy.deepcopy(recording.meta), "grid": {
+        "rule": f"nearest sample at {rate:.4g} Hz, within half a sensor period, each sample once",
+        "instants": int(len(grid)), "masked_by_grid": lost}}
+    return Recording(out, recording.ground_truth, recording.ground_truth_start, copy.deepcopy(recording.subject), meta)

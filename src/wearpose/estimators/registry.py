@@ -23,6 +23,7 @@ _BUILTIN: dict[str, str] = {
     "birae": "wearpose.estimators.birae.estimator:BiraeEstimator",
     "miposer": "wearpose.estimators.miposer.estimator:MiposerEstimator",
     "imuposer": "wearpose.estimators.miposer.baselines:ImuPoserEstimator",
+    "segments": "wearpose.estimators.segments.estimator:SegmentsEstimator",
 }
 _REGISTRY: dict[str, type] = {}
 
