@@ -9,7 +9,7 @@ See ``docs/calibration.md``.
 """
 
 from wearpose.calibration._common import CalibrationError, DegenerateCalibrationError, chordal_mean
-from wearpose.calibration.api import apply_calibration, calibrate, store_calibration
+from wearpose.calibration.api import apply_calibration, calibrate, fit_imu_noise, store_calibration
 from wearpose.calibration.empose import empose_offsets, fit_offsets, per_frame_offsets
 from wearpose.calibration.handeye import axyb_closed_form, handeye_transforms, solve_axyb
 from wearpose.calibration.miposer import apply_miposer, em_to_world, miposer_tpose
@@ -20,7 +20,7 @@ from wearpose.calibration.segment import (
 )
 
 __all__ = [
-    "calibrate", "store_calibration", "apply_calibration", "CalibrationResult", "METHODS",
+    "calibrate", "fit_imu_noise", "store_calibration", "apply_calibration", "CalibrationResult", "METHODS",
     "CalibrationError", "DegenerateCalibrationError", "chordal_mean",
     "per_frame_offsets", "fit_offsets", "empose_offsets",
     "segment_calibration", "bone_orientations", "heading_reset", "heading_correction", "calibration_pose",

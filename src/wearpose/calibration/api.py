@@ -276,3 +276,22 @@ def apply_calibration(recording: Any, result: CalibrationResult) -> Any:
     meta["calibration"] = result.to_dict()
     meta["orientation_frame"] = "segment"
     return replace(rec, sensors=out, meta=meta)
+
+
+def fit_imu_noise(recording: Any, window: tuple[float, float], sensors: Sequence[str]) -> dict[str, float]:
+    """:func:`wearpose.sensors.imu.fit_static_noise` of ``sensors`` held still in ``window`` (s):
+    the recording's declared units converted, acceleration as sensor-frame specific force.
+    ``rate_hz`` in the result is the sensors' mean rate."""
+    from wearpose.sensors.imu import fit_static_noise
+
+    rec = recording.to_canonical().declared_as(acc_frame="sensor", acc_gravity="included")
+    data, rates = [], []
+    for name in sensors:
+        s = rec.sensor(name)
+        if s.angular_velocity is None or s.acceleration is None or s.orientation is None:
+            raise CalibrationError(f"fit_imu_noise: sensor {name!r} needs angular_velocity, acceleration and orientation")
+        m = window_mask(s.timestamps, window, f"fit_imu_noise sensor {name!r}") & s.valid
+        data.append((np.asarray(s.angular_velocity[m], np.float64), np.asarray(s.acceleration[m], np.float64),
+                     np.asarray(s.orientation[m], np.float64)))
+        rates.append(float(s.info.rate))
+    return {**fit_static_noise(data, float(np.mean(rates))), "rate_hz": float(np.mean(rates))}

@@ -20,7 +20,7 @@ def simulate(
     kit: str = typer.Option("em12", help="Sensor kit: em12, em6, imu6, mimu6, miposer, miposer1."),
     split: str = typer.Option("train", help="Corpus split: train, val, test, or all."),
     seed: int = typer.Option(0, help="Base seed; each clip's seed is derived from it and the clip id."),
-    noise: str = typer.Option("default", help="Sensor error models: default (documented noise, dropped EM frames) or none."),
+    noise: str = typer.Option("default", help="Sensor error models: default (documented noise, dropped EM frames), ximu3 (IMU terms fitted to a real x-IMU3 log) or none."),
     offsets: str = typer.Option("random", help="EM sensor-to-skin offsets: random (a synthetic subject per clip) or none."),
     limit: Optional[int] = typer.Option(None, min=1, help="Only the first N selected clips (sorted by id)."),
     workers: Optional[int] = typer.Option(None, min=1, help="Worker processes (default: the idle CPU cores for batches over 20 min of motion, else 1)."),

@@ -49,7 +49,7 @@ SET_FORMAT = "wearpose.recording-set"
 SET_VERSION = 1
 #: Bump when what a clip's recording contains changes, so that existing sets are regenerated.
 GENERATOR_VERSION = "simset-1"
-NOISE_CHOICES = ("default", "none")
+NOISE_CHOICES = ("default", "none", "ximu3")
 EXECUTORS = ("local", "ray")
 OFFSETS_CHOICES = ("random", "none")
 #: How often (seconds) the index is rewritten during a long run, so an interrupted run keeps

@@ -58,6 +58,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
 import torch
 
 from wearpose.errors import ShapeError
@@ -231,6 +232,59 @@ class ImuNoise:
     def scaled(self, k: float) -> ImuNoise:
         """Every term multiplied by ``k``."""
         return replace(self, **{f: getattr(self, f) * k for f in self.__dataclass_fields__})
+
+    @staticmethod
+    def ximu3() -> ImuNoise:
+        """Fitted to the real x-IMU3 lower-body log's two foot sensors standing still on the floor
+        (first 1.0 s, 49 samples each; :func:`fit_static_noise`, re-fitted by the tests from
+        ../shared/real-sensors): gyro 0.022 deg/s/sqrt(Hz) and 0.026 deg/s bias (defaults 0.01
+        and 0.2), accelerometer 204 ug/sqrt(Hz) and 0.016 m/s^2 (defaults 153 and 0.05). The
+        AHRS orientation is steadier still (0.03 deg) than the default's 0.5 deg assumes in
+        motion: that term keeps the default. Bias walks are not observable in 1 s: defaults."""
+        d = ImuNoise()
+        return ImuNoise(gyro_white=XIMU3_FIT["gyro_white"], gyro_bias=XIMU3_FIT["gyro_bias"],
+                        gyro_bias_walk=d.gyro_bias_walk, acc_white=XIMU3_FIT["acc_white"],
+                        acc_bias=XIMU3_FIT["acc_bias"], acc_bias_walk=d.acc_bias_walk,
+                        orientation_white=d.orientation_white)
+
+
+#: ``fit_static_noise`` of the x-IMU3 log's feet (rad/s/sqrt(Hz), rad/s, m/s^2/sqrt(Hz), m/s^2,
+#: rad); ``tests/sensors/test_noise_fit.py`` checks these against a fresh fit of the real files.
+XIMU3_FIT: dict[str, float] = {"gyro_white": 3.85e-4, "gyro_bias": 4.56e-4, "acc_white": 2.00e-3, "acc_bias": 1.65e-2,
+                               "orientation_white": 5.17e-4}
+
+
+def fit_static_noise(sensors: list[tuple[np.ndarray, np.ndarray, np.ndarray]], fps: float) -> dict[str, float]:
+    """White noise and bias of IMUs held still, in :class:`ImuNoise`'s terms.
+
+    Args:
+        sensors: per sensor ``(gyro (N, 3) rad/s, acc (N, 3) m/s^2, orientation (N, 3, 3))``
+            over a still stretch: sensor-frame angular velocity and specific force (gravity
+            included), ``R_WS``; valid samples only.
+        fps: Hz.
+
+    Returns:
+        ``gyro_white`` (per-axis std / sqrt(fps)), ``gyro_bias`` (RMS of the per-axis means: the
+        true rate is 0), ``acc_white``, ``acc_bias`` (RMS of ``|mean f| - 9.81``: only the part
+        along gravity is observable still), ``orientation_white`` (RMS angle from the mean
+        orientation / sqrt(3): per axis, rad), ``samples`` (the fewest of any sensor).
+    """
+    from scipy.spatial.transform import Rotation
+
+    if not sensors or min(len(g) for g, _, _ in sensors) < 3:
+        raise ShapeError("fit_static_noise: expected at least 3 still samples of at least one sensor")
+    gw, gb, aw, ab, ow = [], [], [], [], []
+    for g, a, R in sensors:
+        gw.append(g.std(0, ddof=1))
+        gb.append(g.mean(0))
+        aw.append(a.std(0, ddof=1))
+        ab.append(np.linalg.norm(a.mean(0)) - float(np.linalg.norm(GRAVITY)))
+        rots = Rotation.from_matrix(R)
+        ow.append((rots.mean().inv() * rots).magnitude())
+    rms = lambda x: float(np.sqrt(np.mean(np.square(np.concatenate([np.ravel(v) for v in x])))))  # noqa: E731
+    return {"gyro_white": rms(gw) / math.sqrt(fps), "gyro_bias": rms(gb), "acc_white": rms(aw) / math.sqrt(fps),
+            "acc_bias": rms(ab), "orientation_white": rms(ow) / math.sqrt(3.0),
+            "samples": int(min(len(g) for g, _, _ in sensors))}
 
 
 def _randn(shape: tuple[int, ...], g: torch.Generator | None, dtype: torch.dtype = torch.float64) -> torch.Tensor:

@@ -14,7 +14,7 @@ removed from a kit. The per-sequence EM offset draw (EM-POSE supp. 2.2) uses ``(
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 import torch
@@ -135,7 +135,9 @@ def _noise_config(noise: str | NoiseConfig) -> NoiseConfig:
         return NoiseConfig.default()
     if noise == "none":
         return NoiseConfig.none()
-    raise ConfigError(f"simulate: noise must be 'default', 'none' or a NoiseConfig, got {noise!r}")
+    if noise == "ximu3":  # inertial terms fitted to a real x-IMU3 log (ImuNoise.ximu3); EM and VIO default
+        return NoiseConfig(imu=ImuNoise.ximu3(), mimu=replace(MimuNoise(), imu=ImuNoise.ximu3()))
+    raise ConfigError(f"simulate: noise must be 'default', 'none', 'ximu3' or a NoiseConfig, got {noise!r}")
 
 
 def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: int = 0,
