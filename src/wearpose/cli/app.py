@@ -167,7 +167,9 @@ DEFAULT_DEMO_CLIP = "cmu_daz/05/05_01"  # a walk from the test split
 @app.command()
 def demo(
     clip: str = typer.Option(DEFAULT_DEMO_CLIP, help="Clip id, corpus path or motion file to run the demo on."),
-    out: Path = typer.Option(Path("out/demo"), help="Output folder (HTML page, files, metrics JSON)."),
+    out: Optional[Path] = typer.Option(None, help="Output folder (HTML page, files, metrics JSON); default "
+                                                  "out/demo-<kit> (out/demo-roundtrip), so demos of other kits "
+                                                  "do not overwrite each other."),
     mode: str = typer.Option("auto", help="sensors (simulated sensors of --kit -> shipped estimator -> pose), "
                                           "roundtrip (file round trip of the motion), or auto (sensors when "
                                           "weights are shipped)."),
@@ -193,6 +195,7 @@ def demo(
         raise typer.BadParameter(f"--mode must be auto, sensors or roundtrip, got {mode!r}")
     if mode == "auto":
         mode = "sensors" if (kit != "em12" or "empose12_cpu" in list_weights()) else "roundtrip"
+    out = out or Path("out") / f"demo-{kit if mode == 'sensors' else 'roundtrip'}"
     result = kit_demo(kit)(clip, out) if mode == "sensors" else run_roundtrip_demo(clip, out, body=body)
     result["mode"] = mode
 

@@ -46,7 +46,7 @@ def estimate(
     pelvis sensor, e.g. `wearpose recording import ximu3`). The motion is written upright with
     its feet on the floor (the result's `placement` and `floor` say how).
 
-    Example: wearpose estimate out/demo/recording.npz --model empose12_cpu --out out/estimate.bvh
+    Example: wearpose estimate out/demo-em12/recording.npz --model empose12_cpu --out out/estimate.bvh
     """
     import torch
 
