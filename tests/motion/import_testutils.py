@@ -127,8 +127,9 @@ def joint_tree_to_asf_amc(sk: dict, names: dict[str, str] | None = None, length_
 
     Each non-root joint ``j`` becomes the bone ``name(j)`` from ``j`` to its primary child (leaves:
     ``end_len`` times the parent bone further); a joint that is not its parent's primary child hangs
-    from a static link bone ``<name>_lnk`` from the end of the parent's bone (from the root for
-    the root's children), as CMU's clavicles hang from the end of ``thorax``. Every bone
+    from a static link bone ``<name>_lnk`` of non-zero length from the end of the parent's bone
+    (from the root for the root's children). Real CMU files have no such links: their layout is
+    :func:`cmu_layout_asf_amc`. Every bone
     gets a random ``axis`` (random order letters) and a random permutation of ``rx ry rz``, so the
     reader's ``C M C^-1`` and dof order are exercised. Values are ``file = length_mult * units``.
 
@@ -141,7 +142,6 @@ def joint_tree_to_asf_amc(sk: dict, names: dict[str, str] | None = None, length_
     X = sk["rest_pos"].to(torch.float64)
     G = sk["G"].to(torch.float64)
     Tn = G.shape[0]
-    to_a = (lambda r: math.degrees(r)) if angle == "deg" else (lambda r: r)
     bones: list[dict] = []  # name, parent_bone, dir, length, rotation (T,3,3) relative to parent bone
     end_of: dict[int, str] = {}  # joint -> bone ending at it
     prim = {j: _primary_child(par, sk["names"], j) for j in range(J)}
@@ -170,6 +170,24 @@ def joint_tree_to_asf_amc(sk: dict, names: dict[str, str] | None = None, length_
         bones.append({"name": bname, "parent": parent_bone, "vec": v, "rel": G[:, p].transpose(-1, -2) @ G[:, j], "animated": True})
         if c is not None:
             end_of[c] = bname
+    asf, amc = write_asf_amc(bones, G[:, 0], sk["pos"][:, 0], length_mult, angle, g, root_order)
+    return asf, amc, joint_bone
+
+
+def write_asf_amc(bones: list[dict], root_rot: torch.Tensor, root_pos: torch.Tensor, length_mult: float = 1.0,
+                  angle: str = "deg", g: torch.Generator | None = None, root_order: str = "TX TY TZ RX RY RZ"
+                  ) -> tuple[str, str]:
+    """ASF + AMC text for a bone list (parents first).
+
+    Each bone: ``name``, ``parent`` (bone name or ``"root"``), ``vec`` ``(3,)`` from its start to
+    its end in the zero pose (file world, units before ``length_mult``), ``rel`` ``(T, 3, 3)`` its
+    rotation relative to the parent bone (world-aligned zero-pose frames), ``animated`` (static
+    bones get no dofs). ``root_rot`` ``(T, 3, 3)`` and ``root_pos`` ``(T, 3)`` are the root's world
+    rotation and position. Every bone gets a random ``axis`` and a permutation of ``rx ry rz``.
+    """
+    g = g if g is not None else torch.Generator().manual_seed(0)
+    to_a = (lambda r: math.degrees(r)) if angle == "deg" else (lambda r: r)
+    Tn = root_rot.shape[0]
     asf = [":version 1.10", ":name synthetic", ":units", "  mass 1.0", f"  length {length_mult:g}", f"  angle {angle}",
            ":documentation", "  written by tests/motion/import_testutils.py", ":root",
            f"   order {root_order}", "   axis XYZ", "   position 0 0 0", "   orientation 0 0 0", ":bonedata"]
@@ -204,8 +222,8 @@ def joint_tree_to_asf_amc(sk: dict, names: dict[str, str] | None = None, length_
     # AMC: root translation (file units) and rotation (fixed axes, root order).
     toks = root_order.split()
     rl = "".join(t[1] for t in toks if t.startswith("R"))
-    ang_root = matrix_to_euler(G[:, 0], rl[::-1]).flip(-1).numpy()
-    pos = sk["pos"][:, 0].numpy() * length_mult
+    ang_root = matrix_to_euler(root_rot.to(torch.float64), rl[::-1]).flip(-1).numpy()
+    pos = root_pos.to(torch.float64).numpy() * length_mult
     amc = ["# synthetic", ":FULLY-SPECIFIED", ":DEGREES" if angle == "deg" else ":RADIANS"]
     for t in range(Tn):
         amc.append(str(t + 1))
@@ -220,8 +238,116 @@ def joint_tree_to_asf_amc(sk: dict, names: dict[str, str] | None = None, length_
         amc.append("root " + " ".join(f"{v:.10f}" for v in rv))
         for name, a in amc_vals:
             amc.append(f"{name} " + " ".join(f"{to_a(float(v)):.10f}" for v in a[t]))
-    return "\n".join(asf) + "\n", "\n".join(amc) + "\n", joint_bone
+    return "\n".join(asf) + "\n", "\n".join(amc) + "\n"
+
+
+#: CMU's ASF bones in file order: (bone, parent bone, SMPL joint whose world rotation it takes).
+#: The real layout: ``lowerback`` and the hip links start at the root, both clavicles start at
+#: the thorax end (where ``lowerneck`` starts), ``upperneck`` sits between ``lowerneck`` and
+#: ``head``, ``lwrist`` (forearm twist) between ``lradius`` and ``lhand``, ``lthumb`` hangs from
+#: ``lwrist``. ``None``: a static link (no dofs).
+CMU_LAYOUT: tuple[tuple[str, str, str | None], ...] = (
+    *((f"{s}hipjoint", "root", None) for s in "lr"),
+    *(b for s, side in (("l", "left"), ("r", "right")) for b in (
+        (f"{s}femur", f"{s}hipjoint", f"{side}_hip"), (f"{s}tibia", f"{s}femur", f"{side}_knee"),
+        (f"{s}foot", f"{s}tibia", f"{side}_ankle"), (f"{s}toes", f"{s}foot", f"{side}_foot"))),
+    ("lowerback", "root", "spine1"), ("upperback", "lowerback", "spine2"), ("thorax", "upperback", "spine3"),
+    ("lowerneck", "thorax", "neck"), ("upperneck", "lowerneck", "neck"), ("head", "upperneck", "head"),
+    *(b for s, side in (("l", "left"), ("r", "right")) for b in (
+        (f"{s}clavicle", "thorax", f"{side}_collar"), (f"{s}humerus", f"{s}clavicle", f"{side}_shoulder"),
+        (f"{s}radius", f"{s}humerus", f"{side}_elbow"), (f"{s}wrist", f"{s}radius", f"{side}_elbow"),
+        (f"{s}hand", f"{s}wrist", f"{side}_wrist"), (f"{s}fingers", f"{s}hand", f"{side}_hand"),
+        (f"{s}thumb", f"{s}wrist", f"{side}_wrist"))),
+)
+
+
+def _cmu_zero_pose(rest: torch.Tensor) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
+    """Start and end (m, Y up, T-pose facing +Z) of every :data:`CMU_LAYOUT` bone, built from
+    SMPL's rest joints: the spine starts at the pelvis, the clavicles where the neck starts."""
+    X = {n: rest[JOINT_INDEX[n]].to(torch.float64) for n in JOINT_NAMES}
+    mid_neck = 0.5 * (X["neck"] + X["head"])
+    out = {"lowerback": (X["pelvis"], X["spine2"]), "upperback": (X["spine2"], X["spine3"]),
+           "thorax": (X["spine3"], X["neck"]), "lowerneck": (X["neck"], mid_neck), "upperneck": (mid_neck, X["head"]),
+           "head": (X["head"], X["head"] + torch.tensor([0.0, 0.15, 0.02], dtype=torch.float64))}
+    for s, side in (("l", "left"), ("r", "right")):
+        J = {k: X[f"{side}_{k}"] for k in ("hip", "knee", "ankle", "foot", "collar", "shoulder", "elbow", "wrist", "hand")}
+        twist_at = J["elbow"] + 0.85 * (J["wrist"] - J["elbow"])
+        out.update({f"{s}hipjoint": (X["pelvis"], J["hip"]), f"{s}femur": (J["hip"], J["knee"]),
+                    f"{s}tibia": (J["knee"], J["ankle"]), f"{s}foot": (J["ankle"], J["foot"]),
+                    f"{s}toes": (J["foot"], J["foot"] + torch.tensor([0.0, -0.01, 0.05], dtype=torch.float64)),
+                    f"{s}clavicle": (X["neck"], J["shoulder"]), f"{s}humerus": (J["shoulder"], J["elbow"]),
+                    f"{s}radius": (J["elbow"], twist_at), f"{s}wrist": (twist_at, J["wrist"]),
+                    f"{s}hand": (J["wrist"], J["hand"]), f"{s}fingers": (J["hand"], J["hand"] + 0.5 * (J["hand"] - J["wrist"])),
+                    f"{s}thumb": (J["wrist"], J["wrist"] + 0.5 * (J["hand"] - J["wrist"]) + torch.tensor([0.0, 0.0, 0.03], dtype=torch.float64))})
+    return out
+
+
+def cmu_layout_motion(local: torch.Tensor, pelvis: torch.Tensor, rest: torch.Tensor, tilt_deg: tuple[float, float] = (30.0, 40.0),
+                      neck_deg: float = 20.0, twist_deg: float = 60.0) -> dict:
+    """Known motion on CMU's ASF layout (:data:`CMU_LAYOUT`), Y up, T-pose zero pose.
+
+    Every bone takes the world rotation of its SMPL joint in the SMPL motion ``local`` ``(T, 24,
+    3, 3)`` / ``pelvis`` ``(T, 3)`` (m), except: the **root is tilted forward against
+    ``lowerback``** by an angle sweeping ``tilt_deg`` (root = lowerback's world rotation turned
+    about its lateral axis; the hips, on static links from the root, tilt with it), ``upperneck`` bends up to ``neck_deg`` against
+    ``lowerneck``, and ``lwrist``/``rwrist`` twist up to ``twist_deg`` about the forearm.
+
+    Returns a dict: ``bones`` (for :func:`write_asf_amc`, vectors in metres), ``root_rot``
+    ``(T, 3, 3)``, ``root_pos`` ``(T, 3)`` m, ``world`` bone -> ``(T, 3, 3)``, ``start`` bone ->
+    ``(T, 3)`` the true world position (m) of each bone's start, i.e. of the reader's joint, and
+    ``root_vs_lowerback_deg`` ``(T,)`` the angle of lowerback's rotation relative to the root.
+    """
+    from wearpose.geometry import axis_angle_to_matrix, geodesic_angle
+
+    G_s, _ = smpl_world(local.to(torch.float64), pelvis.to(torch.float64), rest.to(torch.float64))
+    Tn = G_s.shape[0]
+    t = torch.linspace(0.0, 1.0, Tn, dtype=torch.float64)
+    zero = _cmu_zero_pose(rest)
+
+    def about(axis: torch.Tensor, ang: torch.Tensor) -> torch.Tensor:
+        return axis_angle_to_matrix(axis / axis.norm() * ang[:, None])
+
+    lo, hi = (math.radians(a) for a in tilt_deg)
+    tilt = lo + (hi - lo) * 0.5 * (1 - torch.cos(2 * math.pi * t))
+    # The root's frame is lowerback's turned forward about the lateral axis: CMU's root is
+    # tilted against lowerback by 15-25 deg (median) in real takes; 30-40 deg here.
+    root_rot = G_s[:, JOINT_INDEX["spine1"]] @ about(torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64), tilt)
+    world: dict[str, torch.Tensor] = {"root": root_rot}
+    for name, parent, smpl in CMU_LAYOUT:
+        if smpl is None:
+            world[name] = world[parent]
+        else:
+            world[name] = G_s[:, JOINT_INDEX[smpl]]
+    bend = math.radians(neck_deg) * torch.sin(2 * math.pi * t)
+    world["upperneck"] = world["lowerneck"] @ about(torch.tensor([1.0, 0.0, 0.3], dtype=torch.float64), bend)
+    for s in "lr":
+        bone = zero[f"{s}wrist"][1] - zero[f"{s}wrist"][0]
+        world[f"{s}wrist"] = world[f"{s}radius"] @ about(bone, math.radians(twist_deg) * torch.sin(3 * math.pi * t))
+    bones, start = [], {}
+    for name, parent, smpl in CMU_LAYOUT:
+        a, b = zero[name]
+        rel = world[parent].transpose(-1, -2) @ world[name]
+        bones.append({"name": name, "parent": parent, "vec": b - a, "rel": rel, "animated": smpl is not None})
+    # True positions: each bone starts where its parent ends (the root's children at the root).
+    ends: dict[str, torch.Tensor] = {"root": pelvis.to(torch.float64)}
+    for name, parent, _ in CMU_LAYOUT:
+        start[name] = ends[parent]
+        a, b = zero[name]
+        ends[name] = start[name] + world[name] @ (b - a)
+    rel_lb = geodesic_angle(world["lowerback"], root_rot)
+    return {"bones": bones, "root_rot": root_rot, "root_pos": pelvis.to(torch.float64), "world": world, "start": start,
+            "root_vs_lowerback_deg": torch.rad2deg(rel_lb)}
+
+
+def cmu_layout_asf_amc(cmu: dict, seed: int = 0) -> tuple[str, str]:
+    """ASF + AMC text of :func:`cmu_layout_motion` in CMU's units (``:units length 0.45``: file
+    values are 0.45 x inches) and degrees, root order ``TX TY TZ RX RY RZ``."""
+    inch = 1.0 / 0.0254
+    bones = [{**b, "vec": b["vec"] * inch} for b in cmu["bones"]]
+    return write_asf_amc(bones, cmu["root_rot"], cmu["root_pos"] * inch, length_mult=0.45, angle="deg",
+                         g=torch.Generator().manual_seed(seed))
 
 
 __all__ = ["BIPED_NAMES", "TREE_JOINTS", "custom_skeleton_motion", "custom_bvh_text", "joint_tree_to_asf_amc",
-           "apose_globals", "smpl_world", "random_rotations"]
+           "apose_globals", "smpl_world", "random_rotations", "write_asf_amc", "CMU_LAYOUT", "cmu_layout_motion",
+           "cmu_layout_asf_amc"]

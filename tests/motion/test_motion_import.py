@@ -17,7 +17,9 @@ from wearpose.motion import MotionSequence, read_bvh, template_rest_joints
 from wearpose.motion.importer import UP_AXES, detect_units, detect_up, import_motion, import_paths, parse_units
 from wearpose.motion.mapping import CMU_ASF, MIXAMO, RIGIFY, auto_map, builtin_match, split_name
 from wearpose.motion.retarget import BUILTIN_MAPS
-from import_testutils import BIPED_NAMES, custom_bvh_text, custom_skeleton_motion, joint_tree_to_asf_amc
+from import_testutils import (
+    BIPED_NAMES, cmu_layout_asf_amc, cmu_layout_motion, custom_bvh_text, custom_skeleton_motion, joint_tree_to_asf_amc,
+)
 from motion_testutils import corpus_dir, synthetic_smpl_motion
 
 REST = template_rest_joints()
@@ -314,3 +316,93 @@ def test_auto_map_skips_helpers_fingers_and_links() -> None:
     joints, how, _ = auto_map(skel, skel.offsets)
     want = RIG_SCHEMES["unreal"]
     assert {k: v for k, v in joints.items()} == want, {k: (joints.get(k), v) for k, v in want.items() if joints.get(k) != v}
+
+
+@pytest.fixture(scope="module")
+def cmu_layout(smpl_motion) -> dict:
+    """Known motion on CMU's real ASF layout: collars from the thorax end, lowerback from the
+    root, root tilted 30-40 deg against lowerback, a bending upperneck, twisting lwrist."""
+    return cmu_layout_motion(*smpl_motion, REST)
+
+
+def _write_cmu(tmp_path, cmu: dict) -> object:
+    asf, amc = cmu_layout_asf_amc(cmu, seed=3)
+    (tmp_path / "86.asf").write_text(asf)
+    (tmp_path / "86_01.amc").write_text(amc)
+    return tmp_path / "86_01.amc"
+
+
+def _bone_errors_vs_truth(imp, cmu: dict) -> dict[str, float]:
+    """Per mapped bone, the largest angle (deg, over frames) between the SMPL bone and the true
+    source bone (the known motion the file was written from); zero-length source bones skipped."""
+    from wearpose.body.skeleton import JOINT_INDEX
+    from wearpose.motion.retarget import bone_pairs
+
+    _, J = forward_kinematics(imp.sequence.pose.double(), REST)
+    smap = imp.retargeted.smap.joints
+    start = {**cmu["start"], "root": cmu["root_pos"]}
+    out = {}
+    for a, b in bone_pairs(smap) + (("right_hip", "left_hip"),):
+        src = start[smap[b]] - start[smap[a]]
+        if float(src.norm(dim=-1).max()) < 1e-9:
+            continue
+        ds = J[:, JOINT_INDEX[b]] - J[:, JOINT_INDEX[a]]
+        cos = (ds * src).sum(-1) / ds.norm(dim=-1) / src.norm(dim=-1)
+        out[f"{a}->{b}"] = float(torch.rad2deg(torch.arccos(cos.clamp(-1, 1))).max())
+    return out
+
+
+def test_cmu_layout_asf_amc_imports_without_a_joint_map(tmp_path, cmu_layout) -> None:
+    """Acceptance (issue 23): CMU's real layout imports with the built-in map and every mapped
+    bone (spine segments, neck, collars, limbs, the hip line) within 10 deg of the source at
+    every frame (measured: < 1e-5 deg)."""
+    tilt = cmu_layout["root_vs_lowerback_deg"]
+    assert 29.9 < float(tilt.min()) and float(tilt.max()) < 40.1
+    imp = import_motion(_write_cmu(tmp_path, cmu_layout), REST)
+    r = imp.report
+    assert r.map_source == "built-in cmu_asf" and r.units["name"] == "acclaim" and r.up["axis"] == "y"
+    table = {row[0]: row[1] for row in r.mapping}
+    assert (table["pelvis"], table["spine1"], table["spine2"], table["spine3"]) == ("root", "lowerback", "upperback", "thorax")
+    # The chest's twist comes from the shoulders (the clavicles start at one point); the neck
+    # bone spans upperneck, which the map leaves out, so it is swung onto the source bone.
+    meta = imp.sequence.meta["retarget"]
+    assert meta["twist_refs"]["spine3"] == "left_shoulder-right_shoulder"
+    assert "neck" in meta["bone_swing_fixed"] and "pelvis" not in meta["bone_swing_fixed"]
+    errs = _bone_errors_vs_truth(imp, cmu_layout)
+    assert {"spine1->spine2", "spine2->spine3", "spine3->neck", "neck->head", "left_collar->left_shoulder",
+            "right_hip->left_hip"} <= set(errs)
+    worst = max(errs, key=errs.get)
+    assert errs[worst] < 10.0, (worst, errs[worst])
+    assert errs[worst] < 1e-3, (worst, errs[worst])  # exact up to float rounding
+    # The report: every mapped bone, worst first, no warning.
+    ranked = r.bone_error_deg["ranked"]
+    assert [row["max"] for row in ranked] == sorted((row["max"] for row in ranked), reverse=True)
+    assert len(ranked) == 18 and r.bone_error_deg["worst_bone_max"] < 1e-3 and not r.warnings
+
+
+def test_bone_warnings_name_the_worst_bone(tmp_path, cmu_layout) -> None:
+    """A map that leaves lowerback out (spine1 = upperback, the old built-in map) loses the
+    root's 30-40 deg tilt in the pelvis -> spine1 bone: the report ranks it first and warns."""
+    amc = _write_cmu(tmp_path, cmu_layout)
+    imp = import_motion(amc, REST, joint_map={"joints": {"spine1": "upperback", "spine2": None}})
+    be = imp.report.bone_error_deg
+    assert be["ranked"][0]["bone"] == "pelvis->spine1" and be["ranked"][0]["source"] == "root->upperback"
+    assert 25.0 < be["worst_bone_max"] < 45.0 and be["per_bone"]["pelvis->spine1"] > 20.0
+    assert len(imp.report.warnings) == 1 and "pelvis->spine1" in imp.report.warnings[0]
+    assert "--joint-map" in imp.report.warnings[0] and "root->upperback" in imp.report.warnings[0]
+
+
+def test_asf_option_picks_the_skeleton(tmp_path, cmu_layout) -> None:
+    """A folder with several actors' ASF files: the AMC fails without asf=, names the way out,
+    and imports with it."""
+    asf, amc = cmu_layout_asf_amc(cmu_layout, seed=3)
+    (tmp_path / "actorA.asf").write_text(asf)
+    (tmp_path / "actorB.asf").write_text(asf)
+    (tmp_path / "take_01.amc").write_text(amc)
+    with pytest.raises(InputFileError, match="2 .asf files beside it") as ei:
+        import_motion(tmp_path / "take_01.amc", REST)
+    assert "--asf" in ei.value.expected
+    imp = import_motion(tmp_path / "take_01.amc", REST, asf=tmp_path / "actorB.asf")
+    assert imp.report.skeleton == "cmu_asf" and imp.sequence.num_frames == 40
+    with pytest.raises(InputFileError, match="not found"):
+        import_motion(tmp_path / "take_01.amc", REST, asf=tmp_path / "nope.asf")

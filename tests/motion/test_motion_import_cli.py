@@ -57,3 +57,31 @@ def test_prepare_user_folder(tmp_path, user_folder) -> None:
     store = CorpusStore(tmp_path / "store")
     seq = store.load(store.clips()[0])
     assert seq.meta["import"]["up"]["axis"] == "z" and seq.pose.dtype == torch.float32
+
+
+def test_motion_import_cli_asf_option_and_bone_check(tmp_path) -> None:
+    """--asf picks one of several ASF files; the report shows each bone worst first and the
+    warnings of a map that leaves a spine joint out."""
+    from import_testutils import cmu_layout_asf_amc, cmu_layout_motion
+
+    local, pelvis = synthetic_smpl_motion(REST, T=12, seed=4)
+    asf, amc = cmu_layout_asf_amc(cmu_layout_motion(local, pelvis, REST))
+    src = tmp_path / "amc"
+    src.mkdir()
+    (src / "a.asf").write_text(asf)
+    (src / "b.asf").write_text(asf)
+    (src / "x_01.amc").write_text(amc)
+    res = runner.invoke(app, ["motion", "import", str(src), "--out", str(tmp_path / "o1")])
+    assert res.exit_code == 1 and "--asf" in res.output
+    res = runner.invoke(app, ["motion", "import", str(src), "--out", str(tmp_path / "o2"), "--asf", str(src / "a.asf")])
+    assert res.exit_code == 0, res.output
+    assert "bone check of x_01.amc" in res.stdout and "lowerback->upperback" in res.stdout and "warning" not in res.output
+    jm = tmp_path / "old.yaml"
+    jm.write_text("spine1: upperback\nspine2: null\n")
+    res = runner.invoke(app, ["motion", "import", str(src / "x_01.amc"), "--out", str(tmp_path / "o3"),
+                              "--asf", str(src / "b.asf"), "--joint-map", str(jm), "--json"])
+    assert res.exit_code == 0, res.output
+    row = json.loads(res.stdout)["files"][0]
+    assert row["bone_error_deg"]["ranked"][0]["bone"] == "pelvis->spine1" and "pelvis->spine1" in row["warnings"][0]
+    bad = runner.invoke(app, ["motion", "import", str(src), "--asf", str(src / "nope.asf")])
+    assert bad.exit_code != 0 and "nope.asf" in bad.output

@@ -1,8 +1,10 @@
 """``wearpose motion import``: bring your own BVH or ASF/AMC motion onto the SMPL body.
 
 Thin: collects files, calls :func:`wearpose.motion.import_paths` and prints a per-file report
-(skeleton map, units, up axis, rest pose, frames, fps, bone-direction check) plus the joint
-table of every skeleton that was matched automatically or by a joint map.
+(skeleton map, units, up axis, rest pose, frames, fps, bone-direction check: mean and the worst
+bone's maximum), the joint table of every skeleton that was matched automatically or by a joint
+map, the per-bone check (worst first) of every file with a warning (of every file when there
+are at most :data:`BONE_TABLES_UP_TO`), and the warnings.
 """
 
 from __future__ import annotations
@@ -32,21 +34,39 @@ def _mapping_table(row: dict[str, Any]) -> Table:
     return t
 
 
+#: Per-bone check tables are printed for every file up to this many files (beyond it: only for
+#: files with a warning).
+BONE_TABLES_UP_TO = 3
+
+
+def _bone_table(row: dict[str, Any]) -> Table:
+    be = row["bone_error_deg"]
+    t = Table(title=f"bone check of {Path(row['file']).name}: angle between each mapped bone and the source's (deg), worst first")
+    for c in ("SMPL bone", "your bone", "mean", "max", "at frame"):
+        t.add_column(c, justify="right" if c in ("mean", "max", "at frame") else "left")
+    for r in be.get("ranked", []):
+        style = "red" if r["max"] > be.get("warn_deg", float("inf")) else None
+        t.add_row(r["bone"], r["source"], f"{r['mean']:.2f}", f"{r['max']:.2f}", str(r["max_frame"]), style=style)
+    return t
+
+
 def _report_table(res: dict[str, Any]) -> Table:
     t = Table(title=f"motion import -> {res['out']}: {res['converted']} converted, {res['failed']} failed")
-    for c in ("file", "skeleton", "units", "up", "rest pose", "frames", "fps", "bone err (deg)", "status"):
-        t.add_column(c, justify="right" if c in ("frames", "fps", "bone err (deg)") else "left")
+    for c in ("file", "skeleton", "units", "up", "rest pose", "frames", "fps", "bone err mean (deg)", "worst bone max (deg)", "status"):
+        t.add_column(c, justify="right" if c in ("frames", "fps", "bone err mean (deg)") else "left")
     for r in res["files"]:
         name = Path(r["file"]).name
         if not r["ok"]:
-            t.add_row(name, "", "", "", "", "", "", "", "[red]failed[/]")
+            t.add_row(name, "", "", "", "", "", "", "", "", "[red]failed[/]")
             continue
         u, up, rp, be = r["units"], r["up"], r["rest_pose"], r["bone_error_deg"]
         units = f"{u['name']} ({'declared' if u['how'] == 'declared' else u['how'].split(' ')[0]})"
         rest = rp["kind"] + (f", max {rp['max_deg']:.0f} deg {rp['max_joint']}" if rp.get("max_joint") else "")
+        worst = f"{be['worst_bone_max']:.1f} {be['worst_bone']}" if be.get("worst_bone") else "-"
+        status = f"[yellow]ok, {len(r['warnings'])} warning(s)[/]" if r.get("warnings") else "[green]ok[/]"
         t.add_row(name, f"{r['skeleton']} ({r['map_source'].split(' ')[0]})", units,
                   f"{up['axis']} ({up['how'].split(' ')[0]})", rest, str(r["frames"]), f"{r['fps']:g}",
-                  f"{be['mean']:.2f}", "[green]ok[/]")
+                  f"{be['mean']:.2f}", worst, status)
     return t
 
 
@@ -76,6 +96,7 @@ def motion_import(
     units: Optional[str] = typer.Option(None, help="Length unit of the files: m, cm, mm, inch, acclaim (1/0.45 inch) or metres per unit (default: detected)."),
     up: Optional[str] = typer.Option(None, help="Up axis of the files: y, z, -y, -z, x, -x (default: detected)."),
     fps: Optional[float] = typer.Option(None, help="Frame rate of AMC files, which store none (default 120, CMU's rate)."),
+    asf: Optional[Path] = typer.Option(None, "--asf", help="ASF skeleton for every AMC file (default: <clip>.asf, <subject>.asf or the only .asf beside each AMC); for folders holding several actors' ASF files."),
     body: Optional[str] = typer.Option(None, help="Body asset the motion will play on: default, smpl or a file path."),
     as_json: bool = typer.Option(False, "--json", help="Print the full per-file reports as JSON."),
 ) -> None:
@@ -84,11 +105,14 @@ def motion_import(
     For every file: the skeleton is matched to SMPL's 24 joints (built-in maps for CMU, Bandai,
     Mixamo, Rigify and our own exports, otherwise by joint names and tree position), its length
     unit and up axis are detected, a non-T bind pose is corrected per joint, and the bone
-    directions of the result are compared with the source (mean angle, degrees). A file that
-    cannot be read is reported with the reason and the others are converted (exit code 1 if any
-    failed). Check a result with `wearpose view OUT/clip.npz`.
+    directions of the result are compared with the source, bone by bone (mean and maximum angle
+    over the clip, degrees, worst first; a warning names every bone off by more than 10 deg in
+    some frame). A file that cannot be read is reported with the reason and the others are
+    converted (exit code 1 if any failed). Check a result with `wearpose view OUT/clip.npz`.
 
     Example: wearpose motion import mocap/ take.bvh --out motion_npz/ --joint-map map.yaml
+
+    Example: wearpose motion import amc_takes/ --asf amc_takes/actor2.asf --out motion_npz/
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -96,6 +120,8 @@ def motion_import(
     from wearpose.motion import collect_motion_files, import_paths
 
     _check_options(units, up, joint_map)
+    if asf is not None and not asf.is_file():
+        raise typer.BadParameter(f"no such ASF file: {asf}", param_hint="--asf")
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
         raise typer.BadParameter(f"no such file or folder: {', '.join(missing)}", param_hint="PATHS")
@@ -109,7 +135,7 @@ def motion_import(
                TextColumn("{task.description}"))
     with Progress(*columns, console=err_console, disable=as_json or n == 0, transient=True) as bar:
         task = bar.add_task("", total=n)
-        res = import_paths(paths, out, rest, joint_map=joint_map, units=units, up=up, fps=fps,
+        res = import_paths(paths, out, rest, joint_map=joint_map, units=units, up=up, fps=fps, asf=asf,
                            on_file=lambda f, row: bar.update(task, advance=1, description=f.name))
 
     def render(r: dict[str, Any]) -> None:
@@ -123,6 +149,13 @@ def motion_import(
             for note in row.get("map_notes", []) if row["ok"] else []:
                 err_console.print(f"[yellow]note[/] {escape(Path(row['file']).name)}: {escape(str(note))}")
         console.print(_report_table(r))
+        few = len(r["files"]) <= BONE_TABLES_UP_TO
+        for row in r["files"]:
+            if row["ok"] and row["bone_error_deg"].get("ranked") and (few or row.get("warnings")):
+                console.print(_bone_table(row))
+        for row in r["files"]:
+            for w in row.get("warnings", []) if row["ok"] else []:
+                err_console.print(f"[yellow]warning[/] {escape(Path(row['file']).name)}: {escape(str(w))}")
         for row in r["files"]:
             if not row["ok"]:
                 err, f = str(row["error"]), str(row["file"])

@@ -511,7 +511,8 @@ def find_asf_for(amc: str | Path) -> Path:
     if len(found) == 1:
         return found[0]
     problem = "no .asf skeleton beside it" if not found else f"{len(found)} .asf files beside it and none named {stem}.asf or {stem.split('_')[0]}.asf"
-    raise InputFileError(amc, problem, "the ASF skeleton next to the AMC, named <clip>.asf or <subject>.asf (CMU: 02.asf for 02_01.amc), or the only .asf in the folder")
+    raise InputFileError(amc, problem, "the ASF skeleton next to the AMC, named <clip>.asf or <subject>.asf (CMU: 02.asf for 02_01.amc), "
+                         "or the only .asf in the folder; or name it: --asf FILE (Python: asf=)")
 
 
 def read_asf_amc(amc: str | Path, asf: str | Path | AsfSkeleton | None = None, fps: float | None = None) -> BvhMotion:

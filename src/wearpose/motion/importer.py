@@ -24,7 +24,9 @@ Pipeline of :func:`import_motion` (each step's outcome goes into :class:`ImportR
    and gives the correction per joint (:func:`rest_pose_correction`).
    The root translation is scaled by SMPL's over the source's pelvis-to-ankle height.
 6. **check**: the angle between every mapped bone of the result and the same bone of the source,
-   per frame (:data:`IMPORT_BONE_PAIRS`), mean and worst bone, in degrees.
+   per frame (:func:`wearpose.motion.retarget.bone_pairs` of the map), in degrees: per bone its
+   mean and maximum over the clip, worst first, and a warning for every bone whose maximum
+   exceeds :data:`BONE_WARN_DEG` (a wrong map, or source joints the map leaves out).
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ from wearpose.motion.bvh import BvhMotion, bvh_forward_kinematics, read_bvh
 from wearpose.motion.mapping import SkeletonMatch, match_skeleton
 from wearpose.motion.retarget import (
     BANDAI, BONE_PAIRS, CMU_DAZ, RetargetError, Retargeted, SkeletonMap, TPose, _position_in, _rest_offsets,
-    bone_direction_errors, retarget_bvh,
+    bone_direction_errors, bone_pairs, next_joint, retarget_bvh,
 )
 from wearpose.motion.sequence import MotionSequence
 from wearpose.motion.smpl_bvh import is_smpl_bvh, read_smpl_bvh
@@ -69,7 +71,12 @@ UP_AXES: dict[str, torch.Tensor] = {
     "x": rotation_z(_HALF_PI),
     "-x": rotation_z(-_HALF_PI),
 }
-#: Bones compared by the import check (SMPL joint pairs; skipped where either is unmapped).
+#: A mapped bone whose direction differs from the source bone's by more than this (degrees) in
+#: any frame is named in the report's warnings. A correct map gives ~0 everywhere (bone
+#: directions are transferred exactly); 10 deg is the import acceptance bound.
+BONE_WARN_DEG = 10.0
+#: The bones of the SMPL tree with a counterpart in every corpus skeleton (the import check
+#: itself compares every mapped bone of the map used, :func:`wearpose.motion.retarget.bone_pairs`).
 IMPORT_BONE_PAIRS: tuple[tuple[str, str], ...] = BONE_PAIRS + (
     ("left_collar", "left_shoulder"), ("right_collar", "right_shoulder"),
     ("left_ankle", "left_foot"), ("right_ankle", "right_foot"),
@@ -89,8 +96,9 @@ class ImportReport:
         up: ``{"axis", "how", "agreement"}`` (agreement: cosine of the measured up with the axis);
         rest_pose: ``{"kind", "max_deg", "max_joint", "bone_deg", "total_deg"}``; frames; fps;
         translation_scale: SMPL/source leg ratio applied to the root trajectory;
-        bone_error_deg: ``{"mean", "worst_bone", "worst_bone_mean", "per_bone"}`` (means over
-        the clip); hinge_axes: where knee/elbow axes came from; seconds: wall time.
+        bone_error_deg: see :func:`bone_error_summary` (per bone mean and max over the clip,
+        worst first); hinge_axes: where knee/elbow axes came from; warnings: what the user
+        should look at (bones above :data:`BONE_WARN_DEG`, assumptions); seconds: wall time.
     """
 
     file: str
@@ -107,6 +115,7 @@ class ImportReport:
     translation_scale: float = 1.0
     bone_error_deg: dict[str, Any] = field(default_factory=dict)
     hinge_axes: dict[str, str] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
@@ -124,8 +133,9 @@ class Imported:
 
 
 # ---------------------------------------------------------------------------- reading
-def read_motion_file(path: str | Path, fps: float | None = None) -> BvhMotion:
-    """Read a BVH (``.bvh``/``.bvh.gz``) or an AMC (``.amc``/``.amc.gz``, its ASF beside it).
+def read_motion_file(path: str | Path, fps: float | None = None, asf: str | Path | None = None) -> BvhMotion:
+    """Read a BVH (``.bvh``/``.bvh.gz``) or an AMC (``.amc``/``.amc.gz``, its ASF beside it, or
+    ``asf``: the skeleton file to use, for folders with several actors' ASF files).
 
     Raises:
         InputFileError: unknown extension, a lone ``.asf``, or any reader error.
@@ -135,7 +145,9 @@ def read_motion_file(path: str | Path, fps: float | None = None) -> BvhMotion:
     if name.endswith((".bvh", ".bvh.gz")):
         return read_bvh(path)
     if name.endswith((".amc", ".amc.gz")):
-        return read_asf_amc(path, fps=fps)
+        if asf is not None and not Path(asf).is_file():
+            raise InputFileError(asf, "ASF skeleton file not found", "the .asf file of this AMC's actor (--asf FILE)")
+        return read_asf_amc(path, asf=asf, fps=fps)
     if name.endswith(".asf"):
         raise InputFileError(path, "an .asf file holds only the skeleton", "the .amc motion files (their .asf beside them is found automatically)")
     raise InputFileError(path, f"unsupported file type {path.suffix!r}", "a .bvh, .bvh.gz, .amc or .amc.gz motion file")
@@ -253,8 +265,6 @@ def rest_pose_correction(tpose: TPose, rest_joints: torch.Tensor, motion: BvhMot
     lowered by 25-70 deg), else ``"other bind pose"``. Proportions alone (a source collar or
     spine steeper than SMPL's) give 5-30 deg on other bones; that is not a bind-pose change.
     """
-    from wearpose.motion.retarget import _NEXT  # noqa: PLC0415 - the primary-bone table
-
     T = tpose.rotations
     rest = rest_joints.to(torch.float64)
     skel = motion.skeleton
@@ -274,7 +284,7 @@ def rest_pose_correction(tpose: TPose, rest_joints: torch.Tensor, motion: BvhMot
             p = PARENTS[p]
         if p >= 0:
             total[name] = round(math.degrees(float(geodesic_angle(T[p] @ Tj.T, eye))), 2)
-        nxt = _NEXT.get(name)
+        nxt = tpose.bone_ends.get(name, next_joint(name, smap.joints))
         if nxt is not None and nxt in smap.joints:
             d = pos[skel.index(smap.joints[nxt])] - pos[skel.index(smap.joints[name])]
             b = rest[JOINT_INDEX[nxt]] - rest[j]
@@ -295,22 +305,43 @@ def rest_pose_correction(tpose: TPose, rest_joints: torch.Tensor, motion: BvhMot
 
 
 # ---------------------------------------------------------------------------- import
-def bone_error_summary(res: Retargeted, rest_joints: torch.Tensor) -> dict[str, Any]:
-    """Mean (over the clip) angle between result and source bones, degrees: overall mean over
-    bones, the worst bone, and per bone."""
-    errs = bone_direction_errors(res, rest_joints, IMPORT_BONE_PAIRS)
-    per = {k: float(np.degrees(np.nanmean(v))) for k, v in errs.items()}
-    if not per:
-        return {"mean": float("nan"), "worst_bone": "", "worst_bone_mean": float("nan"), "per_bone": {}}
-    worst = max(per, key=per.get)  # type: ignore[arg-type]
-    return {"mean": float(np.mean(list(per.values()))), "worst_bone": worst, "worst_bone_mean": per[worst],
-            "per_bone": {k: round(v, 3) for k, v in per.items()}}
+def bone_error_summary(res: Retargeted, rest_joints: torch.Tensor, warn_deg: float = BONE_WARN_DEG) -> dict[str, Any]:
+    """Angle between every mapped bone of the result and the same bone of the source, degrees.
+
+    Returns:
+        ``{"mean"`` (over bones of the per-bone clip means), ``"worst_bone"``, ``"worst_bone_mean"``,
+        ``"worst_bone_max"``, ``"per_bone"`` (bone -> clip mean), ``"per_bone_max"`` (bone -> clip
+        max), ``"ranked"`` (rows ``{"bone", "source", "mean", "max", "max_frame"}``, largest max
+        first), ``"warn_deg"``, ``"warnings"`` (one line per bone whose max exceeds ``warn_deg``)``}``.
+        Bones are ``"smpl_a->smpl_b"``; ``source`` names the file's joints.
+    """
+    errs = bone_direction_errors(res, rest_joints, bone_pairs(res.smap.joints))
+    rows = []
+    for k, v in errs.items():
+        deg = np.degrees(v)
+        a, b = k.split("->")
+        rows.append({"bone": k, "source": f"{res.smap.joints[a]}->{res.smap.joints[b]}",
+                     "mean": round(float(np.nanmean(deg)), 3), "max": round(float(np.nanmax(deg)), 3),
+                     "max_frame": int(np.nanargmax(deg))})
+    rows.sort(key=lambda r: -r["max"])
+    if not rows:
+        return {"mean": float("nan"), "worst_bone": "", "worst_bone_mean": float("nan"), "worst_bone_max": float("nan"),
+                "per_bone": {}, "per_bone_max": {}, "ranked": [], "warn_deg": warn_deg, "warnings": []}
+    warnings = [f"bone {r['bone']} (your {r['source']}) is {r['max']:.1f} deg off the source at frame {r['max_frame']} "
+                f"(mean {r['mean']:.1f}; bound {warn_deg:g}): joints of yours between the two that the map leaves out bend "
+                f"it, or the map is wrong there; check those rows of the joint table and map them with --joint-map lines "
+                f"such as '{r['bone'].split('->')[1]}: YourJoint'"
+                for r in rows if r["max"] > warn_deg]
+    return {"mean": float(np.mean([r["mean"] for r in rows])), "worst_bone": rows[0]["bone"],
+            "worst_bone_mean": rows[0]["mean"], "worst_bone_max": rows[0]["max"],
+            "per_bone": {r["bone"]: r["mean"] for r in rows}, "per_bone_max": {r["bone"]: r["max"] for r in rows},
+            "ranked": rows, "warn_deg": warn_deg, "warnings": warnings}
 
 
 def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
                   joint_map: str | Path | Mapping[str, Any] | None = None, units: str | float | None = None,
                   up: str | None = None, fps: float | None = None, betas: torch.Tensor | None = None,
-                  meta: Mapping[str, Any] | None = None) -> Imported:
+                  meta: Mapping[str, Any] | None = None, asf: str | Path | None = None) -> Imported:
     """Import one BVH or AMC file onto SMPL-24 (pipeline in the module doc).
 
     Args:
@@ -322,6 +353,8 @@ def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
         fps: frame rate of AMC files (they store none; default 120).
         betas: ``(10,)`` shape stored in the sequence.
         meta: extra ``sequence.meta`` entries.
+        asf: the ASF skeleton of an AMC file (default: found beside it, see
+            :func:`wearpose.motion.asf.find_asf_for`); ignored for BVH files.
 
     Returns:
         :class:`Imported`; ``sequence.meta["import"]`` holds the report.
@@ -337,7 +370,7 @@ def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
     rest = rest_joints.to(torch.float64)
     if up is not None and up.lower() not in UP_AXES:
         raise WearposeError(f"up axis {up!r}; expected one of {', '.join(UP_AXES)}")
-    motion = read_motion_file(path, fps=fps)
+    motion = read_motion_file(path, fps=fps, asf=asf)
     fmt = motion.meta.get("format", "bvh")
     report = ImportReport(file=str(path), format=fmt)
     if fmt == "bvh" and is_smpl_bvh(motion):
@@ -349,7 +382,8 @@ def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
         report.up = {"axis": "y", "how": "format (wearpose export)", "agreement": 1.0}
         report.rest_pose = {"kind": "T-pose", "max_deg": 0.0, "max_joint": "", "bone_deg": {}, "total_deg": {}}
         report.frames, report.fps = seq.num_frames, seq.fps
-        report.bone_error_deg = {"mean": 0.0, "worst_bone": "", "worst_bone_mean": 0.0, "per_bone": {}}
+        report.bone_error_deg = {"mean": 0.0, "worst_bone": "", "worst_bone_mean": 0.0, "worst_bone_max": 0.0,
+                                 "per_bone": {}, "per_bone_max": {}, "ranked": [], "warn_deg": BONE_WARN_DEG, "warnings": []}
         report.seconds = time.perf_counter() - t0
         seq.meta.update(dict(meta or {}))
         seq.meta["import"] = report.to_dict()
@@ -412,6 +446,9 @@ def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
     report.translation_scale = round(res.tpose.scale, 5)
     report.hinge_axes = dict(res.tpose.hinge_source)
     report.bone_error_deg = bone_error_summary(res, rest)
+    if "WARNING" in str(ures["how"]):
+        report.warnings.append(f"units: {ures['how'].split('WARNING: ')[-1]}; pass --units if the leg length {ures['leg_m']:.3g} m is wrong")
+    report.warnings += report.bone_error_deg["warnings"]
     if motion.meta.get("fps_assumed"):
         report.map_notes.append(f"AMC stores no frame rate: {res.sequence.fps:g} fps assumed (pass fps/--fps)")
     report.seconds = time.perf_counter() - t0
@@ -443,8 +480,13 @@ def _out_name(f: Path, root: Path | None) -> Path:
 
 def import_paths(paths: Sequence[str | Path], out_dir: str | Path, rest_joints: torch.Tensor | None = None,
                  joint_map: str | Path | None = None, units: str | float | None = None, up: str | None = None,
-                 fps: float | None = None, on_file: Callable[[Path, dict[str, Any]], None] | None = None) -> dict[str, Any]:
+                 fps: float | None = None, on_file: Callable[[Path, dict[str, Any]], None] | None = None,
+                 asf: str | Path | None = None) -> dict[str, Any]:
     """Import files and folders (mixed formats) into ``out_dir`` as MotionSequence ``.npz``.
+
+    ``asf`` is the skeleton for every AMC file (a folder of one actor's takes whose ASF is not
+    named after them, or several actors' ASF files side by side); other arguments as
+    :func:`import_motion`.
 
     A file that fails is reported and the others carry on.
 
@@ -463,7 +505,7 @@ def import_paths(paths: Sequence[str | Path], out_dir: str | Path, rest_joints: 
     rows: list[dict[str, Any]] = []
     for f, root in files:
         try:
-            imp = import_motion(f, rest_joints, joint_map=joint_map, units=units, up=up, fps=fps)
+            imp = import_motion(f, rest_joints, joint_map=joint_map, units=units, up=up, fps=fps, asf=asf)
             dest = out_dir / _out_name(f, root)
             dest.parent.mkdir(parents=True, exist_ok=True)
             imp.sequence.save(dest)
@@ -480,4 +522,4 @@ def import_paths(paths: Sequence[str | Path], out_dir: str | Path, rest_joints: 
 
 __all__ = ["import_motion", "import_paths", "collect_motion_files", "read_motion_file", "ImportReport", "Imported",
            "detect_units", "detect_up", "leg_length", "parse_units", "rest_pose_correction", "to_y_up",
-           "UNITS", "UP_AXES", "IMPORT_BONE_PAIRS", "MOTION_SUFFIXES"]
+           "UNITS", "UP_AXES", "IMPORT_BONE_PAIRS", "MOTION_SUFFIXES", "BONE_WARN_DEG", "bone_error_summary"]

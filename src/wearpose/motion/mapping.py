@@ -65,11 +65,17 @@ def _sided(l_names: dict[str, str], r_names: dict[str, str]) -> dict[str, str]:
 _LIMBS = ("collar", "shoulder", "elbow", "wrist", "hand", "hip", "knee", "ankle", "foot")
 
 #: CMU database ASF skeleton (the ASF reader puts each joint at its bone's start: ``lfemur`` at
-#: the hip). ``lowerback`` starts at the root, so spine1 is ``upperback``; clavicles hang from
-#: ``thorax``, so it is spine3; ``lwrist`` is the lower forearm (twist), ``lhand`` starts at the wrist.
+#: the hip). The three spine segments ``lowerback > upperback > thorax`` are SMPL's
+#: spine1 > spine2 > spine3, so no spine rotation is lost between pelvis and chest (``lowerback``
+#: starts at the root: SMPL's short pelvis -> spine1 bone has no source bone and follows the
+#: root, as the hips do). Both clavicles start at the thorax end, where the neck starts, so the
+#: chest's twist comes from the shoulders (:data:`wearpose.motion.retarget._LATERAL`).
+#: ``upperneck`` (between ``lowerneck`` and ``head``) and ``lwrist`` (the forearm twist segment
+#: before ``lhand``) are left out; the neck and forearm bones are swung onto the source's per
+#: frame (:class:`wearpose.motion.retarget.BoneFix`).
 CMU_ASF = SkeletonMap(
     name="cmu_asf",
-    joints={"pelvis": "root", "spine1": "upperback", "spine3": "thorax", "neck": "lowerneck", "head": "head",
+    joints={"pelvis": "root", "spine1": "lowerback", "spine2": "upperback", "spine3": "thorax", "neck": "lowerneck", "head": "head",
             **_sided(dict(zip(_LIMBS, ("lclavicle", "lhumerus", "lradius", "lhand", "lfingers", "lfemur", "ltibia", "lfoot", "ltoes"))),
                      dict(zip(_LIMBS, ("rclavicle", "rhumerus", "rradius", "rhand", "rfingers", "rfemur", "rtibia", "rfoot", "rtoes"))))},
     units_to_m=0.0254 / 0.45, foot_joints=("lfoot", "rfoot", "ltoes", "rtoes"),

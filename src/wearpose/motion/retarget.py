@@ -12,13 +12,18 @@ SMPL's zero pose). ``T_b`` is built from the skeleton's geometry, parents first,
 ``T_b = F(p_s, s_s) @ F(p_b, s_b)^T`` with ``F(p, s)`` the orthonormal frame whose first axis is
 ``p`` and whose second lies in the ``(p, s)`` plane:
 
-- primary direction ``p``: the bone from the joint to its next mapped joint down the chain, in
+- primary direction ``p``: the bone from the joint to its next mapped joint down the chain
+  (:func:`next_joint`: spine1 -> spine2 when spine2 is mapped, else spine1 -> spine3), in
   SMPL's rest skeleton (``p_s``) and in the BVH joint's own frame (``p_b``, from the clip's local
   translations). So every mapped bone of the retargeted skeleton points exactly where the BVH
-  bone points, in every frame.
+  bone points, in every frame. A next joint at the same place as the joint (a zero-length
+  source bone: CMU's ``lowerback`` starts at the root) is passed over for the joint after it;
+  that SMPL bone then has no source bone (:attr:`TPose.bone_ends`).
 - secondary direction ``s`` (twist about the bone), chosen per joint:
 
-  * pelvis and spine3 (two+ children): the right-to-left vector between the hips / the collars.
+  * pelvis and spine3 (two+ children): the right-to-left vector between the hips / the collars,
+    or, where the collars start at one point (CMU's ASF layout: both clavicles at the thorax
+    end), between the shoulders (:data:`_LATERAL`).
   * thighs, shins, upper arms and forearms: the **hinge axis of the knee / elbow**. In SMPL's
     zero pose the knee flexes about ``+X`` and the elbow about ``-Y`` (left) / ``+Y`` (right),
     written generally as ``normalize(cross(parent_bone, flexion_direction))`` with flexion moving
@@ -38,6 +43,11 @@ SMPL's zero pose). ``T_b`` is built from the skeleton's geometry, parents first,
     is twisted by about 90 deg): as above, then turned about the bone so that their local twist
     relative to the corrected parent averages zero over the clip (swing-twist decomposition,
     circular mean). These joints barely twist in practice (Bandai: 3 deg RMS).
+
+Source joints between two mapped joints that the map leaves out (CMU's ``upperneck`` between
+``lowerneck`` and ``head``) would bend the source bone away from the SMPL one; for every joint
+but the pelvis and the chest, the SMPL joint is then swung per frame onto the source bone
+(:class:`BoneFix`), keeping its twist.
 
 Joints SMPL has but the BVH does not (per map): ``spine2`` takes half of the spine1 -> spine3
 relative rotation (slerp at 0.5), the other half goes to spine3; hands (and CMU's SMPL ``foot``
@@ -64,7 +74,7 @@ and SMPL's (about 10-16 deg with the default body), compensated by spine1.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -95,8 +105,17 @@ _NEXT: dict[str, str | None] = {
     "left_hip": "left_knee", "right_hip": "right_knee", "left_knee": "left_ankle", "right_knee": "right_ankle",
     "left_ankle": "left_foot", "right_ankle": "right_foot", "left_foot": None, "right_foot": None,
 }
-#: Joints whose twist comes from the vector between two other joints (left minus right).
-_LATERAL: dict[str, tuple[str, str]] = {"pelvis": ("left_hip", "right_hip"), "spine3": ("left_collar", "right_collar")}
+#: Joints whose twist comes from the vector between two other joints (left minus right): the
+#: first pair that is mapped and not (nearly) parallel to the bone in the source's zero pose.
+#: The shoulders back up the collars because CMU's ASF layout starts both clavicles at the
+#: thorax end, where their difference is zero.
+_LATERAL: dict[str, tuple[tuple[str, str], ...]] = {
+    "pelvis": (("left_hip", "right_hip"),),
+    "spine3": (("left_collar", "right_collar"), ("left_shoulder", "right_shoulder")),
+}
+#: A lateral reference is usable when its part perpendicular to the bone is at least this
+#: fraction of its length (sin 11.5 deg): a nearly parallel one would give an ill-defined twist.
+_MIN_LATERAL_SIN = 0.2
 #: Hinge joints: (parent segment joint, flexion direction of the child bone in SMPL's world).
 _HINGES: dict[str, tuple[str, tuple[float, float, float]]] = {
     "left_knee": ("left_hip", (0.0, 0.0, -1.0)), "right_knee": ("right_hip", (0.0, 0.0, -1.0)),
@@ -195,6 +214,26 @@ BANDAI = SkeletonMap(
 BUILTIN_MAPS: dict[str, SkeletonMap] = {m.name: m for m in (CMU_DAZ, BANDAI)}
 
 
+def next_joint(name: str, mapped: Collection[str]) -> str | None:
+    """The SMPL joint that ``name``'s primary bone points to, given the mapped SMPL joints:
+    :data:`_NEXT`, except that spine1 points to spine2 when spine2 is mapped (so a source with
+    three spine segments, e.g. CMU's ``lowerback > upperback > thorax``, keeps all three)."""
+    if name == "spine1" and "spine2" in mapped:
+        return "spine2"
+    return _NEXT[name]
+
+
+def bone_pairs(mapped: Collection[str]) -> tuple[tuple[str, str], ...]:
+    """Every mapped bone: ``(joint, next joint)`` for each mapped SMPL joint whose
+    :func:`next_joint` is mapped too, in SMPL order (the import check compares these)."""
+    out = []
+    for name in JOINT_NAMES:
+        nxt = next_joint(name, mapped) if name in mapped else None
+        if nxt is not None and nxt in mapped:
+            out.append((name, nxt))
+    return tuple(out)
+
+
 def detect_skeleton_map(skeleton: BvhSkeleton, maps: Sequence[SkeletonMap] | None = None) -> SkeletonMap:
     """The built-in map whose BVH joint names all occur in ``skeleton`` (best coverage wins).
 
@@ -222,12 +261,15 @@ def _unit(v: torch.Tensor) -> torch.Tensor:
     return v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
 
 
-def _frame(p: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
-    """Orthonormal frame (columns) with axis 1 along ``p`` and axis 2 in the ``(p, s)`` plane."""
+def _frame(p: torch.Tensor, s: torch.Tensor, what: str = "the twist reference") -> torch.Tensor:
+    """Orthonormal frame (columns) with axis 1 along ``p`` and axis 2 in the ``(p, s)`` plane.
+
+    ``what`` names the joint and its reference in the error (e.g. ``"left_knee: its hinge axis"``).
+    """
     e1 = _unit(p)
     s_perp = s - (s @ e1) * e1
-    if s_perp.norm() < 1e-6:
-        raise RetargetError("twist reference is parallel to the bone; cannot fix the twist")
+    if s_perp.norm() < 1e-6 * max(float(s.norm()), 1e-12) or s_perp.norm() < 1e-12:
+        raise RetargetError(f"{what} is parallel to the bone (or zero), so the twist about the bone is undefined")
     e2 = _unit(s_perp)
     return torch.stack([e1, e2, torch.linalg.cross(e1, e2)], dim=-1)
 
@@ -328,6 +370,24 @@ def estimate_hinge_axes(motion: BvhMotion, smap: SkeletonMap) -> dict[str, tuple
 
 
 # ---------------------------------------------------------------------------- the T-pose
+@dataclass(frozen=True)
+class BoneFix:
+    """A mapped bone whose source bone spans joints the map leaves out (e.g. CMU's ``upperneck``
+    between ``lowerneck`` and ``head``): their rotations would be lost, so the SMPL joint's
+    global rotation is turned per frame by the minimal rotation (a swing, its twist kept) that
+    points its bone where the source bone points. Not for the pelvis and the chest (spine3):
+    their other children (hips, collars) would move with the swing.
+
+    Attributes:
+        source: source joint index of the SMPL joint; target: source joint index the bone ends at;
+        bone: ``(3,)`` unit direction of the SMPL bone in SMPL's rest pose (world = joint frame).
+    """
+
+    source: int
+    target: int
+    bone: torch.Tensor
+
+
 @dataclass
 class TPose:
     """The BVH skeleton's T-pose matching SMPL's zero pose.
@@ -338,12 +398,27 @@ class TPose:
         scale: SMPL/BVH leg-length ratio (dimensionless, applied after the unit change).
         hinge_source: SMPL hinge joint -> ``"map"``, ``"clip"`` or ``"parent"`` (fallback).
         twist_offsets: SMPL joint -> twist (radians) applied by the ``mean_twist`` rule.
+        twist_refs: SMPL joint -> what fixed its twist about the bone: ``"left_hip-right_hip"``
+            (a lateral pair), ``"hinge"``, ``"parent"`` (minimal twist) or ``"none"`` (no bone).
+        bone_fix: SMPL joint index -> :class:`BoneFix` (per-frame swing onto the source bone).
+        bone_ends: SMPL joint -> the SMPL joint its primary bone ends at, when that is not the
+            next joint (the next joint sits at the same place in the source: a zero-length bone).
     """
 
     rotations: dict[int, torch.Tensor]
     scale: float
     hinge_source: dict[str, str]
     twist_offsets: dict[str, float] = field(default_factory=dict)
+    twist_refs: dict[str, str] = field(default_factory=dict)
+    bone_fix: dict[int, BoneFix] = field(default_factory=dict)
+    bone_ends: dict[str, str] = field(default_factory=dict)
+
+
+def _map_advice(smap: SkeletonMap, joint: str) -> str:
+    """The way out of an unusable joint, as joint-map lines (docs/motion-import.md)."""
+    src = smap.joints.get(joint, "?")
+    return (f"write a --joint-map YAML that maps SMPL {joint} to another joint of your skeleton "
+            f"('{joint}: OtherJoint') or leaves it unmapped ('{joint}: null'; now {src!r})")
 
 
 def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
@@ -358,14 +433,25 @@ def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
         hinge: ``"map"`` use ``smap.hinge_axes``; ``"clip"`` estimate from this clip; ``"auto"``
             map constants when present, else the clip (if its RMS flexion reaches
             ``min_hinge_rms``), else minimal twist from the parent.
+
+    Raises:
+        RetargetError: a mapped joint is not below its mapped SMPL parent's joint, a hinge axis
+            lies along its bone, or the legs do not point down (each names the joint and the
+            joint-map lines that get round it).
     """
     skel = motion.skeleton
     rest = rest_joints.to(torch.float64)
     offs = _rest_offsets(motion)
     bidx = {s: skel.index(b) for s, b in smap.joints.items()}
+    # Bones shorter than this (file units) are zero-length connectors: CMU's lowerback and hip
+    # links start exactly at the root.
+    eps = 1e-3 * float(offs.norm(dim=-1).max().clamp_min(1e-12))
     clip_axes: dict[str, tuple[torch.Tensor, torch.Tensor, float]] | None = None
     hinge_src: dict[str, str] = {}
     twist_offsets: dict[str, float] = {}
+    twist_refs: dict[str, str] = {}
+    bone_fix: dict[int, BoneFix] = {}
+    bone_ends: dict[str, str] = {}
     world_rot: torch.Tensor | None = None
 
     def hinge_axes_for(h: str) -> tuple[torch.Tensor, torch.Tensor] | None:
@@ -391,23 +477,46 @@ def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
         return p if p >= 0 else None
 
     def primary(name: str) -> tuple[torch.Tensor | None, torch.Tensor | None]:
-        nxt = _NEXT[name]
+        """SMPL rest bone and source zero-pose bone (in the source joint's frame) of ``name``."""
+        nxt = next_joint(name, bidx)
+        b = bidx[name]
+        while nxt is not None and nxt in bidx:
+            p_b = _position_in(skel, offs, bidx[nxt], b)
+            if p_b is None:
+                return None, None
+            if float(p_b.norm()) > eps:
+                if nxt != next_joint(name, bidx):
+                    bone_ends[name] = nxt
+                return rest[JOINT_INDEX[nxt]] - rest[JOINT_INDEX[name]], p_b
+            # The next joint sits at this one's place (CMU's lowerback starts at the root): the
+            # joint after it gives the direction (the zero-length SMPL bone has no source bone).
+            nxt = next_joint(nxt, bidx)
         if nxt is None:
             return None, None
-        b = bidx[name]
-        p_s = rest[JOINT_INDEX[nxt]] - rest[JOINT_INDEX[name]]
-        if nxt in bidx:
-            p_b = _position_in(skel, offs, bidx[nxt], b)
-        else:
-            # No mapped counterpart (e.g. CMU's toe End Site for SMPL's foot, fingers for the
-            # hand): use the mean of the joint's child and End Site offsets, if any.
-            vecs = [offs[c] for c in skel.children(b)]
-            if b in skel.end_sites:
-                vecs += list(torch.from_numpy(skel.end_sites[b]))
-            p_b = torch.stack(vecs).mean(0) if vecs else None
-        if p_b is None or p_b.norm() < 1e-6:
+        # No mapped counterpart (e.g. CMU's toe End Site for SMPL's foot, fingers for the hand):
+        # use the mean of the joint's child and End Site offsets, if any.
+        vecs = [offs[c] for c in skel.children(b)]
+        if b in skel.end_sites:
+            vecs += list(torch.from_numpy(skel.end_sites[b]))
+        p_b = torch.stack(vecs).mean(0) if vecs else None
+        if p_b is None or float(p_b.norm()) <= eps:
             return None, None
-        return p_s, p_b
+        return rest[JOINT_INDEX[nxt]] - rest[JOINT_INDEX[name]], p_b
+
+    def lateral(name: str, p_b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, str] | None:
+        """The first usable lateral pair of ``name`` (see :data:`_LATERAL`): (SMPL, source, label)."""
+        b = bidx[name]
+        for l, r in _LATERAL.get(name, ()):
+            if l not in bidx or r not in bidx:
+                continue
+            pl, pr = _position_in(skel, offs, bidx[l], b), _position_in(skel, offs, bidx[r], b)
+            if pl is None or pr is None:
+                continue
+            s_b = pl - pr
+            perp = s_b - (s_b @ _unit(p_b)) * _unit(p_b)
+            if float(s_b.norm()) > eps and float(perp.norm()) >= _MIN_LATERAL_SIN * float(s_b.norm()):
+                return rest[JOINT_INDEX[l]] - rest[JOINT_INDEX[r]], s_b, f"{l}-{r}"
+        return None
 
     T: dict[int, torch.Tensor] = {}
     for j, name in enumerate(JOINT_NAMES):
@@ -420,14 +529,13 @@ def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
         if anc is not None:
             # Relative rotation of intermediate BVH joints at the zero pose is the identity.
             if _path_to_ancestor(skel, b, bidx[JOINT_NAMES[anc]]) is None:
-                raise RetargetError(f"{smap.name}: BVH joint {smap.joints[name]} is not below {smap.joints[JOINT_NAMES[anc]]}")
+                raise RetargetError(f"{smap.name}: joint {smap.joints[name]} (SMPL {name}) is not below "
+                                    f"{smap.joints[JOINT_NAMES[anc]]} (SMPL {JOINT_NAMES[anc]}); {_map_advice(smap, name)}")
         s_pair: tuple[torch.Tensor, torch.Tensor] | None = None
-        if name in _LATERAL and p_b is not None:
-            l, r = _LATERAL[name]
-            if l in bidx and r in bidx:
-                s_s = rest[JOINT_INDEX[l]] - rest[JOINT_INDEX[r]]
-                s_b = _position_in(skel, offs, bidx[l], b) - _position_in(skel, offs, bidx[r], b)
-                s_pair = (s_s, s_b)
+        what = ""
+        if p_b is not None and (lat := lateral(name, p_b)) is not None:
+            s_pair, twist_refs[name] = (lat[0], lat[1]), lat[2]
+            what = f"{smap.name}: SMPL {name} ({smap.joints[name]}): its twist reference {lat[2]}"
         hname = name if name in _HINGES else _SEGMENT_HINGE.get(name)
         if s_pair is None and p_b is not None and hname is not None and hname in bidx and _HINGES[hname][0] in bidx:
             axes = hinge_axes_for(hname)
@@ -436,12 +544,26 @@ def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
                 parent_bone_s = rest[JOINT_INDEX[hname]] - rest[JOINT_INDEX[seg]]
                 s_s = torch.linalg.cross(_unit(parent_bone_s), torch.tensor(flex, dtype=torch.float64), dim=-1)
                 s_pair = (s_s, axes[0] if name == seg else axes[1])
+                twist_refs[name] = "hinge"
+                what = f"{smap.name}: SMPL {name} ({smap.joints[name]}): the {hname} hinge axis"
         if s_pair is not None:
-            T[j] = _frame(p_s, s_pair[0]) @ _frame(p_b, s_pair[1]).T
+            try:
+                T[j] = _frame(p_s, s_pair[0], what) @ _frame(p_b, s_pair[1], what).T
+            except RetargetError as exc:
+                raise RetargetError(f"{exc}; {_map_advice(smap, name)}") from None
         elif p_b is not None:
             T[j] = rotation_between(K @ p_b, p_s) @ K
+            twist_refs[name] = "parent"
         else:
             T[j] = K.clone()
+            twist_refs[name] = "none"
+        nxt = next_joint(name, bidx)
+        # Not the pelvis or chest: swinging them onto one bone would move their other children
+        # (hips, collars) off the source's; their loss shows in the bone check instead.
+        if p_b is not None and name not in bone_ends and name not in _LATERAL and nxt in bidx:
+            path = _path_to_ancestor(skel, bidx[nxt], b)
+            if path is not None and len(path) > 1:
+                bone_fix[j] = BoneFix(b, bidx[nxt], _unit(p_s))
         if name in smap.mean_twist and p_s is not None and anc is not None:
             if world_rot is None:
                 world_rot = bvh_forward_kinematics(motion)[0]
@@ -467,7 +589,7 @@ def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
     bvh_leg = 0.5 * (bvh_drop("left") + bvh_drop("right"))
     if bvh_leg <= 1e-6:
         raise RetargetError(f"{smap.name}: legs do not point down in the T-pose (pelvis-to-ankle height {bvh_leg:.3f} m)")
-    return TPose(T, smpl_drop / bvh_leg, hinge_src, twist_offsets)
+    return TPose(T, smpl_drop / bvh_leg, hinge_src, twist_offsets, twist_refs, bone_fix, bone_ends)
 
 
 # ---------------------------------------------------------------------------- retargeting
@@ -524,6 +646,11 @@ def retarget_bvh(motion: BvhMotion, rest_joints: torch.Tensor, smap: SkeletonMap
     for j, name in enumerate(JOINT_NAMES):
         if name in smap.joints:
             G[j] = G_b[:, skel.index(smap.joints[name])] @ tpose.rotations[j].T
+    for j, fix in tpose.bone_fix.items():
+        # Swing the joint so its bone points where the source bone points (joints the map
+        # leaves out in between would otherwise bend it away).
+        want = P_b[:, fix.target] - P_b[:, fix.source]
+        G[j] = rotation_between(G[j] @ fix.bone, want) @ G[j]  # type: ignore[operator]
     for j, name in enumerate(JOINT_NAMES):
         if G[j] is not None:
             continue
@@ -545,7 +672,8 @@ def retarget_bvh(motion: BvhMotion, rest_joints: torch.Tensor, smap: SkeletonMap
     m: dict[str, Any] = {
         "source_format": "bvh", "skeleton": smap.name, "source_fps": motion.fps,
         "retarget": {"method": "global-orientation transfer with rest-pose correction", "leg_scale": tpose.scale,
-                     "hinge_axes": tpose.hinge_source,
+                     "hinge_axes": tpose.hinge_source, "twist_refs": tpose.twist_refs,
+                     "bone_swing_fixed": sorted(JOINT_NAMES[j] for j in tpose.bone_fix),
                      "twist_offsets_deg": {k: math.degrees(v) for k, v in tpose.twist_offsets.items()},
                      "lowest_foot_y": lowest, "lowest_bvh_foot_y": lowest_bvh},
     }
@@ -572,7 +700,9 @@ def bone_direction_errors(result: Retargeted, rest_joints: torch.Tensor,
     """Per-frame angle (radians) between each retargeted SMPL bone and its BVH bone.
 
     SMPL bones come from ``forward_kinematics(pose, rest_joints)``; BVH bones from the clip's own
-    FK. Pairs whose joints are not both mapped are skipped.
+    FK. Pairs whose joints are not both mapped are skipped, and so are pairs whose source joints
+    sit at the same place (a zero-length source bone has no direction: CMU's root and
+    ``lowerback``).
 
     Returns:
         ``"a->b"`` -> ``(T,)`` angles in radians.
@@ -586,8 +716,11 @@ def bone_direction_errors(result: Retargeted, rest_joints: torch.Tensor,
     for a, b in pairs:
         if a not in mapped or b not in mapped:
             continue
+        vb = P[:, names.index(result.smap.joints[b])] - P[:, names.index(result.smap.joints[a])]
+        if float(vb.norm(dim=-1).median()) < 1e-6:
+            continue
         ds = _unit(J[:, JOINT_INDEX[b]] - J[:, JOINT_INDEX[a]])
-        db = _unit(P[:, names.index(result.smap.joints[b])] - P[:, names.index(result.smap.joints[a])])
+        db = _unit(vb)
         cos = (ds * db).sum(-1).clamp(-1.0, 1.0)
         out[f"{a}->{b}"] = torch.arccos(cos).numpy()
     return out
