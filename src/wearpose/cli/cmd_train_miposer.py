@@ -11,12 +11,12 @@ from typing import Any, Optional
 import typer
 
 from wearpose.cli.app import _emit, console
-from wearpose.cli.cmd_train import train_app
+from wearpose.cli.cmd_train import clip_limit, train_app
 
 
 @train_app.command("miposer")
 def train_miposer_cmd(
-    config: str = typer.Option("cpu", help="Preset: tiny (smoke test), cpu (CPU-sized), paper (AvatarPoser / MI-Poser Sec. 4.2)."),
+    config: str = typer.Option("cpu", help="Preset: tiny (smoke test: 8 training clips unless --limit, under a minute), cpu (CPU-sized), paper (AvatarPoser / MI-Poser Sec. 4.2)."),
     model: str = typer.Option("avatarposer", help="avatarposer (MI-Poser IK network) or imuposer (IMU-only BiLSTM baseline)."),
     wrists: int = typer.Option(2, help="Wrist sensors: 2 (kit miposer) or 1 (left wrist, smartwatch variant, kit miposer1)."),
     epochs: Optional[int] = typer.Option(None, help="Override the preset's number of epochs."),
@@ -52,7 +52,8 @@ def train_miposer_cmd(
         est = MiposerEstimator(cfg)
         out = out or Path("runs") / f"miposer{wrists}_{config}"
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    res = train_miposer(est, out, epochs=epochs, resume=resume, threads=threads, device=device, limit_train=limit,
+    res = train_miposer(est, out, epochs=epochs, resume=resume, threads=threads, device=device,
+                        limit_train=clip_limit(config, limit),
                         checkpoint_every=checkpoint_every, train_command=command, quiet=as_json,
                         console=None if as_json else console)
     res = {"method": est.name, "model": model, "wrists": wrists, "config": cfg.to_dict(), **res}

@@ -10,12 +10,12 @@ from typing import Any, Optional
 import typer
 
 from wearpose.cli.app import _emit, console
-from wearpose.cli.cmd_train import train_app
+from wearpose.cli.cmd_train import clip_limit, train_app
 
 
 @train_app.command("pip")
 def train_pip_cmd(
-    config: str = typer.Option("cpu", help="Preset: tiny (smoke test), cpu (CPU-sized), paper (PIP appendix)."),
+    config: str = typer.Option("cpu", help="Preset: tiny (smoke test: 8 training clips unless --limit, under a minute), cpu (CPU-sized), paper (PIP appendix)."),
     epochs: Optional[int] = typer.Option(None, help="Override the preset's number of epochs."),
     out: Optional[Path] = typer.Option(None, help="Run directory (default runs/pip_<config>[_noinit])."),
     resume: bool = typer.Option(False, "--resume", help="Continue from <out>/last.pt."),
@@ -85,7 +85,8 @@ def train_pip_cmd(
         est.model.load_state_dict(ck.weights)  # same architecture required (strict)
         est.meta["init_from"] = str(init_from)
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    res = train_pip(est, out, epochs=epochs, resume=resume, threads=threads, device=device, limit_train=limit,
+    res = train_pip(est, out, epochs=epochs, resume=resume, threads=threads, device=device,
+                    limit_train=clip_limit(config, limit),
                     checkpoint_every=checkpoint_every, train_command=command, quiet=as_json,
                     console=None if as_json else console)
     res = {"method": "pip", "config": cfg.to_dict(), **res}
