@@ -34,6 +34,14 @@ class StreamError(WearposeError, RuntimeError):
     """The server refused a request (its ``error`` message), or the connection failed."""
 
 
+class SubjectEnded(StreamError):
+    """The server ended a subject this client was streaming (its ``bye`` notice: shutdown, ...)."""
+
+
+#: Which reply an ``error`` answers, by its ``request`` field (an error without one answers a hello).
+_REPLY_TO = {"hello": "ready", "bye": "bye", "stats": "stats", "subscribe": "subscribed"}
+
+
 class StreamClient:
     """One WebSocket connection to the server.
 
@@ -41,22 +49,38 @@ class StreamClient:
         url: ``ws://host:port``.
         on_pose: optional ``(receive_time, PosePacket) -> None`` called for each pose (receive
             time from ``time.perf_counter()``); without it poses go to :attr:`poses`.
+        token: the server's access token (printed by ``wearpose serve``), sent as an
+            ``Authorization: Bearer`` header; needed when the server requires it.
+        origin: an ``Origin`` header to send (what a browser page would send; tests).
     """
 
-    def __init__(self, url: str, on_pose: Callable[[float, PosePacket], None] | None = None) -> None:
+    def __init__(self, url: str, on_pose: Callable[[float, PosePacket], None] | None = None, *,
+                 token: str | None = None, origin: str | None = None) -> None:
         self.url = url
         self.on_pose = on_pose
+        self.token, self.origin = token, origin
         self.poses: asyncio.Queue = asyncio.Queue()
         self.hellos: dict[int, Hello] = {}
         self.messages: deque = deque(maxlen=1000)  # control messages received (subject, error ...)
+        #: Subjects the server ended (its ``bye`` message, with ``stats`` and ``reason``), by id.
+        self.ended: dict[int, dict[str, Any]] = {}
+        #: Poses the server dropped for this subscriber because it read too slowly (its reports).
+        self.dropped_poses = 0
         self._ws: Any = None
         self._reader: asyncio.Task | None = None
         self._waiters: dict[tuple[str, Any], deque] = defaultdict(deque)
 
     async def connect(self) -> StreamClient:
+        """Open the connection (StreamError naming the fix when the server refuses it)."""
         from websockets.asyncio.client import connect
+        from websockets.exceptions import InvalidStatus
 
-        self._ws = await connect(self.url, compression=None, max_size=1 << 22, ping_interval=None)
+        headers = {"Authorization": f"Bearer {self.token}"} if self.token else None
+        try:
+            self._ws = await connect(self.url, compression=None, max_size=1 << 22, ping_interval=None,
+                                     origin=self.origin, additional_headers=headers)
+        except InvalidStatus as exc:
+            raise StreamError(_refusal_text(self.url, exc.response, self.token is not None)) from None
         self._reader = asyncio.create_task(self._read())
         return self
 
@@ -96,7 +120,13 @@ class StreamClient:
                     continue
                 self.messages.append(m)
                 kind = m.get("type")
-                key = (("ready" if kind == "error" else kind), m.get("subject"))  # an error answers a hello
+                if kind == "bye":  # the end of a subject, asked for or not (server stopping ...)
+                    self.ended[m.get("subject")] = m
+                elif kind == "dropped":
+                    self.dropped_poses += int(m.get("count") or 0)
+                if kind == "error":
+                    kind = _REPLY_TO.get(m.get("request") or "hello")
+                key = (kind, None if kind in ("subscribed", "stats") else m.get("subject"))
                 waiting = self._waiters.get(key)
                 while waiting:
                     fut = waiting.popleft()
@@ -112,10 +142,21 @@ class StreamClient:
                     if not fut.done():
                         fut.set_exception(StreamError(f"connection to {self.url} closed"))
 
+    async def _send(self, msg: str | bytes) -> None:
+        """Send, or StreamError when the connection is gone (the server stopped or closed it)."""
+        from websockets.exceptions import ConnectionClosed
+
+        if self.disconnected:
+            raise StreamError(f"connection to {self.url} closed{_close_text(self._ws)}")
+        try:
+            await self._ws.send(msg)
+        except ConnectionClosed:
+            raise StreamError(f"connection to {self.url} closed{_close_text(self._ws)}") from None
+
     async def _request(self, text: str, key: tuple[str, Any], timeout: float) -> dict[str, Any]:
         fut = asyncio.get_running_loop().create_future()
         self._waiters[key].append(fut)
-        await self._ws.send(text)
+        await self._send(text)
         return await asyncio.wait_for(fut, timeout)
 
     async def hello(self, hello: Hello, timeout: float = 120.0) -> dict[str, Any]:
@@ -125,25 +166,58 @@ class StreamClient:
         if reply.get("type") == "error":
             raise StreamError(f"server refused subject {hello.subject}: {reply.get('error')}")
         self.hellos[hello.subject] = hello
+        self.ended.pop(hello.subject, None)  # a restart: the bye of its previous stream came first
         return reply
 
     async def send_frame(self, pkt: FramePacket) -> None:
-        """Send one frame in the subject's declared format."""
+        """Send one frame in the subject's declared format; SubjectEnded once the server has
+        ended the subject, StreamError when the connection is gone."""
+        if pkt.subject in self.ended:
+            raise SubjectEnded(f"subject {pkt.subject}: the server ended it "
+                               f"({self.ended[pkt.subject].get('reason') or 'bye'})")
         h = self.hellos[pkt.subject]
-        await self._ws.send(encode_frame_binary(pkt) if h.format == "binary" else encode_frame_json(pkt, h.channels))
+        await self._send(encode_frame_binary(pkt) if h.format == "binary" else encode_frame_json(pkt, h.channels))
 
     async def send_raw(self, msg: str | bytes) -> None:
         """Send any message as is (fault injection, custom packets)."""
-        await self._ws.send(msg)
+        await self._send(msg)
 
     async def bye(self, subject: int, timeout: float = 600.0) -> dict[str, Any]:
-        """End a subject's stream; returns its final server stats once every pose was sent."""
+        """End a subject's stream; returns its final server stats once every pose was sent (at
+        once when the server has already ended it). StreamError when the server refuses it."""
+        if subject in self.ended:
+            return self.ended[subject].get("stats", {})
         reply = await self._request(json.dumps({"type": "bye", "subject": subject}), ("bye", subject), timeout)
+        if reply.get("type") == "error":
+            raise StreamError(f"server refused bye for subject {subject}: {reply.get('error')}")
         return reply.get("stats", {})
 
     async def stats(self, timeout: float = 10.0) -> dict[str, Any]:
         return await self._request(json.dumps({"type": "stats"}), ("stats", None), timeout)
 
-    async def subscribe(self, subjects: list[int] | None = None, fmt: str = "json") -> None:
-        """Receive the poses of ``subjects`` (None: all) published by other connections."""
-        await self._ws.send(json.dumps({"type": "subscribe", "subjects": subjects, "format": fmt}))
+    async def subscribe(self, subjects: list[int] | None = None, fmt: str = "json",
+                        timeout: float = 10.0) -> dict[str, Any]:
+        """Receive the poses of ``subjects`` (None: all) published by other connections; returns
+        the server's ``subscribed`` reply (its overload policy). StreamError when refused."""
+        msg = json.dumps({"type": "subscribe", "subjects": subjects, "format": fmt})
+        reply = await self._request(msg, ("subscribed", None), timeout)
+        if reply.get("type") == "error":
+            raise StreamError(f"server refused the subscription: {reply.get('error')}")
+        return reply
+
+
+def _close_text(ws: Any) -> str:
+    code = getattr(ws, "close_code", None)
+    return f" (code {code}: {getattr(ws, 'close_reason', None) or 'no reason given'})" if code is not None else ""
+
+
+def _refusal_text(url: str, response: Any, had_token: bool) -> str:
+    """What a refused handshake means and what to do (the server's own text included)."""
+    body = (response.body or b"").decode("utf-8", "replace").strip()
+    if response.status_code == 401:
+        fix = ("the token given is not the server's" if had_token else
+               "this server requires its access token: pass --token (printed by `wearpose serve` at start-up)")
+        return f"{url}: HTTP 401, {fix}. Server: {body}"
+    if response.status_code == 403:
+        return f"{url}: HTTP 403, the server refuses this client ({body})"
+    return f"{url}: HTTP {response.status_code}, the server refused the connection ({body})"

@@ -57,8 +57,9 @@ CHANNEL_FLOATS: dict[str, int] = {"position": 3, "orientation": 9, "acceleration
 MAX_SENSORS = 64  # the validity bits are one u64
 NUM_JOINTS = 24
 POSE_FLOATS = NUM_JOINTS * 9 + 10 + 3 + NUM_JOINTS + 2
-#: Largest message the server accepts (a 64-sensor frame of every channel is ~20 kB of JSON-ish text).
-MAX_MESSAGE_BYTES = 1 << 20
+#: Largest message the server accepts by default, bytes (``Limits.message_bytes``): 128 KiB, about
+#: four times the largest valid message (a JSON frame of 64 sensors with every channel, ~35 kB).
+MAX_MESSAGE_BYTES = 1 << 17
 
 
 class PacketError(WearposeError, ValueError):

@@ -21,7 +21,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from wearpose.stream.client import StreamClient
+from wearpose.stream.client import StreamClient, StreamError
 from wearpose.stream.packets import (
     CHANNEL_FLOATS,
     HEADER,
@@ -103,7 +103,7 @@ def _malformed(kind: int, good: bytes, hello: Hello, rng: np.random.Generator) -
 async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "binary", realtime: bool = True,
                  speed: float = 1.0, duration: float | None = None, faults: Faults | None = None,
                  progress: Callable[[int, int], None] | None = None, client: StreamClient | None = None,
-                 drain_timeout: float | None = None) -> dict[str, Any]:
+                 drain_timeout: float | None = None, token: str | None = None) -> dict[str, Any]:
     """Stream ``recording`` as subject ``subject`` and collect its poses.
 
     Args:
@@ -118,6 +118,8 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         drain_timeout: seconds to wait after the last frame for the remaining poses (default
             max(600, twice the stream's duration)); frames still queued at the server then count
             in ``frames_lost`` and ``gave_up_waiting`` is True.
+        token: the server's access token (``wearpose serve`` prints it; needed when the server
+            requires it); ignored with ``client`` (give it to that client).
 
     Returns:
         dict: ``frames_sent``, ``poses_received``, ``frames_expected`` (sent minus those the
@@ -128,7 +130,12 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         ms (``latency_ms`` end to end = send -> pose received; ``server_ms`` frame arrival ->
         pose sent, of which ``compute_ms`` is the estimator's step; ``transport_ms`` = end to end
         minus server), ``send_lag_ms`` (how late the sender was against the schedule), the
-        server's final ``server_stats``, ``faults`` and ``invalid_pose_frames``.
+        server's final ``server_stats``, ``faults`` and ``invalid_pose_frames``;
+        ``ended_by_server``: None, or why the stream stopped early (the server ended the subject,
+        e.g. shutting down, or closed the connection): the replay stops sending at once and
+        returns what it has, it never waits for a server that is gone; ``frames_cut_at_end``:
+        frames sent while the server was already ending the subject (it did not accept them;
+        not counted in ``frames_expected`` / ``frames_lost``).
     """
     faults = faults or Faults()
     rng = np.random.default_rng(faults.seed)
@@ -145,7 +152,7 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
             recv[p.seq] = (t, p.server_ms, p.compute_ms, p.valid)
 
     own = client is None
-    c = client or StreamClient(url)
+    c = client or StreamClient(url, token=token)
     if own:
         await c.connect()
     prev_on_pose = c.on_pose
@@ -161,64 +168,80 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         period = 1.0 / (st.rate * speed)
         t0 = time.perf_counter() + 0.05
         last_progress = t0
-        for k in range(N):
-            if realtime:
-                target = t0 + k * period
-                now = time.perf_counter()
-                if target > now:
-                    await asyncio.sleep(target - now)
-                lag.append(max(0.0, time.perf_counter() - target) * 1e3)
-            i = k % T
-            valid = st.valid[i].copy()
-            if faults.dropout > 0:
-                start = (rng.random(S) < faults.dropout) & (off_until <= k)
-                lo, hi = faults.dropout_frames
-                off_until[start] = k + rng.integers(lo, hi + 1, size=int(start.sum()))
-                n_dropped_samples += int((valid & (off_until > k)).sum())
-                valid &= off_until <= k
-            data = st.data[i].copy()
-            data[~valid] = np.nan
-            ts = float(st.timestamps[0] + k / st.rate)
-            pkt = FramePacket(subject, k, ts, valid, data)
-            if held is None and k + 1 < N and faults.reorder > 0 and rng.random() < faults.reorder:
-                held, n_reordered = pkt, n_reordered + 1  # sent after its successor
-                swapped.add(k)
-            else:
-                sent[k] = time.perf_counter()
-                await c.send_frame(pkt)
-                if held is not None:
-                    sent[held.seq] = time.perf_counter()
-                    await c.send_frame(held)
-                    held = None
-            if faults.malformed > 0 and rng.random() < faults.malformed:
-                await c.send_raw(_malformed(int(rng.integers(0, 8)), encode_frame_binary(pkt), hello, rng))
-                n_malformed += 1
-            if progress is not None and time.perf_counter() - last_progress > 1.0:
-                last_progress = time.perf_counter()
-                progress(k + 1, N)
-            if not realtime and k % 64 == 63:
-                await asyncio.sleep(0)  # let the reader run
-        if held is not None:
-            sent[held.seq] = time.perf_counter()
-            await c.send_frame(held)
+
+        async def send(p: FramePacket) -> None:
+            t = time.perf_counter()
+            await c.send_frame(p)
+            sent[p.seq] = t  # only frames that left: one the server had ended is not "lost"
+
+        ended: str | None = None  # why the server ended the stream early (None: it did not)
+        try:
+            for k in range(N):
+                if realtime:
+                    target = t0 + k * period
+                    now = time.perf_counter()
+                    if target > now:
+                        await asyncio.sleep(target - now)
+                    lag.append(max(0.0, time.perf_counter() - target) * 1e3)
+                i = k % T
+                valid = st.valid[i].copy()
+                if faults.dropout > 0:
+                    start = (rng.random(S) < faults.dropout) & (off_until <= k)
+                    lo, hi = faults.dropout_frames
+                    off_until[start] = k + rng.integers(lo, hi + 1, size=int(start.sum()))
+                    n_dropped_samples += int((valid & (off_until > k)).sum())
+                    valid &= off_until <= k
+                data = st.data[i].copy()
+                data[~valid] = np.nan
+                ts = float(st.timestamps[0] + k / st.rate)
+                pkt = FramePacket(subject, k, ts, valid, data)
+                if held is None and k + 1 < N and faults.reorder > 0 and rng.random() < faults.reorder:
+                    held, n_reordered = pkt, n_reordered + 1  # sent after its successor
+                    swapped.add(k)
+                else:
+                    await send(pkt)
+                    if held is not None:
+                        await send(held)
+                        held = None
+                if faults.malformed > 0 and rng.random() < faults.malformed:
+                    await c.send_raw(_malformed(int(rng.integers(0, 8)), encode_frame_binary(pkt), hello, rng))
+                    n_malformed += 1
+                if progress is not None and time.perf_counter() - last_progress > 1.0:
+                    last_progress = time.perf_counter()
+                    progress(k + 1, N)
+                if not realtime and k % 64 == 63:
+                    await asyncio.sleep(0)  # let the reader run
+            if held is not None:
+                await send(held)
+        except StreamError as exc:  # the server ended the subject or closed the connection: stop, report
+            ended = str(exc)
         # The estimator may be behind (frames queue, never dropped): give it time to finish.
         t_end = time.perf_counter()
-        try:
-            server_stats = await c.bye(subject, timeout=drain_timeout if drain_timeout is not None
-                                       else max(600.0, 2.0 * N / st.rate))
-            gave_up = False
-        except asyncio.TimeoutError:
-            # Report what arrived; the server still holds (and will estimate) the rest.
-            gave_up = True
-            stats = await c.stats()
-            server_stats = stats.get("subjects", {}).get(str(subject), {})
+        gave_up = False
+        if ended is None:
+            try:
+                server_stats = await c.bye(subject, timeout=drain_timeout if drain_timeout is not None
+                                           else max(600.0, 2.0 * N / st.rate))
+            except asyncio.TimeoutError:
+                # Report what arrived; the server still holds (and will estimate) the rest.
+                gave_up = True
+                stats = await c.stats()
+                server_stats = stats.get("subjects", {}).get(str(subject), {})
+            except StreamError as exc:  # the connection went away while waiting
+                ended = str(exc)
+        if ended is not None:
+            server_stats = (c.ended.get(subject) or {}).get("stats", {})
         drain_s = time.perf_counter() - t_end
     finally:
         c.on_pose = prev_on_pose
         if own:
             await c.close()
     stride = int(ready.get("stride", 1))
-    expected = [s for s in sent if s % stride == 0]
+    # Ended by the server: the last frames sent may have reached it while it was ending the
+    # subject (it did not accept them: sent minus received). They are cut, not lost.
+    cut = max(0, len(sent) - int(server_stats.get("received", len(sent)))) if ended is not None else 0
+    accepted = sorted(sent)[:len(sent) - cut]
+    expected = [s for s in accepted if s % stride == 0]
     got = [s for s in expected if s in recv]
     e2e = [(recv[s][0] - sent[s]) * 1e3 for s in got]
     srv = [recv[s][1] for s in got]
@@ -241,7 +264,7 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         "frames_sent": len(sent), "frames_expected": len(expected), "poses_received": len(recv),
         "frames_lost": len(expected) - len(got),
         "frames_lost_by_server": int(server_stats.get("lost", 0)) + int(server_stats.get("late", 0)),
-        "gave_up_waiting": gave_up, "drain_s": round(drain_s, 3),
+        "gave_up_waiting": gave_up, "drain_s": round(drain_s, 3), "ended_by_server": ended, "frames_cut_at_end": cut,
         "frames_queued_at_server_at_end": server_stats.get("queue_now") if gave_up else 0,
         "invalid_pose_frames": sum(1 for s in got if not recv[s][3]),
         "latency_ms": _summary_ms(e2e), "server_ms": _summary_ms(srv), "compute_ms": _summary_ms(comp),

@@ -37,6 +37,15 @@ sends it. Latency measures (all in ``stats``, per subject):
   each stage's mean over the slowest 1 % of frames (where the tail comes from).
 - ``gc``: Python garbage-collector pauses in the server process.
 
+Security (:mod:`wearpose.stream.security`, ``docs/streaming.md``): every handshake and ``GET
+/stats`` passes the Origin allow-list and the access token of :class:`~wearpose.stream.security.
+AccessPolicy`; only the connection that opened a subject (its ``hello``) may send its frames,
+``bye`` or a new ``hello`` for it; each connection has a message size, a message rate, a number of
+subjects and a subscription size limit (:class:`~wearpose.stream.security.Limits`); a subscriber
+that cannot keep up loses its oldest queued poses (counted, reported to it). Every refusal is
+counted in ``stats()["security"]``. A subject the server ends (shutdown, a restart by its owner's
+new ``hello``) is announced to its owner with a ``bye`` message carrying the ``reason``.
+
 Before a subject's ``ready`` the estimator is warmed up (``warmup`` steps on a synthetic frame,
 then ``reset()``): the first steps of a fresh estimator build and optimise its traced graph and
 would otherwise stall the first real frames. After loading, the objects alive so far (modules,
@@ -57,16 +66,16 @@ import struct
 import sys
 import threading
 import time
+import urllib.parse
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from wearpose.estimators.base import Estimator, SensorFrame
 from wearpose.recording import RecordingError, decimation_factor
 from wearpose.stream.packets import (
-    MAX_MESSAGE_BYTES,
     FramePacket,
     Hello,
     PacketError,
@@ -78,13 +87,15 @@ from wearpose.stream.packets import (
     frame_channels,
     peek_subject,
 )
+from wearpose.stream.security import VIEWER_PORTS, AccessPolicy, Limits, Throttle, TokenBucket
 
 log = logging.getLogger("wearpose.stream")
 
 #: Default lateness bound, frames (see module doc).
 REORDER_WINDOW = 4
-#: A subscriber with more than this unsent is skipped for a pose (counted ``subscriber_skipped``).
-SUBSCRIBER_BACKLOG_BYTES = 1 << 20
+#: Refusals counted in ``stats()["security"]`` (docs/streaming.md, Security).
+SECURITY_COUNTERS = ("origin", "host", "token", "not_owner", "rate_limited", "oversize", "subscription_limit",
+                     "subscriber_limit", "subject_limit", "errors_suppressed")
 #: Latency samples kept per subject for the stats percentiles (the last ones; 10 min at 120 Hz).
 STATS_SAMPLES = 1 << 17
 #: Per-frame stages timed by the server (``stats()["subjects"][k]["stages_ms"]``; module doc).
@@ -242,11 +253,13 @@ class _Subject:
     thread: threading.Thread | None = None
     worker: asyncio.Task | None = None  # the sender task; done once every pose is sent
     abandon: bool = False  # shutdown gave up waiting: the thread skips what is left
+    closing: bool = False  # being ended: frames arriving now are counted after_end, not estimated
     ready: asyncio.Event = field(default_factory=asyncio.Event)
     t_ready: float = 0.0  # perf_counter when the subject became ready
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
         ("received", "estimated", "published", "malformed", "masked_sensor_samples", "decimated", "estimator_errors",
-         "abandoned_at_shutdown",
+         "abandoned_at_shutdown", "refused_foreign",  # frames / bye / hello for it from another connection
+         "after_end",  # frames that arrived while the subject was ending (not estimated)
          "queue_max"), 0))
     stages: StageLog = field(default_factory=StageLog)
     compute_cpu_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_SAMPLES))
@@ -264,6 +277,85 @@ class _Subject:
 
 
 _END = object()  # queue sentinel: the subject's stream ended
+
+
+class _Peer:
+    """Per-connection state of the limits: its message bucket and its error-reply throttles."""
+
+    def __init__(self, limits: Limits) -> None:
+        self.bucket = TokenBucket(limits.rate, limits.burst)
+        self.errors = Throttle(10.0)  # error replies per second
+        self.rate_notices = Throttle(1.0)  # "rate limited" notices per second
+        self.rate_limited = 0
+
+
+class _Subscriber:
+    """One subscribing connection: what it wants, and its send queue (the overload policy).
+
+    Poses are offered without waiting (:meth:`offer`); a sender task sends them in order. When
+    ``maxlen`` poses are queued the oldest is dropped (a viewer wants the newest pose, and the
+    estimation never waits for a viewer), counted, and reported to the subscriber by a
+    ``{"type": "dropped"}`` message sent before the next pose (at most once a second).
+    Control messages (``subject``) have their own queue and are sent first.
+    """
+
+    REPORT_EVERY_S = 1.0
+
+    def __init__(self, ws: Any, fmt: str, subjects: set[int] | None, maxlen: int) -> None:
+        self.ws, self.fmt, self.subjects, self.maxlen = ws, fmt, subjects, maxlen
+        self.poses: deque = deque()
+        self.control: deque = deque(maxlen=1024)
+        self.wake = asyncio.Event()
+        self.dropped = self.unreported = 0
+        self.t_report = 0.0
+        self.task: asyncio.Task | None = None
+
+    def wants(self, subject: int) -> bool:
+        return self.subjects is None or subject in self.subjects
+
+    def offer(self, msg: str | bytes) -> bool:
+        """Queue a pose; False when the queue was full and its oldest pose was dropped for it."""
+        self.poses.append(msg)
+        self.wake.set()
+        if len(self.poses) <= self.maxlen:
+            return True
+        self.poses.popleft()
+        self.dropped += 1
+        self.unreported += 1
+        return False
+
+    def say(self, msg: str) -> None:
+        """Queue a control message (sent before any queued pose)."""
+        self.control.append(msg)
+        self.wake.set()
+
+    async def run(self) -> None:
+        """The sender task: until the connection closes (or the task is cancelled)."""
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            while True:
+                await self.wake.wait()
+                self.wake.clear()
+                while self.control or self.poses:
+                    await self.ws.send(self._next())
+        except ConnectionClosed:
+            pass
+
+    def _next(self) -> str | bytes:
+        if self.control:
+            return self.control.popleft()
+        now = time.monotonic()
+        if self.unreported and now - self.t_report >= self.REPORT_EVERY_S:
+            self.t_report, n, self.unreported = now, self.unreported, 0
+            return json.dumps({"type": "dropped", "count": n, "total": self.dropped, "policy": "drop-oldest",
+                               "queue": self.maxlen})
+        return self.poses.popleft()
+
+    def stats(self) -> dict[str, Any]:
+        return {"remote": str(getattr(self.ws, "remote_address", "?")), "format": self.fmt,
+                "subjects": None if self.subjects is None else sorted(self.subjects), "queued": len(self.poses),
+                "dropped": self.dropped}
 
 
 class StreamServer:
@@ -288,13 +380,26 @@ class StreamServer:
         threads: torch intra-op threads of the estimator threads (None: leave torch's setting).
         udp_port: also accept the same messages as UDP datagrams on this port (0: any free one,
             see :attr:`udp_port`; None: no UDP). Replies and poses go back to the sender's address.
+        token: the access token (None: a random one, see :attr:`token`); required from every client
+            on a non-loopback ``host`` or with ``require_token``, optional on loopback.
+        require_token: require the token on loopback too.
+        allow_origins: browser origins allowed besides same-host pages (``http://host:port``; such a
+            page must present the token as well).
+        page_ports: ports of same-host pages allowed besides the server's own (the live viewer's).
+        limits: per-connection limits (:class:`~wearpose.stream.security.Limits`).
     """
 
     def __init__(self, estimator_factory: Callable[[], Estimator], host: str = "127.0.0.1", port: int = 8765, *,
                  reorder_window: int = REORDER_WINDOW, stride: int | str = 1, workers: int = 2,
-                 udp_port: int | None = None, warmup: int = WARMUP_STEPS, threads: int | None = 1) -> None:
+                 udp_port: int | None = None, warmup: int = WARMUP_STEPS, threads: int | None = 1,
+                 token: str | None = None, require_token: bool = False, allow_origins: Sequence[str] = (),
+                 page_ports: Sequence[int] = VIEWER_PORTS, limits: Limits | None = None) -> None:
         if stride != "auto" and (not isinstance(stride, int) or stride < 1):
             raise ValueError(f"stride: expected a positive integer or 'auto', got {stride!r}")
+        self.policy = AccessPolicy(host, token, require_token, tuple(allow_origins), tuple(page_ports))
+        self.limits = limits or Limits()
+        self.security = dict.fromkeys(SECURITY_COUNTERS, 0)
+        self._peers: dict[Any, _Peer] = {}
         self.factory = estimator_factory
         self.host, self.port = host, port
         self.udp_port = udp_port
@@ -308,11 +413,11 @@ class StreamServer:
         self._loop: asyncio.AbstractEventLoop | None = None
         GC_PAUSES.install()
         self.subjects: dict[int, _Subject] = {}
-        self.subscribers: dict[Any, tuple[str, set[int] | None]] = {}
+        self.subscribers: dict[Any, _Subscriber] = {}
         self.connections: set[Any] = set()
         self.malformed = 0
         self.refused = 0  # hellos answered with an error (missing sensor, rate that does not fit...)
-        self.subscriber_skipped = 0
+        self.subscriber_dropped = 0  # poses dropped for subscribers that could not keep up
         self.finished: dict[str, dict[str, Any]] = {}  # stats of subjects whose stream ended
         self.started = time.time()
         self._server: Any = None
@@ -325,9 +430,13 @@ class StreamServer:
 
         self._loop = asyncio.get_running_loop()
         # No per-message compression: it costs latency and float payloads hardly compress.
-        self._server = await serve(self._handle, self.host, self.port, compression=None, max_size=MAX_MESSAGE_BYTES,
+        # origins=: the library refuses any other Origin (403) when a handshake gets past
+        # _http, which checks the same list first so that it can count and cover GET /stats.
+        self._server = await serve(self._handle, self.host, self.port, compression=None,
+                                   max_size=self.limits.message_bytes, origins=self.policy.origin_list,
                                    process_request=self._http, ping_interval=None)
         self.port = self._server.sockets[0].getsockname()[1]
+        self.policy.bind(self.port)  # same-host pages of the port actually bound (port 0 picks one)
         log.info("wearpose stream server on ws://%s:%d", self.host, self.port)
         if self.udp_port is not None:
             self._udp, _ = await asyncio.get_running_loop().create_datagram_endpoint(
@@ -341,7 +450,7 @@ class StreamServer:
         self._closing = True
         if self._server is not None:
             self._server.close(close_connections=False)
-        ends = [self._end_subject(k) for k in list(self.subjects)]
+        ends = [self._end_subject(k, reason="server stopping") for k in list(self.subjects)]
         if ends:
             try:
                 await asyncio.wait_for(asyncio.gather(*ends, return_exceptions=True), drain_timeout)
@@ -358,6 +467,9 @@ class StreamServer:
                 self.subjects.clear()
         for ws in list(self.connections):
             await ws.close(1001, "server shutting down")
+        for sub in list(self.subscribers.values()):
+            if sub.task is not None:
+                sub.task.cancel()
         if self._udp is not None:
             self._udp.close()
         if self._server is not None:
@@ -374,64 +486,125 @@ class StreamServer:
     def url(self) -> str:
         return f"ws://{self.host}:{self.port}"
 
+    @property
+    def token(self) -> str:
+        """The access token clients present (``?token=`` or ``Authorization: Bearer``)."""
+        return str(self.policy.token)
+
+    @property
+    def token_required(self) -> bool:
+        """Whether every client must present :attr:`token` (non-loopback bind or ``require_token``)."""
+        return self.policy.token_required
+
     def stats(self) -> dict[str, Any]:
         """Counters and latency summaries (what ``{"type": "stats"}`` and ``GET /stats`` return)."""
         return {"type": "stats", "uptime_s": round(time.time() - self.started, 3), "connections": len(self.connections),
                 "subscribers": len(self.subscribers), "malformed_total": self.malformed,
                 "refused_total": self.refused,
-                "subscriber_skipped": self.subscriber_skipped,
+                "subscriber_dropped": self.subscriber_dropped,
+                "subscriber_queues": [sub.stats() for sub in self.subscribers.values()],
+                "security": {**self.security, "token_required": self.token_required,
+                             "allowed_origins": [o for o in self.policy.origin_list if o]},
                 "subjects": {str(k): s.stats() for k, s in self.subjects.items()}, "finished": dict(self.finished)}
 
     def _http(self, connection: Any, request: Any) -> Any:
-        if request.path == "/stats":
+        """The handshake hook: the access rules first (for ``/stats`` too), then ``/stats``."""
+        refusal = self.policy.check(connection.protocol, request)
+        if refusal is not None:
+            self._count(refusal.reason, f"handshake from {connection.remote_address} refused "
+                                        f"(HTTP {refusal.status.value}): {refusal.message.strip()}")
+            return connection.respond(refusal.status, refusal.message)
+        if urllib.parse.urlsplit(request.path).path == "/stats":
             resp = connection.respond(http.HTTPStatus.OK, json.dumps(self.stats()) + "\n")
+            del resp.headers["Content-Type"]  # respond() set text/plain; a second header would be appended
             resp.headers["Content-Type"] = "application/json"
             return resp
         return None  # anything else: the WebSocket handshake
+
+    def _count(self, reason: str, what: str) -> None:
+        """Count one refusal in ``stats()["security"]``; log the first 20, then every 100th."""
+        self.security[reason] += 1
+        n = self.security[reason]
+        if n <= 20 or n % 100 == 0:
+            log.warning("security: %s #%d: %s", reason, n, what)
+
+    def _peer(self, ws: Any) -> _Peer:
+        peer = self._peers.get(ws)
+        if peer is None:
+            peer = self._peers[ws] = _Peer(self.limits)
+        return peer
+
+    async def _error(self, ws: Any, request: str, error: str, subject: int | None = None,
+                     code: str | None = None) -> None:
+        """An ``error`` reply to one request, unless this connection already got 10 this second."""
+        if not self._peer(ws).errors.allow():
+            self.security["errors_suppressed"] += 1
+            return
+        await self._safe_send(ws, json.dumps({"type": "error", "request": request, "subject": subject, "code": code,
+                                              "error": error}))
 
     # ------------------------------------------------------------------ connections
     async def _handle(self, ws: Any) -> None:
         from websockets.exceptions import ConnectionClosed
 
         self.connections.add(ws)
+        peer = self._peer(ws)
         try:
             async for msg in ws:
                 t_arr = time.perf_counter()
+                if not peer.bucket.take():
+                    await self._rate_limited(ws, peer)
+                    continue
                 try:
                     if isinstance(msg, str):
                         await self._on_text(ws, msg, t_arr)
                     else:
-                        self._on_binary(msg, t_arr)
+                        await self._on_binary(ws, msg, t_arr)
                 except PacketError as exc:
                     self._malformed(exc, ws)
-        except ConnectionClosed:
-            pass
+        except ConnectionClosed as exc:
+            if exc.sent is not None and exc.sent.code == 1009:  # the library refused a message over max_size
+                self._count("oversize", f"{ws.remote_address}: a message over {self.limits.message_bytes} bytes; "
+                                        f"connection closed (1009)")
         finally:
             self.connections.discard(ws)
-            self.subscribers.pop(ws, None)
+            self._peers.pop(ws, None)
+            sub = self.subscribers.pop(ws, None)
+            if sub is not None and sub.task is not None:
+                sub.task.cancel()
             owned = [k for k, s in self.subjects.items() if s.owner is ws]
             for k in owned:  # the device went away: estimate what arrived, then forget the subject
                 await self._end_subject(k)
 
+    async def _rate_limited(self, ws: Any, peer: _Peer) -> None:
+        """A message over the connection's rate: dropped unprocessed, counted, told (once a second)."""
+        peer.rate_limited += 1
+        self._count("rate_limited", f"{getattr(ws, 'remote_address', '?')}: over {self.limits.rate:g} messages/s")
+        if peer.rate_notices.allow():
+            await self._safe_send(ws, json.dumps({
+                "type": "error", "request": None, "subject": None, "code": "rate_limited",
+                "error": f"more than {self.limits.rate:g} messages/s on this connection: {peer.rate_limited} "
+                         f"dropped unprocessed so far; send slower (or start the server with a higher --rate-limit)"}))
+
     def _on_datagram(self, peer: Any, data: bytes, t_arr: float) -> None:
-        """One UDP datagram: a binary frame (handled now) or a JSON message (in a task)."""
-        try:
-            if data[:2] == b"WP":
-                self._on_binary(data, t_arr)
-                return
-            text = data.decode("utf-8")
-        except PacketError as exc:
-            self._malformed(exc, peer)
-            return
-        except UnicodeDecodeError:
-            self._malformed(PacketError("datagram is neither a binary packet nor UTF-8 JSON"), peer)
+        """One UDP datagram (within the limits): handled in a task, in arrival order."""
+        if len(data) > self.limits.message_bytes:
+            self._count("oversize", f"udp {peer.remote_address}: {len(data)} bytes")
             return
 
         async def handle() -> None:
+            if not self._peer(peer).bucket.take():
+                await self._rate_limited(peer, self._peer(peer))
+                return
             try:
-                await self._on_text(peer, text, t_arr)
+                if data[:2] == b"WP":
+                    await self._on_binary(peer, data, t_arr)
+                    return
+                await self._on_text(peer, data.decode("utf-8"), t_arr, udp=True)
             except PacketError as exc:
                 self._malformed(exc, peer)
+            except UnicodeDecodeError:
+                self._malformed(PacketError("datagram is neither a binary packet nor UTF-8 JSON"), peer)
 
         self._spawn(handle())
 
@@ -442,7 +615,7 @@ class StreamServer:
         if self.malformed <= 20 or self.malformed % 100 == 0:  # a flood of bad packets must not flood the log
             log.warning("malformed message #%d from %s skipped: %s", self.malformed, getattr(ws, "remote_address", "?"), exc)
 
-    async def _on_text(self, ws: Any, msg: str, t_arr: float) -> None:
+    async def _on_text(self, ws: Any, msg: str, t_arr: float, udp: bool = False) -> None:
         try:
             d = json.loads(msg)
         except json.JSONDecodeError as exc:
@@ -450,11 +623,16 @@ class StreamServer:
         if not isinstance(d, dict) or not isinstance(d.get("type"), str):
             raise PacketError("text message: expected a JSON object with a 'type'")
         kind = d["type"]
+        if udp and kind in ("hello", "subscribe", "stats") and not await self._udp_token_ok(ws, d, kind):
+            return
         if kind == "frame":
             subject = d.get("subject")
             s = self.subjects.get(subject) if isinstance(subject, int) else None
             if s is None:
                 raise PacketError(f"frame for unknown subject {subject!r} (send a hello first)")
+            if s.owner is not ws:
+                await self._not_owner(ws, s, subject, "frame")
+                return
             try:
                 self._on_frame(s, decode_frame_json(d, s.hello), t_arr)
             except PacketError as exc:
@@ -464,22 +642,80 @@ class StreamServer:
             # the frames of this connection's other subjects.
             self._spawn(self._on_hello(ws, Hello.from_dict(d)))
         elif kind == "bye":
-            subject = d.get("subject")
-            if subject not in self.subjects:
-                raise PacketError(f"bye for unknown subject {subject!r}")
-            self._spawn(self._bye(ws, subject))
+            await self._on_bye(ws, d.get("subject"))
         elif kind == "subscribe":
-            subs = d.get("subjects")
-            fmt = d.get("format", "json")
-            if fmt not in ("json", "binary") or not (subs is None or isinstance(subs, list)):
-                raise PacketError("subscribe: expected format 'json'|'binary' and subjects null or a list of ids")
-            self.subscribers[ws] = (fmt, None if subs is None else set(subs))
-            for k, s in self.subjects.items():
-                await ws.send(self._subject_message(k, s))
+            await self._on_subscribe(ws, d)
         elif kind == "stats":
             await ws.send(json.dumps(self.stats()))
         else:
             raise PacketError(f"unknown message type {kind!r}; expected hello, frame, bye, subscribe or stats")
+
+    async def _udp_token_ok(self, peer: Any, d: dict[str, Any], kind: str) -> bool:
+        """UDP has no handshake: its control messages carry the token in a ``token`` field, by
+        the rule a WebSocket client without an Origin follows (required when the server requires it)."""
+        import secrets
+
+        given = d.get("token")
+        if given is None and not self.token_required:
+            return True
+        if isinstance(given, str) and secrets.compare_digest(given.encode(), self.token.encode()):
+            return True
+        self._count("token", f"udp {peer.remote_address}: {kind} without the right token")
+        await self._error(peer, kind, "this server requires its access token: add \"token\": \"...\" (printed by "
+                                      "`wearpose serve` at start-up) to UDP hello / subscribe / stats messages",
+                          d.get("subject") if isinstance(d.get("subject"), int) else None, "token")
+        return False
+
+    async def _not_owner(self, ws: Any, s: _Subject, subject: int, request: str) -> None:
+        """Frames, ``bye`` or ``hello`` for a subject another connection opened: refused, counted
+        (server-wide and in the subject's ``refused_foreign``), answered; the owner is unaffected."""
+        s.counts["refused_foreign"] += 1
+        self._count("not_owner", f"{getattr(ws, 'remote_address', '?')}: {request} for subject {subject}, "
+                                 f"which another connection opened")
+        await self._error(ws, request, f"subject {subject} was opened by another connection: only that connection "
+                                       f"may send its frames, bye or a new hello (use another subject id)",
+                          subject, "not_owner")
+
+    async def _on_bye(self, ws: Any, subject: Any) -> None:
+        s = self.subjects.get(subject) if isinstance(subject, int) else None
+        if s is None:
+            self._malformed(PacketError(f"bye for unknown subject {subject!r}"), ws)
+            await self._error(ws, "bye", f"bye for subject {subject!r}, which is not open (it ended, or was never "
+                                         f"opened with a hello)", subject if isinstance(subject, int) else None,
+                              "unknown_subject")
+        elif s.owner is not ws:
+            await self._not_owner(ws, s, subject, "bye")
+        else:
+            self._spawn(self._bye(ws, subject))
+
+    async def _on_subscribe(self, ws: Any, d: dict[str, Any]) -> None:
+        """``subscribe``: within the subscription limits, replace the connection's subscription,
+        confirm it (``subscribed``, with the overload policy) and announce the active subjects."""
+        subs, fmt = d.get("subjects"), d.get("format", "json")
+        if fmt not in ("json", "binary") or not (subs is None or (isinstance(subs, list) and all(
+                isinstance(k, int) and not isinstance(k, bool) and 0 <= k <= 0xFFFF for k in subs))):
+            raise PacketError("subscribe: expected format 'json'|'binary' and subjects null or a list of ids 0..65535")
+        wanted = None if subs is None else set(subs)
+        lim = self.limits
+        if wanted is not None and len(wanted) > lim.subscriptions:
+            self._count("subscription_limit", f"{getattr(ws, 'remote_address', '?')}: {len(wanted)} subjects")
+            await self._error(ws, "subscribe", f"subscribe: {len(wanted)} subject ids, at most {lim.subscriptions} "
+                                               f"per connection (or null: every subject)", None, "subscription_limit")
+            return
+        sub = self.subscribers.get(ws)
+        if sub is None and len(self.subscribers) >= lim.subscribers:
+            self._count("subscriber_limit", f"{getattr(ws, 'remote_address', '?')}: {lim.subscribers} subscribed")
+            await self._error(ws, "subscribe", f"subscribe: the server already has {lim.subscribers} subscribers, "
+                                               f"its limit; close another viewer first", None, "subscriber_limit")
+            return
+        if sub is None:
+            sub = self.subscribers[ws] = _Subscriber(ws, fmt, wanted, lim.subscriber_queue)
+            sub.task = asyncio.create_task(sub.run())
+        sub.fmt, sub.subjects = fmt, wanted
+        await self._safe_send(ws, json.dumps({"type": "subscribed", "subjects": subs, "format": fmt,
+                                              "policy": "drop-oldest", "queue": lim.subscriber_queue}))
+        for k, s in self.subjects.items():
+            sub.say(self._subject_message(k, s))
 
     def _spawn(self, coro: Any) -> None:
         task = asyncio.create_task(coro)
@@ -494,13 +730,16 @@ class StreamServer:
 
     async def _bye(self, ws: Any, subject: int) -> None:
         stats = await self._end_subject(subject)
-        await self._safe_send(ws, json.dumps({"type": "bye", "subject": subject, "stats": stats}))
+        await self._safe_send(ws, json.dumps({"type": "bye", "subject": subject, "stats": stats, "reason": "bye"}))
 
-    def _on_binary(self, msg: bytes, t_arr: float) -> None:
+    async def _on_binary(self, ws: Any, msg: bytes, t_arr: float) -> None:
         subject = peek_subject(msg)
         s = self.subjects.get(subject)
         if s is None:
             raise PacketError(f"binary frame for unknown subject {subject} (send a hello first)")
+        if s.owner is not ws:
+            await self._not_owner(ws, s, subject, "frame")
+            return
         try:
             self._on_frame(s, decode_frame_binary(msg, s.hello), t_arr)
         except PacketError as exc:
@@ -510,10 +749,15 @@ class StreamServer:
     # ------------------------------------------------------------------ subjects
     async def _on_hello(self, ws: Any, hello: Hello) -> None:
         if self._closing:
-            await ws.send(json.dumps({"type": "error", "subject": hello.subject, "error": "server shutting down"}))
+            await self._safe_send(ws, json.dumps({"type": "error", "request": "hello", "subject": hello.subject,
+                                                  "error": "server shutting down"}))
             return
-        if hello.subject in self.subjects:
-            await self._end_subject(hello.subject)  # a new hello restarts the subject's stream
+        if not await self._may_open(ws, hello.subject):
+            return
+        if hello.subject in self.subjects:  # a new hello from its owner restarts the subject's stream
+            await self._end_subject(hello.subject, reason="restarted by a new hello")
+            if not await self._may_open(ws, hello.subject):  # another connection took it meanwhile
+                return
         s = _Subject(hello, ws, reorder=ReorderBuffer(self.reorder_window))
         self.subjects[hello.subject] = s
         loop = asyncio.get_running_loop()
@@ -525,7 +769,8 @@ class StreamServer:
             s.ready.set()
             self.refused += 1
             log.warning("subject %d refused: %s", hello.subject, exc)
-            await self._safe_send(ws, json.dumps({"type": "error", "subject": hello.subject, "error": str(exc)}))
+            await self._safe_send(ws, json.dumps({"type": "error", "request": "hello", "subject": hello.subject,
+                                                  "error": str(exc)}))
             return
         # What is alive now (modules, weights, traced graphs) stays: keep it out of every later
         # collection, so a full collection does not stall a step for tens of ms.
@@ -551,8 +796,23 @@ class StreamServer:
         await self._safe_send(ws, json.dumps({"type": "ready", "subject": hello.subject, "estimator": est.name,
                                   "sensors": list(est.sensor_names), "estimator_fps": est.fps, "stride": s.stride,
                                               "reorder_window": s.reorder.window, "note": note}))
-        for sub in list(self.subscribers):
-            await self._safe_send(sub, self._subject_message(hello.subject, s))
+        for sub in list(self.subscribers.values()):
+            sub.say(self._subject_message(hello.subject, s))
+
+    async def _may_open(self, ws: Any, k: int) -> bool:
+        """Whether ``ws`` may (re)open subject ``k``: not while another connection has it open, and
+        within the per-connection subject limit; else refused, counted and answered."""
+        s = self.subjects.get(k)
+        if s is not None and s.owner is not ws:
+            await self._not_owner(ws, s, k, "hello")
+            return False
+        n = sum(1 for j, t in self.subjects.items() if t.owner is ws and j != k)
+        if n >= self.limits.subjects:
+            self._count("subject_limit", f"{getattr(ws, 'remote_address', '?')}: {n} subjects open")
+            await self._error(ws, "hello", f"subject {k}: this connection already has {n} subjects open, the "
+                                           f"server's limit; end one with bye first", k, "subject_limit")
+            return False
+        return True
 
     def _make_estimator(self, hello: Hello) -> tuple[Estimator, int]:
         """A fresh, warmed-up estimator for ``hello`` and the subject's stride; raises (the hello is refused)
@@ -602,6 +862,9 @@ class StreamServer:
                            "kit": getattr(est, "kit_name", None)})
 
     def _on_frame(self, s: _Subject, pkt: FramePacket, t_arr: float) -> None:
+        if s.closing:  # its end marker is queued: a frame now would be counted received and never estimated
+            s.counts["after_end"] += 1
+            return
         s.counts["received"] += 1
         for item in s.reorder.push(pkt.seq, (pkt, t_arr)):
             self._enqueue(s, item)
@@ -613,21 +876,35 @@ class StreamServer:
         s.inbox.put((item[0], item[1], time.perf_counter()))
         s.counts["queue_max"] = max(s.counts["queue_max"], s.inbox.qsize())
 
-    async def _end_subject(self, k: int) -> dict[str, Any]:
+    async def _end_subject(self, k: int, reason: str | None = None) -> dict[str, Any]:
+        """Estimate what subject ``k`` has received, send its poses, forget it; returns its final
+        stats. ``reason`` (the server ends it, not its owner's ``bye``): the owner is told with a
+        ``bye`` message carrying the stats and the reason, so its client stops sending and waiting."""
+        stats, owner = await self._finish_subject(k)
+        if reason is not None and owner is not None:
+            await self._safe_send(owner, json.dumps({"type": "bye", "subject": k, "stats": stats, "reason": reason}))
+        return stats
+
+    async def _finish_subject(self, k: int) -> tuple[dict[str, Any], Any]:
+        """Final stats of subject ``k`` and its owner when this call ended it (None when it had
+        already ended or another call is ending it)."""
         s = self.subjects.get(k)
         if s is None:
-            return self.finished.get(str(k), {})
+            return self.finished.get(str(k), {}), None
         await s.ready.wait()  # its estimator may still be loading
         if self.subjects.get(k) is not s:
-            return self.finished.get(str(k), {})
+            return self.finished.get(str(k), {}), None
+        s.closing = True
         for item in s.reorder.flush():
             self._enqueue(s, item)
         if s.worker is not None and not s.worker.done():
             s.inbox.put(_END)
             await s.worker
-        self.subjects.pop(k, None)
+        if self.subjects.get(k) is not s:  # a concurrent end finished it while this one waited for the poses
+            return self.finished.get(str(k), {}), None
+        self.subjects.pop(k)
         self.finished[str(k)] = s.stats()
-        return self.finished[str(k)]
+        return self.finished[str(k)], s.owner
 
     def _estimate(self, k: int, s: _Subject, loop: asyncio.AbstractEventLoop) -> None:
         """The subject's estimator thread: frames from ``s.inbox`` in order -> ``step`` -> pose
@@ -709,14 +986,11 @@ class StreamServer:
 
         sent = await self._safe_send(s.owner, msg(s.hello.format))
         s.stages.add((*stamps, time.perf_counter()))
-        for ws, (fmt, subs) in list(self.subscribers.items()):
-            if subs is None or pose.subject in subs:
-                tr = getattr(ws, "transport", None)
-                if tr is not None and tr.get_write_buffer_size() > SUBSCRIBER_BACKLOG_BYTES:
-                    # A viewer that cannot keep up must not stall the estimation: skip it, count it.
-                    self.subscriber_skipped += 1
-                    continue
-                await self._safe_send(ws, msg(fmt))
+        for sub in list(self.subscribers.values()):
+            # Queued, not awaited: a viewer that cannot keep up loses its oldest poses (counted,
+            # reported to it) and never stalls the estimation (_Subscriber).
+            if sub.wants(pose.subject) and not sub.offer(msg(sub.fmt)):
+                self.subscriber_dropped += 1
         s.counts["published"] += int(sent)
 
     @staticmethod
