@@ -118,3 +118,35 @@ def test_live_viewer_follows_a_server() -> None:
     assert r["poses_received"] == 60 and v.received == 60
     assert set(v.layers) == {2} and v.shown > 5
     assert "subject 2" in v.timeline.info.content and "seq 59" in v.timeline.info.content
+
+
+def test_viewer_port_refuses_a_foreign_origin_before_sending_the_scene() -> None:
+    """viser has no Origin option: the OriginGuard closes a foreign page's connection (1008) in
+    viser's connect callback, before any scene message; this machine's pages and non-browser
+    clients get the scene."""
+    import viser
+    from websockets.asyncio.client import connect
+    from websockets.exceptions import ConnectionClosed
+
+    body = BodyModel(make_tiny_asset())
+    rec, track = _recording_and_track(body)
+    viewer = RecordingViewer(rec, track, body=body, port=0, autoplay=False, allow_origins=["http://lab.example:3000"])
+
+    async def probe(origin: str | None) -> str | int:
+        async with connect(f"ws://127.0.0.1:{viewer.port}", origin=origin,
+                           subprotocols=[f"viser-v{viser.__version__}"]) as ws:
+            try:
+                await asyncio.wait_for(ws.recv(), 10)
+                return "scene"
+            except ConnectionClosed:
+                return ws.close_code
+
+    try:
+        assert viewer.server.origin_guard.active
+        assert asyncio.run(probe("http://evil.example.com")) == 1008
+        assert asyncio.run(probe(f"http://127.0.0.1:{viewer.port + 1}")) == 1008  # another local port
+        for ok in (None, f"http://127.0.0.1:{viewer.port}", f"http://localhost:{viewer.port}", "http://lab.example:3000"):
+            assert asyncio.run(probe(ok)) == "scene", ok
+        assert viewer.server.origin_guard.refused == 2
+    finally:
+        viewer.close()

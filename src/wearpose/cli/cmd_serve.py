@@ -9,7 +9,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, List, Optional
 
 import typer
 from rich.markup import escape
@@ -54,20 +54,39 @@ def serve(
     threads: int = typer.Option(1, min=1, help="torch CPU threads per step."),
     warmup: int = typer.Option(30, min=0, help="Synthetic steps run on each new subject's estimator before it is ready "
                                         "(pays tracing / first-call costs before real frames; 0: none)."),
+    token: Optional[str] = typer.Option(None, envvar="WEARPOSE_TOKEN",
+                                        help="Access token clients present (default: a random one, printed at start; "
+                                             "at least 16 characters A-Z a-z 0-9 _ -)."),
+    require_token: bool = typer.Option(False, "--require-token",
+                                       help="Require the token on loopback too (always required on any other bind)."),
+    allow_origin: Optional[List[str]] = typer.Option(None, "--allow-origin",
+                                                     help="Also accept browser pages from this origin, e.g. "
+                                                          "http://dashboard.lan:3000 (repeatable; such a page must "
+                                                          "present the token too). Default: same-host pages only."),
+    rate_limit: float = typer.Option(2000.0, min=1.0, help="Messages per second per connection; more are dropped, "
+                                                           "counted and reported."),
+    max_message_bytes: int = typer.Option(131072, min=1024, help="Largest message, bytes (a bigger one closes "
+                                                                 "its connection)."),
+    max_subscriptions: int = typer.Option(16, min=1, help="Subject ids one subscription may name (null = all "
+                                                          "counts as one)."),
     log_level: str = typer.Option("INFO", help="Python logging level."),
     as_json: bool = typer.Option(False, "--json", help="Print the final stats as JSON at shutdown."),
 ) -> None:
     """Run the streaming server: sensor frames in, poses out (WebSocket, JSON or binary packets).
 
     Runs until Ctrl-C / SIGTERM, then finishes the frames it has received and closes cleanly.
-    Packet formats: docs/streaming.md. Stats: send {"type": "stats"} or GET http://HOST:PORT/stats.
+    Packet formats and the security rules (Origin allow-list, access token, limits): docs/streaming.md.
+    Stats: send {"type": "stats"} or GET http://HOST:PORT/stats.
 
     Example: wearpose serve --model empose12_cpu --port 8765
     """
     from wearpose.cli.models import check_pose_weights
     from wearpose.stream import estimator_factory, run_server
+    from wearpose.stream.security import Limits, check_token, new_token, normalise_origin
 
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    token = new_token() if token is None else check_token(token)
+    origins = [normalise_origin(o) for o in allow_origin or []]  # a typo fails now, not at the first page
     check_pose_weights(model)
     factory = estimator_factory(model, method, threads)
     factory()  # load once now: a checkpoint that does not fit --method fails here, not at the first subject
@@ -76,9 +95,17 @@ def serve(
         # One line a script can wait for (benchmarks/stream.py does).
         udp = f" and udp://{server.host}:{server.udp_port}" if server.udp_port is not None else ""
         print(f"serving {model} on {server.url}{udp}", flush=True)
+        # The token on stderr: stdout stays the one line above (and the --json stats at the end).
+        need = "required from every client" if server.token_required else \
+            "optional on loopback, required from pages allowed by --allow-origin"
+        err_console.print(f"access token ({need}): {server.token}\n"
+                          f"  browser pages: {server.url}/?token=...; Python client, stream replay and view-live: "
+                          f"--token or WEARPOSE_TOKEN", highlight=False, soft_wrap=True)
 
+    limits = Limits(message_bytes=max_message_bytes, rate=rate_limit, subscriptions=max_subscriptions)
     final = run_server(factory, host, port, on_start=started, reorder_window=reorder_window, stride=_stride(stride),
-                       workers=workers, udp_port=udp_port, warmup=warmup, threads=threads)
+                       workers=workers, udp_port=udp_port, warmup=warmup, threads=threads, token=token,
+                       require_token=require_token, allow_origins=origins, limits=limits)
     _emit(final, as_json, lambda r: console.print(f"stopped; subjects served: {len(r['finished'])}, "
                                                   f"malformed messages: {r['malformed_total']}"))
 
@@ -95,9 +122,14 @@ def stream_replay(
     dropout: float = typer.Option(0.0, help="Per-sensor, per-frame probability of starting a 1-30 frame dropout."),
     reorder: float = typer.Option(0.0, help="Fraction of frames sent after their successor."),
     seed: int = typer.Option(0, help="Seed of the injected faults."),
+    token: Optional[str] = typer.Option(None, envvar="WEARPOSE_TOKEN",
+                                        help="The server's access token (printed by wearpose serve; needed when it "
+                                             "requires one)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Stream a recording to a running server at real time and report latency and losses.
+
+    Stops at once (exit code 1, with what arrived) when the server ends the subject or goes away.
 
     Example: wearpose stream replay out/demo/recording.npz --speed 1 --dropout 0.001 --malformed 0.01
     """
@@ -118,7 +150,8 @@ def stream_replay(
         task = prog.add_task("streaming", total=None)
         try:
             res = asyncio.run(replay(rec, url, subject=subject, fmt=fmt, speed=speed, duration=duration,
-                                     faults=faults, progress=lambda k, n: prog.update(task, completed=k, total=n)))
+                                     faults=faults, progress=lambda k, n: prog.update(task, completed=k, total=n),
+                                     token=token))
         except OSError as exc:  # nothing listening, wrong host/port, network down
             raise ConfigError(f"--url {url}: cannot connect ({exc.strerror or exc}); is a server running there? "
                               f"start one with: wearpose serve --model <weights>") from None
@@ -140,6 +173,10 @@ def stream_replay(
     if note:  # e.g. a 120 Hz stream into weights trained at 30 Hz on a server started without --stride auto
         err_console.print(f"[yellow]warning[/]: the server says: {escape(note)}. Start it with --stride auto "
                           f"or stream at the estimator's rate.")
+    if res.get("ended_by_server"):
+        err_console.print(f"[bold red]error:[/] the stream stopped early after {res['frames_sent']} frames: "
+                          f"{escape(res['ended_by_server'])}")
+        raise typer.Exit(code=1)
 
 
 @app.command("view-live")
@@ -149,6 +186,11 @@ def view_live(
     host: str = typer.Option("127.0.0.1", help="Interface of the viewer page."),
     subject: Optional[int] = typer.Option(None, help="Only this subject (default: every subject)."),
     body: Optional[str] = typer.Option(None, help="Body asset: default, smpl or a file path."),
+    token: Optional[str] = typer.Option(None, envvar="WEARPOSE_TOKEN",
+                                        help="The streaming server's access token (when it requires one)."),
+    allow_origin: Optional[List[str]] = typer.Option(None, "--allow-origin",
+                                                     help="Also let pages from this origin open the viewer "
+                                                          "(repeatable; default: this machine's pages only)."),
 ) -> None:
     """Browser viewer of a running server's pose stream (body mesh, skeleton, sensors).
 
@@ -158,7 +200,8 @@ def view_live(
     """
     from wearpose.viewer.live import run_live_viewer
 
-    run_live_viewer(url, host=host, port=port, subjects=None if subject is None else [subject], body=body)
+    run_live_viewer(url, host=host, port=port, subjects=None if subject is None else [subject], body=body,
+                    token=token, allow_origins=allow_origin or ())
 
 
 @app.command("view-recording")
@@ -169,6 +212,9 @@ def view_recording(
     port: int = typer.Option(8080, help="HTTP port of the viewer page."),
     host: str = typer.Option("127.0.0.1", help="Interface of the viewer page."),
     body: Optional[str] = typer.Option(None, help="Body asset: default, smpl or a file path."),
+    allow_origin: Optional[List[str]] = typer.Option(None, "--allow-origin",
+                                                     help="Also let pages from this origin open the viewer "
+                                                          "(repeatable; default: this machine's pages only)."),
 ) -> None:
     """Browser viewer of a recording (ground truth and/or an estimate) with a timeline.
 
@@ -183,7 +229,7 @@ def view_recording(
     if model is not None:
         check_pose_weights(model)
     try:
-        run_recording_viewer(recording, model=model, host=host, port=port, body=body)
+        run_recording_viewer(recording, model=model, host=host, port=port, body=body, allow_origins=allow_origin or ())
     except ShapeError as exc:  # the estimator's check of the recording: missing sensors, another rate
         if model is None:
             raise

@@ -16,6 +16,11 @@ sensors at their body sites: green valid, red dropped (masked) in that frame, an
 green -> orange -> red by an interference level in [0, 1] when the pose carries
 ``extras["interference"]`` (one value per sensor).
 
+Origin check: viser (1.1) has no option to refuse a foreign browser page, so :class:`OriginGuard`
+closes such a connection (code 1008) from viser's connect callback, before any scene message is
+sent; the handshake itself succeeds and the static page is served to anyone (docs/streaming.md,
+Security). The viewer port has no token.
+
 World: wearpose's Y-up frame (the viewer's up direction is set to +Y), metres. EM estimates
 whose root is relative to the EM source (``extras["frame"] == "em_source"``) are placed in the
 world with the recording's EM source pose offline when the recording has one
@@ -26,8 +31,10 @@ world with the recording's EM source pose offline when the recording has one
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
+import warnings
 from collections import deque
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -140,11 +147,79 @@ class BodyLayer:
 #: Seconds the viewer waits for its WebSocket to close cleanly before it exits anyway.
 CLOSE_TIMEOUT_S = 2.0
 
+log = logging.getLogger("wearpose.viewer")
 
-def _new_server(host: str, port: int) -> Any:
+
+class OriginGuard:
+    """Closes viser connections whose ``Origin`` is not allowed (viser has no option for it).
+
+    Allowed: no ``Origin`` header (a non-browser client), this machine's pages on the viewer's
+    port (``http://127.0.0.1:P``, ``http://localhost:P``, ``http://[::1]:P``) and
+    ``allow_origins``. A refused connection is closed with code 1008 in viser's connect callback,
+    which runs before any scene message is sent; :attr:`refused` counts them.
+
+    It reads viser's table of live connections (``ViserServer._websock_server._live_connections``,
+    viser 1.1): where that is missing, :attr:`active` is False and a warning says the viewer
+    port is unchecked.
+    """
+
+    def __init__(self, server: Any, allow_origins: Sequence[str] = ()) -> None:
+        from wearpose.stream.security import normalise_origin, same_host_origins
+
+        self.allowed = {None, *same_host_origins([server.get_port()]), *(normalise_origin(o) for o in allow_origins)}
+        self.refused = 0
+        self.active = self._install(server)
+
+    def _install(self, server: Any) -> bool:
+        infra = getattr(server, "_websock_server", None)
+        conns = getattr(infra, "_live_connections", None)
+        if not isinstance(conns, dict) or not callable(getattr(infra, "on_client_connect", None)):
+            warnings.warn("this viser version offers no way to check the Origin of viewer connections: any web "
+                          "page in this machine's browser can read the viewer's scene (docs/streaming.md, Security)")
+            return False
+
+        async def check(client: Any) -> None:
+            ws = conns.get(client.client_id)
+            if ws is None or self.allows(ws.request):
+                return
+            self.refused += 1
+            log.warning("viewer: refused a connection from Origin %r (#%d)", _origin(ws.request), self.refused)
+            await ws.close(1008, "Origin not allowed")
+
+        infra.on_client_connect(check)
+        return True
+
+    def allows(self, request: Any) -> bool:
+        """Whether a handshake ``request`` (``websockets.http11.Request``) comes from an allowed page."""
+        try:
+            return _origin(request) in self.allowed
+        except ValueError:  # several Origin headers
+            return False
+
+
+def _origin(request: Any) -> str | None:
+    from websockets.datastructures import MultipleValuesError
+
+    try:
+        return None if request is None else request.headers.get("Origin")
+    except MultipleValuesError:
+        raise ValueError("several Origin headers") from None
+
+
+def _warn_if_exposed(host: str, port: int) -> None:
+    from wearpose.stream.security import is_loopback_host
+
+    if not is_loopback_host(host):
+        warnings.warn(f"the viewer listens on {host}:{port}, beyond this machine, and its port has no access token "
+                      f"(viser offers no hook for one): any program that can reach it sees the poses, and browsers on "
+                      f"other machines need --allow-origin http://NAME:{port}; prefer 127.0.0.1 and an SSH tunnel")
+
+
+def _new_server(host: str, port: int, allow_origins: Sequence[str] = ()) -> Any:
     import viser
 
     server = viser.ViserServer(host=host, port=port, verbose=False)
+    server.origin_guard = OriginGuard(server, allow_origins)  # before any page can connect to a scene
     server.scene.set_up_direction("+y")
     server.scene.configure_default_lights(True, cast_shadow=False)
     server.scene.configure_environment_map(None)  # the default HDRI washes the colours out
@@ -217,11 +292,12 @@ class RecordingViewer:
         body: body model (default: the embedded asset).
         autoplay: start playing.
         camera_distance: m, initial camera distance in front of the first frame's root.
+        allow_origins: browser origins allowed besides this machine's pages (:class:`OriginGuard`).
     """
 
     def __init__(self, recording: Any = None, track: Any = None, *, sensor_names: Sequence[str] | None = None,
                  body: BodyModel | None = None, host: str = "127.0.0.1", port: int = 8080, title: str = "wearpose",
-                 autoplay: bool = True, camera_distance: float = 6.0) -> None:
+                 autoplay: bool = True, camera_distance: float = 6.0, allow_origins: Sequence[str] = ()) -> None:
         from wearpose.errors import ShapeError
 
         gt = getattr(recording, "ground_truth", None)
@@ -238,7 +314,7 @@ class RecordingViewer:
         keep = [i for i, inf in enumerate(infos) if inf.site in self.body.site_names]
         self.sensor_idx = keep
         sites = tuple(infos[i].site for i in keep)
-        self.server = _new_server(host, port)
+        self.server = _new_server(host, port, allow_origins)
         self.port = self.server.get_port()
         self.layers: dict[str, BodyLayer] = {}
         if track is not None:
@@ -331,15 +407,20 @@ class LiveViewer:
         url: ``ws://host:port`` of the server.
         subjects: subject ids to show (None: all).
         history_s: seconds of poses kept for the timeline.
+        token: the streaming server's access token (when it requires one).
+        allow_origins: browser origins allowed on the viewer's port besides this machine's pages.
     """
 
     def __init__(self, url: str, *, subjects: list[int] | None = None, body: BodyModel | None = None,
-                 host: str = "127.0.0.1", port: int = 8080, history_s: float = 30.0) -> None:
+                 host: str = "127.0.0.1", port: int = 8080, history_s: float = 30.0, token: str | None = None,
+                 allow_origins: Sequence[str] = ()) -> None:
         self.url_server = url
+        self.token = token
         self.subjects = subjects
         self.body = body or BodyModel()
         self.history_s = history_s
-        self.server = _new_server(host, port)
+        self.dropped_by_server = 0  # poses the server dropped because this viewer read too slowly
+        self.server = _new_server(host, port, allow_origins)
         self.port = self.server.get_port()
         self.history: dict[int, deque] = {}
         self.meta: dict[int, dict[str, Any]] = {}
@@ -402,7 +483,8 @@ class LiveViewer:
             lines.append(f"subject {k}: t = {p.timestamp:.2f} s, seq {p.seq}, {'valid' if p.valid else 'INVALID'}, "
                          f"estimator {p.compute_ms:.1f} ms, server {p.server_ms:.1f} ms")
         self.shown += 1
-        self.timeline.info.content = "  \n".join(lines + [f"poses received: {self.received}"])
+        dropped = f", dropped by the server (viewer too slow): {self.dropped_by_server}" if self.dropped_by_server else ""
+        self.timeline.info.content = "  \n".join(lines + [f"poses received: {self.received}{dropped}"])
 
     async def run(self, stop: asyncio.Event | None = None, fps: float = 30.0, *, handle_signals: bool = False,
                   on_subscribed: Callable[[], None] | None = None) -> str:
@@ -426,7 +508,7 @@ class LiveViewer:
             # cancellation arriving inside wait_for/close on a dead connection could be lost
             # (view-live ignored Ctrl-C after its server stopped); a flag the loop polls cannot be.
             loop.add_signal_handler(sig, stop.set)
-        client = StreamClient(self.url_server, on_pose=self._on_pose)
+        client = StreamClient(self.url_server, on_pose=self._on_pose, token=self.token)
         why = "stopped"
         try:
             await client.connect()
@@ -437,6 +519,7 @@ class LiveViewer:
                 for m in list(client.messages):
                     if m.get("type") == "subject":
                         self.meta[int(m["subject"])] = m
+                self.dropped_by_server = client.dropped_poses
                 self.render()
                 if client.disconnected:  # the server stopped: nothing more will come
                     why = "upstream closed"
@@ -458,7 +541,7 @@ class LiveViewer:
 
 
 def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subjects: list[int] | None = None,
-                    body: str | None = None) -> str:
+                    body: str | None = None, token: str | None = None, allow_origins: Sequence[str] = ()) -> str:
     """Blocking: the live viewer (``wearpose view-live``) until Ctrl-C / SIGTERM, or until the
     server closes the connection (it says so and returns). Returns why it stopped."""
     import signal
@@ -466,7 +549,9 @@ def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subj
     def _terminate(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt  # SIGTERM outside the event loop: the same clean stop as Ctrl-C
 
-    v = LiveViewer(url, subjects=subjects, body=BodyModel(body), host=host, port=port)
+    _warn_if_exposed(host, port)
+    v = LiveViewer(url, subjects=subjects, body=BodyModel(body), host=host, port=port, token=token,
+                   allow_origins=allow_origins)
     why = "stopped"
     try:
         signal.signal(signal.SIGTERM, _terminate)
@@ -499,7 +584,7 @@ def _em_track_in_world(est: Any, track: Any, rec: Any) -> Any:
 
 
 def run_recording_viewer(path: str | Path, *, model: str | None = None, host: str = "127.0.0.1", port: int = 8080,
-                         body: str | None = None) -> None:
+                         body: str | None = None, allow_origins: Sequence[str] = ()) -> None:
     """Blocking: the offline viewer of a recording file (and an estimate by ``model``) until Ctrl-C."""
     from wearpose.recording import load_recording
 
@@ -516,7 +601,9 @@ def run_recording_viewer(path: str | Path, *, model: str | None = None, host: st
         track, names = est.estimate(rec), est.sensor_names
         bm = getattr(est, "body", bm)
         track = _em_track_in_world(est, track, rec)
-    v = RecordingViewer(rec, track, sensor_names=names, body=bm, host=host, port=port, title=f"wearpose: {Path(path).name}")
+    _warn_if_exposed(host, port)
+    v = RecordingViewer(rec, track, sensor_names=names, body=bm, host=host, port=port, title=f"wearpose: {Path(path).name}",
+                        allow_origins=allow_origins)
     print(f"viewer on {v.url}; Ctrl-C to stop", flush=True)
     try:
         while True:
