@@ -144,3 +144,41 @@ def test_paths(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert cache_dir() == tmp_path / "xdg" / "wearpose"
     assert cache_dir("~/x") == Path.home() / "x"
+
+
+def test_manifest_amc_rows_and_paths_of_a_renamed_corpus(tmp_path: Path) -> None:
+    """Corpus v2 layout: the folder is ``data-v2`` but manifest paths start with ``data/``; a row
+    may be an ``.amc.gz`` (CMU-layout ASF beside it) read at the manifest's fps through the
+    built-in cmu_asf map. A same-named file in a sibling ``data`` folder (v1) is never read."""
+    from import_testutils import cmu_layout_asf_amc, cmu_layout_motion
+
+    local, pelvis = synthetic_smpl_motion(REST, T=16, seed=5)
+    asf, amc = cmu_layout_asf_amc(cmu_layout_motion(local, pelvis, REST))
+    v2 = tmp_path / "data-v2"
+    (v2 / "cmu_asf" / "86").mkdir(parents=True)
+    (v2 / "cmu_asf" / "86" / "86.asf").write_text(asf)
+    write_gz(v2 / "cmu_asf" / "86" / "86_01.amc.gz", amc)
+    write_gz(v2 / "bandai" / "s1" / "walk.bvh.gz", bandai_like_bvh(0, T=20))
+    write_gz(tmp_path / "data" / "bandai" / "s1" / "walk.bvh.gz", bandai_like_bvh(0, T=12))  # v1 decoy
+    rows = ["path,source,subject,clip,description,frames,fps,seconds,split,licence,frame0_is_tpose",
+            "data/cmu_asf/86/86_01.amc.gz,cmu_asf,86,86_01,synthetic,16,60,0.267,train,CMU-mocap-terms,0",
+            "data/bandai/s1/walk.bvh.gz,bandai,s1,walk,walk,20,30,0.667,test,CC-BY-NC-4.0,0"]
+    (v2 / "manifest.csv").write_text("\n".join(rows) + "\n")
+    cache = tmp_path / "cache"
+    r = prepare_corpus(v2, cache, progress=False, workers=1, rest_joints=REST)
+    assert r["failed"] == 0 and r["converted"] == 2, r["failures"]
+    store = CorpusStore(cache)
+    e = store.entry("cmu_asf/86/86_01")
+    assert e["skeleton"] == "cmu_asf" and e["fps"] == 60.0 and e["frames"] == 16
+    assert store.entry("bandai/s1/walk")["frames"] == 20 and str(v2) in store.entry("bandai/s1/walk")["source_file"]
+    seq = store.load("cmu_asf/86/86_01")
+    assert seq.meta["import"]["up"]["how"] == "given" and seq.meta["import"]["map_source"] == "built-in cmu_asf"
+    # The ASF is an input of the AMC row: touching it converts the clip again.
+    a = v2 / "cmu_asf" / "86" / "86.asf"
+    os.utime(a, ns=(a.stat().st_atime_ns, a.stat().st_mtime_ns + 10**9))
+    assert prepare_corpus(v2, cache, progress=False, workers=1, rest_joints=REST)["converted"] == 1
+    # A corpus AMC whose skeleton no built-in map fits is refused, not matched automatically.
+    (v2 / "cmu_asf" / "86" / "86.asf").write_text(asf.replace("lowerback", "lumbar"))
+    write_gz(v2 / "cmu_asf" / "86" / "86_01.amc.gz", amc.replace("lowerback", "lumbar"))
+    r = prepare_corpus(v2, cache, progress=False, workers=1, rest_joints=REST)
+    assert "not a built-in one" in r["failures"]["cmu_asf/86/86_01"]

@@ -70,20 +70,40 @@ def _read_manifest(data: Path) -> list[dict[str, Any]]:
         rows = list(reader)
     out = []
     for i, r in enumerate(rows, start=2):
-        rel = r["path"]
-        # Paths in the corpus manifest are relative to shared/ (i.e. start with data/).
-        cands = [data / rel, data.parent / rel]
-        if rel.startswith(data.name + "/"):
-            cands.insert(0, data / rel[len(data.name) + 1:])
-        src = next((c for c in cands if c.exists()), cands[0])
         if r["split"] not in SPLITS:
             raise InputFileError(path, f"split {r['split']!r}", f"one of {SPLITS}", field=f"line {i}, split")
         out.append({
-            "file": src, "source": r["source"], "subject": r["subject"], "clip": r["clip"], "split": r["split"],
-            "licence": r.get("licence", "unknown") or "unknown", "description": r.get("description", ""),
-            "skip_first": r.get("frame0_is_tpose", "0").strip() == "1",
+            "file": _manifest_file(data, r["path"]), "source": r["source"], "subject": r["subject"], "clip": r["clip"],
+            "split": r["split"], "licence": r.get("licence", "unknown") or "unknown", "description": r.get("description", ""),
+            "skip_first": r.get("frame0_is_tpose", "0").strip() == "1", "manifest_fps": _manifest_fps(path, i, r),
         })
     return out
+
+
+def _manifest_file(data: Path, rel: str) -> Path:
+    """A manifest ``path`` as a file: paths are relative to shared/ and start with the corpus
+    folder's original name (``data/cmu_daz/...`` also in ``data-v2``), so the first part is
+    dropped inside ``data``; a path already relative to ``data`` is used as it is. Never the
+    sibling folder's file of the same name (v2's rows must not read v1's files)."""
+    parts = Path(rel).parts
+    cands = [data / rel]
+    if len(parts) > 1 and parts[0] in ("data", data.name):
+        cands.append(data.joinpath(*parts[1:]))
+    return next((c for c in cands if c.exists()), cands[-1])
+
+
+def _manifest_fps(path: Path, line: int, row: dict[str, Any]) -> float | None:
+    """The row's ``fps`` (AMC files store none), or None when the column is absent or empty."""
+    v = (row.get("fps") or "").strip()
+    if not v:
+        return None
+    try:
+        fps = float(v)
+    except ValueError:
+        fps = float("nan")
+    if not fps > 0:
+        raise InputFileError(path, f"fps {v!r}", "a positive frame rate in Hz", field=f"line {line}, fps")
+    return fps
 
 
 def _clip_id(row: dict[str, Any]) -> str:
@@ -123,6 +143,18 @@ def _stamp(path: Path, fps: float | None, rest_key: str) -> str:
     return f"{CONVERTER_VERSION}|{st.st_size}|{st.st_mtime_ns}|{fps}|{rest_key}"
 
 
+def _asf_stamp(amc: Path) -> str:
+    """Size and mtime of the ASF an AMC clip reads (``"asf:?"`` when it cannot be found: the
+    conversion then fails and says why)."""
+    from wearpose.motion.asf import find_asf_for  # noqa: PLC0415
+
+    try:
+        st = find_asf_for(amc).stat()
+    except (WearposeError, OSError):
+        return "asf:?"
+    return f"asf:{st.st_size}|{st.st_mtime_ns}"
+
+
 def _convert_one(job: dict[str, Any]) -> dict[str, Any]:
     """Worker: one source file -> one MotionSequence file. Never raises (errors are returned)."""
     torch.set_num_threads(1)  # one process per core; intra-op threads would only contend
@@ -140,6 +172,8 @@ def _convert_one(job: dict[str, Any]) -> dict[str, Any]:
             from wearpose.motion.importer import import_motion  # noqa: PLC0415 - heavier, only for user folders
 
             seq = import_motion(src, rest, joint_map=job.get("joint_map"), meta=meta).sequence
+        elif src.name.lower().endswith((".amc", ".amc.gz")):
+            seq = _import_corpus_amc(src, rest, job.get("manifest_fps"), meta)
         else:
             seq = retarget_bvh(read_bvh(src), rest, meta=meta).sequence
         if job["skip_first"] and seq.num_frames > 1:
@@ -157,6 +191,23 @@ def _convert_one(job: dict[str, Any]) -> dict[str, Any]:
         return {"ok": False, "id": job["id"], "error": f"{kind}{exc}"}
 
 
+def _import_corpus_amc(src: Path, rest: torch.Tensor, fps: float | None, meta: dict[str, Any]) -> MotionSequence:
+    """A manifest row's AMC (its ASF beside it, CMU naming) through the ASF/AMC reader and the
+    importer's built-in ``cmu_asf`` map, at the manifest's frame rate (AMC stores none).
+
+    The corpus declares Y up (its README), so the up axis is not guessed; units come from the
+    ASF's ``:units``. Any other skeleton is refused: corpus rows must retarget the same way every
+    time, not through an automatic match.
+    """
+    from wearpose.motion.importer import import_motion  # noqa: PLC0415 - heavier, only for AMC rows
+
+    imp = import_motion(src, rest, up="y", fps=fps, meta=meta)
+    if not imp.report.map_source.startswith("built-in"):
+        raise InputFileError(src, f"its ASF skeleton ({imp.report.map_source} match) is not a built-in one",
+                             "a CMU-layout ASF (root, lowerback, lfemur, lhumerus...) beside each corpus AMC")
+    return imp.sequence
+
+
 def _write_json(path: Path, obj: Any) -> None:
     atomic_write_text(path, json.dumps(obj, indent=1, sort_keys=True))
 
@@ -170,6 +221,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
 
     Args:
         data_dir: corpus folder with ``manifest.csv`` (default :func:`wearpose.motion.paths.data_dir`);
+            manifest rows may be BVH, AMASS ``.npz`` or ``.amc``/``.amc.gz`` (CMU-layout ASF beside
+            it, read at the row's ``fps``: :func:`_import_corpus_amc`);
             or folder(s) without a manifest, in which case every ``.bvh``/``.bvh.gz``/``.amc``
             (with its ``.asf``)/``.npz`` below them is converted, subject = parent folder name,
             split = hash of the subject; their BVH/AMC go through
@@ -244,6 +297,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
             failures[cid] = str(InputFileError(r["file"], "file not found", "the clip listed in manifest.csv"))
             continue
         stamp = _stamp(Path(r["file"]), fps, rest_key)
+        if str(r["file"]).lower().endswith((".amc", ".amc.gz")):
+            stamp += f"|{_asf_stamp(Path(r['file']))}|fps:{r.get('manifest_fps')}"  # the skeleton is an input too
         if joint_map is not None and r.get("user_files"):
             stamp += f"|map:{_stamp(Path(joint_map), None, '')}"
         entry["stamp"] = stamp
