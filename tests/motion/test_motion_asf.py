@@ -113,6 +113,10 @@ def test_known_rotations_read_back_exactly(tmp_path, angle: str, length_mult: fl
         err = float((P[:, j] - want[:, k]).norm(dim=-1).max())
         assert err < 1e-4, (name, err)
     assert m.num_frames == 12 and m.fps == 60
+    # The column-wise fast path (regular files) and the line-by-line parser read the same values.
+    asf = parse_asf_text(asf_text)
+    fast, slow = parse_amc_text(amc_text, asf), parse_amc_text(amc_text, asf, strict=True)
+    assert fast.keys() == slow.keys() and all((fast[k] == slow[k]).all() for k in slow)
 
 
 def _bad(text_asf: str = HAND_ASF, text_amc: str = HAND_AMC) -> InputFileError:
@@ -137,6 +141,8 @@ def test_malformed_files_name_file_line_and_problem() -> None:
     assert "unknown bone 'zz'" in str(e) and "bad.asf" in str(e)
     e = _bad(HAND_ASF.replace("    dof rz ry\n", "    dof rz rq\n"))
     assert "rq" in str(e) and "line 29" in str(e)
+    e = _bad(text_amc=HAND_AMC.replace("a 0\n", "a nan\n"))  # read fast, then found and named
+    assert "line 9" in str(e) and "'nan'" in str(e)
     e = _bad(text_amc=HAND_AMC.replace(":DEGREES", ":RADIANS"))
     assert "angle" in str(e).lower() or "rad" in str(e)
 

@@ -353,12 +353,14 @@ def parse_amc_text(text: str, asf: AsfSkeleton, path: str | Path = "<string>", s
         (angles converted to radians; lengths in file units).
     """
     path = Path(path)
-    raw = text.splitlines()
     ndof = {"root": len(asf.root_order), **{n: len(b.dof) for n, b in asf.bones.items()}}
     animated = [n for n, k in ndof.items() if k > 0]
+    regular = None if strict else _parse_regular_amc(text, ndof, animated)
+    if regular is not None:
+        return _amc_values(path, asf, *regular)
+    raw = text.splitlines()
     frames: list[dict[str, list[float]]] = []
     frame_lines: list[int] = []
-    angle = asf.angle
     declared = None
     cur: dict[str, list[float]] | None = None
     expected_next: int | None = None
@@ -420,21 +422,73 @@ def parse_amc_text(text: str, asf: AsfSkeleton, path: str | Path = "<string>", s
         frames.append(cur)
     if not frames:
         raise InputFileError(path, "no frames", "frame number lines each followed by one line per bone", field="MOTION")
-    if declared is not None and declared != angle:
-        raise InputFileError(path, f"angles declared {declared} here but {angle} in the ASF {asf.path.name}",
+    values = {n: np.asarray([f[n] for f in frames], dtype=np.float64) for n in animated}
+    if not strict and any(np.isnan(v).any() for v in values.values()):
+        return parse_amc_text(text, asf, path, strict=True)  # a 'nan' value: find and name its line
+    return _amc_values(path, asf, declared, values)
+
+
+def _amc_values(path: Path, asf: AsfSkeleton, declared: str | None, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Check the declared angle unit against the ASF's and convert rotation values to radians."""
+    if declared is not None and declared != asf.angle:
+        raise InputFileError(path, f"angles declared {declared} here but {asf.angle} in the ASF {asf.path.name}",
                              "the same angle unit in both files", field=":DEGREES/:RADIANS")
-    to_rad = math.pi / 180.0 if angle == "deg" else 1.0
-    out: dict[str, np.ndarray] = {}
-    for n in animated:
-        arr = np.asarray([f[n] for f in frames], dtype=np.float64)
-        if not strict and np.isnan(arr).any():
-            return parse_amc_text(text, asf, path, strict=True)  # a 'nan' value: find and name its line
+    to_rad = math.pi / 180.0 if asf.angle == "deg" else 1.0
+    for n, arr in values.items():
         toks = asf.root_order if n == "root" else asf.bones[n].dof
         for c, t in enumerate(toks):
             if t.lower() in _ROT_DOFS:
                 arr[:, c] *= to_rad
-        out[n] = arr
-    return out
+    return values
+
+
+def _parse_regular_amc(text: str, ndof: dict[str, int], animated: list[str]) -> tuple[str | None, dict[str, np.ndarray]] | None:
+    """Fast path for the common layout (CMU, Vicon exports): header keywords, then frames
+    numbered 1, 2, 3... each listing every animated bone once, in the same order every frame,
+    with plain numbers. Reads each bone's column of lines at once (5-10x faster than line by
+    line). Returns ``(declared angle unit, raw values)``, or ``None`` for anything else; the
+    general parser then reads the file and names any problem with its line."""
+    lines = [ln.strip() for ln in text.splitlines()]
+    lines = [ln for ln in lines if ln and not ln.startswith("#")]
+    k = 0
+    declared = None
+    while k < len(lines) and lines[k].startswith(":"):
+        h = lines[k].split()[0].upper()
+        if h in (":DEGREES", ":DEGREE"):
+            declared = "deg"
+        elif h in (":RADIANS", ":RADIAN"):
+            declared = "rad"
+        elif h not in (":FULLY-SPECIFIED", ":FULLY_SPECIFIED") or len(lines[k].split()) > 1:
+            return None
+        k += 1
+    body = lines[k:]
+    step = len(animated) + 1
+    if not body or len(body) % step or not body[0].isdigit():
+        return None
+    T = len(body) // step
+    first = int(body[0])
+    if body[0::step] != [str(first + t) for t in range(T)]:
+        return None
+    names = [ln.split(None, 1)[0] for ln in body[1:step]]
+    if sorted(names) != sorted(animated):
+        return None
+    values: dict[str, np.ndarray] = {}
+    for i, name in enumerate(names, start=1):
+        col = body[i::step]
+        head = name + " "
+        if any(not ln.startswith(head) for ln in col):
+            return None
+        joined = " ".join(ln[len(head):] for ln in col)
+        if "#" in joined or "," in joined or "(" in joined or ")" in joined:
+            return None
+        try:
+            arr = np.array(joined.split(), dtype=np.float64)
+        except ValueError:
+            return None
+        if arr.size != T * ndof[name] or np.isnan(arr).any():
+            return None
+        values[name] = arr.reshape(T, ndof[name])
+    return declared, values
 
 
 def asf_amc_to_motion(asf: AsfSkeleton, values: dict[str, np.ndarray], fps: float | None = None,
