@@ -155,14 +155,15 @@ def synthetic_bvh_from_smpl(rest: torch.Tensor, local: torch.Tensor, pelvis: tor
 
 
 def corpus_dir() -> Path | None:
-    """The shared corpus if present: ``$WEARPOSE_DATA`` or ``../shared/data`` next to the checkout."""
+    """The shared corpus if present: ``$WEARPOSE_DATA`` or ``../shared/data-v2`` next to the
+    checkout (the library's default, :func:`wearpose.motion.data_dir`)."""
     env = os.environ.get("WEARPOSE_DATA")
     if env:
         p = Path(env)
         return p if (p / "manifest.csv").is_file() else None
     here = Path(__file__).resolve()
     for d in here.parents:
-        cand = d.parent / "shared" / "data"
+        cand = d.parent / "shared" / "data-v2"
         if (cand / "manifest.csv").is_file():
             return cand
     return None

@@ -146,7 +146,7 @@ def test_paths(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     assert cache_dir("~/x") == Path.home() / "x"
 
 
-def test_manifest_amc_rows_and_paths_of_a_renamed_corpus(tmp_path: Path) -> None:
+def test_manifest_amc_rows_and_paths_of_a_renamed_corpus(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Corpus v2 layout: the folder is ``data-v2`` but manifest paths start with ``data/``; a row
     may be an ``.amc.gz`` (CMU-layout ASF beside it) read at the manifest's fps through the
     built-in cmu_asf map. A same-named file in a sibling ``data`` folder (v1) is never read."""
@@ -173,6 +173,11 @@ def test_manifest_amc_rows_and_paths_of_a_renamed_corpus(tmp_path: Path) -> None
     assert store.entry("bandai/s1/walk")["frames"] == 20 and str(v2) in store.entry("bandai/s1/walk")["source_file"]
     seq = store.load("cmu_asf/86/86_01")
     assert seq.meta["import"]["up"]["how"] == "given" and seq.meta["import"]["map_source"] == "built-in cmu_asf"
+    # A corpus AMC clip id loads from the corpus folder when no store holds it.
+    from wearpose.motion import load_motion
+
+    monkeypatch.setenv("WEARPOSE_DATA", str(v2))
+    assert load_motion("cmu_asf/86/86_01", cache=tmp_path / "no_store", rest_joints=REST).meta["skeleton"] == "cmu_asf"
     # The ASF is an input of the AMC row: touching it converts the clip again.
     a = v2 / "cmu_asf" / "86" / "86.asf"
     os.utime(a, ns=(a.stat().st_atime_ns, a.stat().st_mtime_ns + 10**9))
@@ -182,3 +187,21 @@ def test_manifest_amc_rows_and_paths_of_a_renamed_corpus(tmp_path: Path) -> None
     write_gz(v2 / "cmu_asf" / "86" / "86_01.amc.gz", amc.replace("lowerback", "lumbar"))
     r = prepare_corpus(v2, cache, progress=False, workers=1, rest_joints=REST)
     assert "not a built-in one" in r["failures"]["cmu_asf/86/86_01"]
+
+
+def test_default_corpus_is_v2_beside_the_checkout(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Without WEARPOSE_DATA: ../shared/data-v2 beside the checkout; a lone v1 folder is named in
+    the error (never used silently)."""
+    from wearpose.motion import paths
+
+    monkeypatch.delenv("WEARPOSE_DATA", raising=False)
+    monkeypatch.setattr(paths, "__file__", str(tmp_path / "elsewhere" / "paths.py"))  # not the real checkout
+    checkout = tmp_path / "work" / "main" / "src"
+    checkout.mkdir(parents=True)
+    (tmp_path / "work" / "shared" / "data").mkdir(parents=True)
+    monkeypatch.chdir(checkout)
+    with pytest.raises(ConfigError, match=r"shared/data-v2.*older corpus .*shared/data \(v1\).*WEARPOSE_DATA="):
+        data_dir()
+    assert data_dir(must_exist=False) == Path("../shared/data-v2")
+    (tmp_path / "work" / "shared" / "data-v2").mkdir()
+    assert data_dir() == tmp_path / "work" / "shared" / "data-v2"

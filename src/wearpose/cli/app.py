@@ -95,7 +95,7 @@ def info(
 
 @data_app.command("prepare")
 def data_prepare(
-    folders: Optional[list[Path]] = typer.Argument(None, help="Corpus folder (with manifest.csv) or your own folders of BVH, ASF/AMC or AMASS files (any skeleton, see docs/motion-import.md); default $WEARPOSE_DATA or ../shared/data."),
+    folders: Optional[list[Path]] = typer.Argument(None, help="Corpus folder (with manifest.csv) or your own folders of BVH, ASF/AMC or AMASS files (any skeleton, see docs/motion-import.md); default $WEARPOSE_DATA or ../shared/data-v2 (corpus v2)."),
     cache: Optional[Path] = typer.Option(None, help="Output store; default $WEARPOSE_CACHE or ~/.cache/wearpose."),
     fps: Optional[float] = typer.Option(None, help="Resample every clip to this rate (default: keep each clip's rate)."),
     workers: Optional[int] = typer.Option(None, min=1, help="Worker processes (default: up to 2)."),

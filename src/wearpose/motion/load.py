@@ -64,7 +64,7 @@ def load_motion(spec: str | Path, cache: str | Path | None = None, rest_joints: 
     else:
         tried.append(f"prepared store {store_dir} (absent)")
     root = data_dir(must_exist=False)
-    for cand in (root / f"{spec}.bvh.gz", root / f"{spec}.bvh", root / str(spec)):
+    for cand in (root / f"{spec}.bvh.gz", root / f"{spec}.bvh", root / f"{spec}.amc.gz", root / str(spec)):
         if cand.is_file():
             return load_motion(cand, rest_joints=rest_joints)
     tried.append(f"corpus file under {root}" if root.is_dir() else
