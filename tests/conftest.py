@@ -5,7 +5,7 @@ point at a fresh, empty temporary directory (removed at the end), and every test
 temporary working directory. No test can read a store, weights cache, ``runs/`` or ``out/`` that an
 earlier command left on the machine, or write into the checkout. Tests that need the real motion
 corpus take the ``corpus_store`` fixture: a small store prepared once per session from
-``$WEARPOSE_DATA`` (default ``../shared/data`` beside the checkout) into that directory.
+``$WEARPOSE_DATA`` (default ``../shared/data-v2`` beside the checkout) into that directory.
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ def pytest_configure(config: pytest.Config) -> None:  # noqa: ARG001 - pytest ho
     """Point the home and every cache at an empty temporary directory, before collection
     (so that nothing computed at import time can see the user's home either)."""
     # Resolve the corpus while the real environment is still in place: a user's
-    # WEARPOSE_DATA or the checkout's ../shared/data, never anything in the home.
+    # WEARPOSE_DATA or the checkout's ../shared/data-v2, never anything in the home.
     from wearpose.motion import data_dir
 
     try:
@@ -137,7 +137,7 @@ def _own_working_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> N
 @pytest.fixture(scope="session")
 def corpus_root() -> Path:
     if "data" not in _FRESH:
-        pytest.skip(f"motion corpus absent ({_FRESH.get('data_error')}): corpus tests need ../shared/data "
+        pytest.skip(f"motion corpus absent ({_FRESH.get('data_error')}): corpus tests need ../shared/data-v2 "
                     "beside the checkout or WEARPOSE_DATA")
     from wearpose.motion import prepare_corpus
 

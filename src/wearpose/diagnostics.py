@@ -120,7 +120,7 @@ def check_data() -> list[Check]:
         out.append(Check("data", "motion corpus", "ok", str(d)))
     except Exception as exc:  # noqa: BLE001
         out.append(Check("data", "motion corpus", "warn", str(exc),
-                         "set WEARPOSE_DATA to the corpus folder (../shared/data next to a checkout), or prepare "
+                         "set WEARPOSE_DATA to the corpus folder (../shared/data-v2 next to a checkout), or prepare "
                          "your own motion: wearpose data prepare ~/mocap"))
     c = cache_dir()
     try:
