@@ -110,7 +110,7 @@ class StreamClient:
                 t = time.perf_counter()
                 try:
                     m = decode_pose(msg)
-                except (PacketError, json.JSONDecodeError):
+                except PacketError:  # not a message of the protocol: skipped
                     continue
                 if isinstance(m, PosePacket):
                     if self.on_pose is not None:

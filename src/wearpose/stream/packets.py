@@ -104,15 +104,16 @@ class Hello:
         if len(sensors) > MAX_SENSORS or len(set(sensors)) != len(sensors):
             raise PacketError(f"hello.sensors: expected at most {MAX_SENSORS} distinct names, got {len(sensors)}")
         channels = d.get("channels")
-        if not isinstance(channels, list) or not channels or any(c not in CHANNEL_FLOATS for c in channels) \
-                or len(set(channels)) != len(channels):
-            raise PacketError(f"hello.channels: expected distinct names from {sorted(CHANNEL_FLOATS)}, got {channels!r}")
-        rate = d.get("rate")
-        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not math.isfinite(rate) or rate <= 0:
-            raise PacketError(f"hello.rate: expected a positive number of Hz, got {rate!r}")
+        if not isinstance(channels, list) or not channels or any(
+                not isinstance(c, str) or c not in CHANNEL_FLOATS for c in channels) or len(set(channels)) != len(channels):
+            raise PacketError(f"hello.channels: expected distinct names from {sorted(CHANNEL_FLOATS)}, "
+                              f"got {_short(channels)}")
+        rate = _finite(d.get("rate"))
+        if rate is None or rate <= 0:
+            raise PacketError(f"hello.rate: expected a positive number of Hz, got {_short(d.get('rate'))}")
         fmt = d.get("format", "json")
         if fmt not in ("json", "binary"):
-            raise PacketError(f"hello.format: expected 'json' or 'binary', got {fmt!r}")
+            raise PacketError(f"hello.format: expected 'json' or 'binary', got {_short(fmt)}")
         info = d.get("subject_info") or {}
         if not isinstance(info, dict):
             raise PacketError("hello.subject_info: expected a JSON object")
@@ -162,20 +163,39 @@ class PosePacket:
 
 def _subject(x: Any) -> int:
     if isinstance(x, bool) or not isinstance(x, int) or not 0 <= x <= 0xFFFF:
-        raise PacketError(f"subject: expected an integer 0..65535, got {x!r}")
+        raise PacketError(f"subject: expected an integer 0..65535, got {_short(x)}")
     return x
 
 
 def _seq(x: Any) -> int:
     if isinstance(x, bool) or not isinstance(x, int) or not 0 <= x <= 0xFFFFFFFF:
-        raise PacketError(f"seq: expected an integer 0..2^32-1, got {x!r}")
+        raise PacketError(f"seq: expected an integer 0..2^32-1, got {_short(x)}")
     return x
 
 
+def _finite(x: Any) -> float | None:
+    """``x`` as a finite float, or None when it is not a finite number (bools, strings, NaN,
+    infinities and integers too large for a float: JSON allows any number of digits)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return None
+    try:
+        f = float(x)
+    except OverflowError:
+        return None
+    return f if math.isfinite(f) else None
+
+
 def _finite_time(x: Any) -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-        raise PacketError(f"t: expected a finite timestamp in seconds, got {x!r}")
-    return float(x)
+    t = _finite(x)
+    if t is None:
+        raise PacketError(f"t: expected a finite timestamp in seconds, got {_short(x)}")
+    return t
+
+
+def _short(x: Any, n: int = 60) -> str:
+    """``repr(x)``, cut to ``n`` characters: an error message must not echo a hostile megabyte."""
+    r = repr(x)
+    return r if len(r) <= n else r[:n] + "..."
 
 
 def _jsonable(x: Any) -> Any:
@@ -266,10 +286,10 @@ def decode_frame_json(d: dict[str, Any], hello: Hello) -> FramePacket:
                 continue
             if c == "orientation" and isinstance(row, list) and len(row) == 3:  # accept [[..],[..],[..]]
                 row = [x for r in row for x in (r if isinstance(r, list) else [r])]
-            if not isinstance(row, list) or len(row) != n or not all(
-                    isinstance(x, (int, float)) and not isinstance(x, bool) for x in row):
-                raise PacketError(f"frame subject {subject} seq {seq}: {c}[{i}] must be {n} numbers")
-            data[i, a:a + n] = row
+            values = [_finite(x) for x in row] if isinstance(row, list) and len(row) == n else None
+            if values is None or None in values:
+                raise PacketError(f"frame subject {subject} seq {seq}: {c}[{i}] must be {n} finite numbers")
+            data[i, a:a + n] = values
         a += n
     _check_valid_values(data, valid, subject, seq)
     return FramePacket(subject, seq, t, valid, data)
@@ -336,22 +356,46 @@ def encode_pose_json(p: PosePacket) -> str:
 
 
 def decode_pose_json(d: dict[str, Any]) -> PosePacket:
+    """Parse a JSON pose (already ``json.loads``-ed); PacketError when malformed."""
     try:
-        rot = np.asarray(d["local_rot"], np.float32).reshape(NUM_JOINTS, 3, 3)
-        betas = np.asarray(d["betas"], np.float32).reshape(10)
-        trans = None if d.get("trans") is None else np.asarray(d["trans"], np.float32).reshape(3)
-        unc = None if d.get("uncertainty") is None else np.asarray(d["uncertainty"], np.float32).reshape(NUM_JOINTS)
-        nan = float("nan")
-        return PosePacket(_subject(d["subject"]), _seq(d["seq"]), _finite_time(d["t"]), bool(d["valid"]), rot, betas,
-                          trans, unc, nan if d.get("compute_ms") is None else float(d["compute_ms"]),
-                          nan if d.get("server_ms") is None else float(d["server_ms"]), d.get("extras") or {})
-    except (KeyError, ValueError, TypeError) as exc:
-        raise PacketError(f"pose message: {exc}") from None
+        with np.errstate(over="ignore"):  # a hostile 1e39 becomes inf in float32: no warning per value
+            return _pose_from_dict(d)
+    except (KeyError, ValueError, TypeError, OverflowError) as exc:  # OverflowError: an integer beyond float
+        raise PacketError(f"pose message: {_short(exc, 200)}") from None
+
+
+def _pose_from_dict(d: dict[str, Any]) -> PosePacket:
+    extras = d.get("extras") or {}
+    if not isinstance(extras, dict):
+        raise TypeError("extras: expected a JSON object")
+    rot = np.asarray(d["local_rot"], np.float32).reshape(NUM_JOINTS, 3, 3)
+    betas = np.asarray(d["betas"], np.float32).reshape(10)
+    trans = None if d.get("trans") is None else np.asarray(d["trans"], np.float32).reshape(3)
+    unc = None if d.get("uncertainty") is None else np.asarray(d["uncertainty"], np.float32).reshape(NUM_JOINTS)
+    nan = float("nan")
+    return PosePacket(_subject(d["subject"]), _seq(d["seq"]), _finite_time(d["t"]), bool(d["valid"]), rot, betas,
+                      trans, unc, nan if d.get("compute_ms") is None else float(d["compute_ms"]),
+                      nan if d.get("server_ms") is None else float(d["server_ms"]), extras)
 
 
 def decode_pose(msg: str | bytes) -> PosePacket | dict[str, Any]:
-    """A server message: a :class:`PosePacket`, or the parsed JSON dict of a control reply."""
+    """A server message: a :class:`PosePacket`, or the parsed JSON dict of a control reply
+    (PacketError when it is neither)."""
     if isinstance(msg, (bytes, bytearray, memoryview)):
         return decode_pose_binary(bytes(msg))
-    d = json.loads(msg)
-    return decode_pose_json(d) if isinstance(d, dict) and d.get("type") == "pose" else d
+    d = parse_message(msg)
+    return decode_pose_json(d) if d["type"] == "pose" else d
+
+
+def parse_message(text: str) -> dict[str, Any]:
+    """A text message as a JSON object with a string ``type``; PacketError for anything else
+    (not JSON, nested too deeply to parse, not an object, no ``type``)."""
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise PacketError(f"text message is not JSON ({exc.msg} at char {exc.pos})") from None
+    except RecursionError:  # "[[[[..." past the interpreter's recursion limit
+        raise PacketError("text message: JSON nested too deeply") from None
+    if not isinstance(d, dict) or not isinstance(d.get("type"), str):
+        raise PacketError("text message: expected a JSON object with a string 'type'")
+    return d

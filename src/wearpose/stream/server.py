@@ -85,6 +85,7 @@ from wearpose.stream.packets import (
     encode_pose_binary,
     encode_pose_json,
     frame_channels,
+    parse_message,
     peek_subject,
 )
 from wearpose.stream.security import VIEWER_PORTS, AccessPolicy, Limits, Throttle, TokenBucket
@@ -616,12 +617,7 @@ class StreamServer:
             log.warning("malformed message #%d from %s skipped: %s", self.malformed, getattr(ws, "remote_address", "?"), exc)
 
     async def _on_text(self, ws: Any, msg: str, t_arr: float, udp: bool = False) -> None:
-        try:
-            d = json.loads(msg)
-        except json.JSONDecodeError as exc:
-            raise PacketError(f"text message is not JSON ({exc.msg} at char {exc.pos})") from None
-        if not isinstance(d, dict) or not isinstance(d.get("type"), str):
-            raise PacketError("text message: expected a JSON object with a 'type'")
+        d = parse_message(msg)
         kind = d["type"]
         if udp and kind in ("hello", "subscribe", "stats") and not await self._udp_token_ok(ws, d, kind):
             return
