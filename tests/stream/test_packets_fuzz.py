@@ -15,6 +15,7 @@ import struct
 from typing import Any
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -39,6 +40,8 @@ from wearpose.stream.packets import (
 )
 
 EXAMPLES = int(os.environ.get("WEARPOSE_FUZZ_EXAMPLES", "200"))
+#: Generating nested JSON is the cost (~3-6 s for 200 inputs, 14 s measured at load average 8).
+JSON_BUDGET = pytest.mark.budget(20)
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, database=None, derandomize=EXAMPLES <= 1000,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 HELLO = Hello(3, ("a", "b", "c"), ("position", "orientation"), 120.0, "binary")
@@ -108,6 +111,7 @@ def test_peek_subject_raises_only_packet_error(msg: bytes) -> None:
         pass
 
 
+@JSON_BUDGET
 @FUZZ
 @given(JSON | _mutated(VALID_JSON_FRAME))
 def test_decode_frame_json_raises_only_packet_error(d: Any) -> None:
@@ -120,6 +124,7 @@ def test_decode_frame_json_raises_only_packet_error(d: Any) -> None:
     _check_frame(pkt, 3)
 
 
+@JSON_BUDGET
 @FUZZ
 @given(JSON | _mutated(VALID_HELLO))
 def test_hello_from_dict_raises_only_packet_error(d: Any) -> None:
@@ -139,6 +144,7 @@ TEXT = (st.text(max_size=300) | JSON.map(json.dumps)
         | _mutated(VALID_JSON_FRAME).map(json.dumps))
 
 
+@JSON_BUDGET
 @FUZZ
 @given(TEXT)
 def test_parse_message_raises_only_packet_error(text: str) -> None:
@@ -161,6 +167,7 @@ POSE_BYTES = (st.binary(max_size=1200)
 POSE_TEXT = TEXT | _mutated(_valid_pose()).map(json.dumps)
 
 
+@JSON_BUDGET
 @FUZZ
 @given(POSE_BYTES | POSE_TEXT)
 def test_decode_pose_raises_only_packet_error(msg: bytes | str) -> None:
