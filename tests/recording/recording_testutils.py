@@ -7,6 +7,12 @@ import torch
 
 from wearpose.geometry import axis_angle_to_matrix
 from wearpose.recording import Recording, SensorInfo, SensorStream
+from wearpose.recording.types import known_sites
+
+
+def _site(name: str) -> str | None:
+    """The sensor's name as its body site when it is one ("left_forearm"), else no site."""
+    return name if name in known_sites() else None
 
 
 def rotations(n: int, seed: int = 0, speed: float = 0.05) -> np.ndarray:
@@ -22,7 +28,7 @@ def imu_stream(name: str = "left_forearm", n: int = 120, rate: float = 60.0, see
     ts = t0 + np.arange(n) / rate
     valid = np.ones(n, bool)
     valid[list(drop)] = False
-    info = SensorInfo(name=name, kind="imu", site=name, rate=rate, **info_kw)
+    info = SensorInfo(name=name, kind="imu", site=_site(name), rate=rate, **info_kw)
     return SensorStream(info, ts, valid, orientation=rotations(n, seed).astype(np.float32),
                         acceleration=rng.normal(scale=2.0, size=(n, 3)).astype(np.float32),
                         angular_velocity=rng.normal(size=(n, 3)).astype(np.float32))
@@ -35,7 +41,7 @@ def em_stream(name: str = "right_forearm", n: int = 120, rate: float = 60.0, see
     valid = np.ones(n, bool)
     valid[list(drop)] = False
     pos = np.array([0.3, 0.5, 0.1]) + np.cumsum(rng.normal(scale=0.005, size=(n, 3)), axis=0)
-    info = SensorInfo(name=name, kind="em6dof", site=name, rate=rate, source="src0", source_site="lower_back")
+    info = SensorInfo(name=name, kind="em6dof", site=_site(name), rate=rate, source="src0", source_site="lower_back")
     return SensorStream(info, ts, valid, position=pos.astype(np.float32), orientation=rotations(n, seed).astype(np.float32))
 
 

@@ -24,6 +24,7 @@ are never interpolated here.
 from __future__ import annotations
 
 import copy
+import difflib
 import math
 import re
 from dataclasses import dataclass, field, fields, replace
@@ -93,7 +94,8 @@ class SensorInfo:
     Attributes:
         name: unique within the recording; ``[A-Za-z0-9_.-]{1,64}`` (it becomes a file key).
         kind: ``"em6dof"``, ``"imu"``, ``"mimu"`` or ``"vio"``.
-        site: body site name (e.g. ``"left_forearm"``) or ``None`` when unknown/off-body.
+        site: body site name, one of :func:`known_sites` (e.g. ``"left_forearm"``,
+            ``"left_shin"``), or ``None`` when unknown/off-body.
         rate: nominal sample rate, Hz (checked against the timestamps on load).
         acc_unit: ``"m/s2"`` or ``"g"`` (1 g = 9.81 m/s^2).
         acc_frame: ``"world"`` or ``"sensor"`` (sensor-frame acceleration is rotated with
@@ -184,11 +186,73 @@ def _check_info(info: SensorInfo) -> None:
         v = getattr(info, key)
         if v is not None and not isinstance(v, str):
             raise _Problem(f"{where}/{key}", f"value {v!r}", "a string or null")
+    if info.site is not None:
+        unknown = _unknown_site(info.site)
+        if unknown is not None:
+            raise _Problem(f"{where}/site", *unknown)
     if not isinstance(info.mag_unit, str):
         raise _Problem(f"{where}/mag_unit", f"value {info.mag_unit!r}", "a string such as 'uT' or 'a.u.'")
     rate = info.rate
     if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not math.isfinite(rate) or rate <= 0:
         raise _Problem(f"{where}/rate", f"value {rate!r}", "a positive number of samples per second (Hz)")
+
+
+def known_sites() -> frozenset[str]:
+    """Body sites a :attr:`SensorInfo.site` may name.
+
+    The sites wearpose knows a bone segment for (:data:`wearpose.sensors.SITE_SEGMENT`: the 18
+    sites of the embedded body asset, which include the 6 SMPL-file sites) and every site of a
+    registered kit (sensor sites, their fallbacks, EM source sites), so a kit registered for a
+    custom body asset brings its own sites.
+    """
+    # Imported here: wearpose.sensors sits above nothing recording needs at import time.
+    from wearpose.sensors.kits import SITE_SEGMENT, get_kit, list_kits
+
+    sites = set(SITE_SEGMENT)
+    for name in list_kits():
+        kit = get_kit(name)
+        for spec in kit.sensors:
+            sites.add(spec.site)
+            sites.update(spec.fallback_sites)
+        if kit.em_source_site is not None:
+            sites.add(kit.em_source_site)
+    return frozenset(sites)
+
+
+def _unknown_site(site: str) -> tuple[str, str] | None:
+    """``(problem, expected)`` for a site wearpose does not know, ``None`` for a known one.
+
+    The commonest mix-up is a kit's *sensor name* for its site (``imu6``'s sensor
+    ``left_lower_leg`` is worn on site ``left_shin``): that site is suggested first, then the
+    nearest known names (difflib).
+    """
+    known = known_sites()
+    if site in known:
+        return None
+    from wearpose.sensors.kits import get_kit, list_kits
+
+    worn_on: dict[str, list[str]] = {}  # site -> kits having a sensor named `site` worn there
+    for name in list_kits():
+        for spec in get_kit(name).sensors:
+            if spec.name == site:
+                worn_on.setdefault(spec.site, []).append(name)
+    if site.lower() in known:
+        suggestions = [site.lower()]
+    elif worn_on:
+        suggestions = list(worn_on)
+    else:
+        suggestions = difflib.get_close_matches(site.lower(), sorted(known), n=3, cutoff=0.6)
+    problem = f"unknown body site {site!r}"
+    if worn_on:
+        problem += " (" + "; ".join(f"the sensor {site!r} of kit{'s' if len(kits) > 1 else ''} {', '.join(kits)} is worn on site {where!r}"
+                                   for where, kits in worn_on.items()) + ")"
+    guess = ""
+    if suggestions:
+        names = [repr(x) for x in suggestions]
+        guess = f"did you mean {names[0] if len(names) == 1 else ', '.join(names[:-1]) + ' or ' + names[-1]}? "
+    expected = (f"a known body site ({guess}known: {', '.join(sorted(known))}; a kit registered with "
+                "wearpose.sensors.register_kit adds its own), or null when the site is unknown")
+    return problem, expected
 
 
 @dataclass
