@@ -32,7 +32,7 @@ import torch
 from wearpose.fileio import atomic_savez, npz_problem
 from wearpose.errors import InputFileError, ShapeError
 from wearpose.geometry import matrix_to_quat
-from wearpose.recording.checks import check_stream
+from wearpose.recording.checks import check_recording
 from wearpose.recording.types import (
     CHANNEL_SHAPES,
     CHANNELS,
@@ -117,8 +117,9 @@ def load_recording(path: str | Path, check_conventions: bool = True) -> Recordin
     unreadable file, unknown format or newer version, malformed header, unknown kind or key,
     missing/extra arrays, wrong shape or dtype, truncated arrays (length differs from the
     timestamps), NaN/inf in a valid frame, non-increasing timestamps, orientations that are not
-    rotations, and (``check_conventions``) data that does not look like its declared units
-    (:mod:`wearpose.recording.checks`). No other exception type escapes.
+    rotations, unknown body sites, and (``check_conventions``) data that does not look like its
+    declared units and conventions (:mod:`wearpose.recording.checks`: timestamps, positions,
+    acceleration, gyro unit, quaternion order). No other exception type escapes.
 
     Returns:
         the :class:`Recording`, exactly as stored (declared conventions kept: call
@@ -254,14 +255,14 @@ def _load(path: Path, check_conventions: bool) -> Recording:
         gt, gt_start = _load_ground_truth(path, d, gt_json)
     rec = Recording(streams, gt, gt_start, header.get("subject", {}) or {}, header.get("meta", {}) or {})
     if check_conventions:
-        for s in rec.sensors:
-            issues = check_stream(s)
-            if issues:
-                # Report every suspicion about the first field at once (e.g. "looks like g" and
-                # "looks like the sensor frame"): fixing one at a time would take several runs.
-                same = [i for i in issues if i.field == issues[0].field]
-                raise InputFileError(path, "; ".join(i.problem for i in same), "; ".join(i.expected for i in same),
-                                     field=f"sensors/{s.name}/{issues[0].field}")
+        issues = check_recording(rec.sensors)
+        if issues:
+            # Report every suspicion about the first field at once (e.g. "looks like g" and
+            # "looks like the sensor frame"): fixing one at a time would take several runs.
+            first = issues[0]
+            same = [i for i in issues if (i.sensor, i.field) == (first.sensor, first.field)]
+            raise InputFileError(path, "; ".join(i.problem for i in same), "; ".join(i.expected for i in same),
+                                 field=f"sensors/{first.sensor}/{first.field}")
     return rec
 
 
