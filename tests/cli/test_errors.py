@@ -113,6 +113,17 @@ def test_positions_in_millimetres_are_caught(em_file: Path, tmp_path: Path, caps
     assert code == 1 and "[sensors/head/position]" in err and "looks like millimetres" in err
 
 
+def test_quaternions_written_x_y_z_w_name_the_field_and_the_fix(em_file: Path, tmp_path: Path, capsys, monkeypatch) -> None:
+    # Issue 22: such a file used to be estimated silently wrong (16.6 cm mean joint difference).
+    with np.load(em_file) as z:
+        wrong = {k: z[k][:, [1, 2, 3, 0]] for k in z.files if k.endswith("/orientation")}
+    bad = _rewrite(em_file, tmp_path / "xyzw.npz", **wrong)
+    code, err = run_main(["estimate", str(bad), "--model", "empose12_cpu", "--out", str(tmp_path / "p.npz")], capsys, monkeypatch)
+    assert code == 1 and "xyzw.npz [sensors/" in err and "/orientation]" in err
+    assert "the quaternions look written (x, y, z, w)" in err and "rewrite them w-first: q[..., [3, 0, 1, 2]]" in err
+    assert not (tmp_path / "p.npz").exists()
+
+
 # ----------------------------------------------------------------------------- recording vs weights
 @pytest.fixture
 def no_viewer(monkeypatch) -> None:

@@ -636,13 +636,14 @@ def _order_issues(streams: list[SensorStream], ev: dict[int, GyroEvidence | None
             if sc < 0:
                 decided[name] = -1
                 texts[name] = (f"a rigid lever on the orientation leaves {math.exp(-sc):.3g} times less of the position "
-                               f"changes unexplained read as (x, y, z, w) than read as stored (w, x, y, z) (pooled over "
-                               f"{len(levers)} position sensor{'s' if len(levers) > 1 else ''}: {math.exp(-pooled):.3g} times)")
+                               f"changes unexplained read as (x, y, z, w) than read as stored (w, x, y, z) (a factor "
+                               f"e^{-pooled:.1f} pooled over {len(levers)} position sensor{'s' if len(levers) > 1 else ''}; "
+                               f"e^{LEVER_POOLED_LOG_RATIO:g} decides)")
     wrong = [s.name for s in streams if decided.get(s.name) == -1]
     out = {}
     for name in wrong:
-        others = [f"sensors/{o}/orientation" for o in wrong if o != name]
-        also = f"; also {', '.join(others)}" if others else ""
+        others = [o for o in wrong if o != name]
+        also = f"; so do the quaternions of {', '.join(others)}" if others else ""
         out[name] = ConventionIssue(name, "orientation", f"{texts[name]}: the quaternions look written (x, y, z, w){also}",
                                     QUAT_FIX)
     return out
