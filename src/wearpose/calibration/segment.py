@@ -55,37 +55,16 @@ from typing import Any, Sequence
 import numpy as np
 import torch
 
+from wearpose.body.poses import IPOSE_ANGLE, POSES, calibration_pose
 from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.calibration._common import (
     E_Y, F64, G_VEC, CalibrationError, DegenerateCalibrationError, chordal_mean, rotation_y, t64, window_mask,
 )
 from wearpose.calibration.result import CalibrationResult
-from wearpose.geometry import best_yaw, geodesic_angle, rotation_between, rotation_z
+from wearpose.geometry import best_yaw, geodesic_angle, rotation_between
 
-POSES: tuple[str, ...] = ("tpose", "ipose")
-#: I-pose arm angle: rotation of each upper arm down from the T-pose, about the body's forward
-#: axis. 80 deg leaves the arms hanging just clear of the hips (our assumption; the papers give
-#: no number). Pass ``ipose_angle`` to match a protocol.
-IPOSE_ANGLE = math.radians(80.0)
 #: Acceleration magnitude accepted as "static" gravity, m/s^2 (|f| within 15 % of 9.81).
 GRAVITY_TOLERANCE = 0.15
-
-
-def calibration_pose(pose: str, ipose_angle: float = IPOSE_ANGLE) -> torch.Tensor:
-    """Local joint rotations ``(24, 3, 3)`` float64 of a calibration pose, root orientation identity.
-
-    ``"tpose"``: SMPL zero pose (arms along +-X, facing +Z). ``"ipose"``: zero pose with the
-    shoulders (SMPL joints 16/17) rotated down by ``ipose_angle`` about +-Z.
-    """
-    P = torch.eye(3, dtype=F64).repeat(24, 1, 1)
-    if pose == "tpose":
-        return P
-    if pose == "ipose":
-        a = torch.tensor(float(ipose_angle), dtype=F64)
-        P[JOINT_INDEX["left_shoulder"]] = rotation_z(-a)  # +X (left arm) -> down
-        P[JOINT_INDEX["right_shoulder"]] = rotation_z(a)
-        return P
-    raise CalibrationError(f"calibration pose {pose!r} is unknown; expected one of {list(POSES)}")
 
 
 def pose_targets(body: Any, sites: Sequence[str], segments: Sequence[str], pose: str = "tpose",

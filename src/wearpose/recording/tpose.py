@@ -37,7 +37,7 @@ def tpose_then(motion: Any, hold_s: float, blend_s: float) -> tuple[Any, int]:
         ``(motion, prefix)``: the longer :class:`~wearpose.motion.MotionSequence` and the number
         of frames before the clip's first frame.
     """
-    from wearpose.calibration import calibration_pose
+    from wearpose.body import calibration_pose
     from wearpose.geometry import heading, rotation_y, slerp_matrix
     from wearpose.motion import MotionSequence
 

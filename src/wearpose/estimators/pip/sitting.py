@@ -52,7 +52,7 @@ def _u(g: torch.Generator, lo: float, hi: float) -> float:
 def sitting_pose(hip_deg: float = 90.0, knee_deg: float = 90.0, base: torch.Tensor | None = None) -> torch.Tensor:
     """A seated pose ``(24, 3, 3)``: ``base`` (default: the calibration I-pose, arms down) with
     both thighs flexed forward by ``hip_deg`` (rotation about -X) and both knees by ``knee_deg``."""
-    from wearpose.calibration import calibration_pose
+    from wearpose.body import calibration_pose
 
     P = (calibration_pose("ipose") if base is None else base).float().clone()
     for side in ("left", "right"):
@@ -64,7 +64,7 @@ def sitting_pose(hip_deg: float = 90.0, knee_deg: float = 90.0, base: torch.Tens
 def _upper_body(g: torch.Generator) -> torch.Tensor:
     """A random standing posture ``(24, 3, 3)``: arms hanging or resting forward, elbows bent
     0-90 deg, small spine/head tilts; legs straight."""
-    from wearpose.calibration import calibration_pose
+    from wearpose.body import calibration_pose
 
     P = calibration_pose("ipose").float().clone()
     for name, lim in (("spine1", 6.0), ("spine3", 6.0), ("neck", 10.0), ("head", 10.0)):
@@ -90,7 +90,7 @@ def _pose_arm(P: torch.Tensor, side: str, fwd_deg: float, out_deg: float, elbow_
 def arms_forward(fwd_deg: float, elbow_deg: float) -> torch.Tensor:
     """The calibration I-pose ``(24, 3, 3)`` with both arms swung forward by ``fwd_deg`` and both
     elbows bent by ``elbow_deg`` (a base posture for :func:`sitting_sequence`)."""
-    from wearpose.calibration import calibration_pose
+    from wearpose.body import calibration_pose
 
     P = calibration_pose("ipose").float().clone()
     for side in ("left", "right"):
@@ -223,7 +223,7 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
                                 spine_deg=_u(g, 5.0, 20.0), shank_deg=_u(g, 8.0, 20.0),
                                 neck_factor=_u(g, 0.2, 0.6), peak=_u(g, 0.35, 0.65))
     if hanging_arms > 0.0 and _u(g, 0.0, 1.0) < hanging_arms:
-        from wearpose.calibration import calibration_pose
+        from wearpose.body import calibration_pose
 
         arms = calibration_pose("ipose").float()  # arms hanging straight, swung from there
         for side in ("left", "right"):
@@ -241,7 +241,7 @@ def sitting_sequence(body: Any, seconds_stand: float = 1.0, seconds_down: float 
     deg) -> one second seated: the start of the long-sitting test (Fig. 6 / Fig. 9).
     ``transitions="lean"``: the sit-down leans like the middle of :func:`sitting_motion`'s ranges
     (pelvis 22.5, spine 12.5, shanks 14 deg, neck 0.4, peak mid-way)."""
-    from wearpose.calibration import calibration_pose
+    from wearpose.body import calibration_pose
     from wearpose.motion import MotionSequence
 
     _check_transitions(transitions)
