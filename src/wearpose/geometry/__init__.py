@@ -44,6 +44,10 @@ from wearpose.geometry.frames import (
     MIRROR_X,
     mirror_rotation,
     mirror_points,
+    TO_UNITY,
+    to_unity_points,
+    to_unity_rotation,
+    to_unity_quat,
 )
 from wearpose.geometry.units import (
     CM_TO_M,
@@ -63,5 +67,6 @@ __all__ = [
     "rotation_x", "rotation_y", "rotation_z", "heading", "vector_heading", "best_yaw",
     "Z_UP_TO_Y_UP", "Y_UP_TO_Z_UP", "change_world_rotation", "change_world_points",
     "MIRROR_X", "mirror_rotation", "mirror_points",
+    "TO_UNITY", "to_unity_points", "to_unity_rotation", "to_unity_quat",
     "CM_TO_M", "MM_TO_M", "M_TO_MM", "M_TO_CM", "INCH_TO_M", "DEG_TO_RAD", "RAD_TO_DEG", "GRAVITY",
 ]

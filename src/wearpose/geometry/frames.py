@@ -48,3 +48,38 @@ def mirror_rotation(R: torch.Tensor) -> torch.Tensor:
 def mirror_points(p: torch.Tensor) -> torch.Tensor:
     """The left/right mirror image of points/vectors ``(..., 3)`` (x negated)."""
     return p * MIRROR_X.diagonal().to(p)
+
+
+#: wearpose world (right-handed, Y up, the body faces +Z with its left at +X) -> Unity's world
+#: (left-handed, Y up, a humanoid faces +Z with its left at -X): x is negated.
+TO_UNITY = torch.diag(torch.tensor([-1.0, 1.0, 1.0], dtype=torch.float64))
+
+
+def to_unity_points(p: torch.Tensor) -> torch.Tensor:
+    """Points/vectors ``(..., 3)`` in wearpose's world (m) as Unity coordinates (m): ``(-x, y, z)``.
+
+    The two worlds share Y up and the facing direction +Z; Unity is left-handed, so the axis
+    across the body flips: a point at the subject's left (+X here) is at -X in Unity.
+    """
+    return p * TO_UNITY.diagonal().to(p)
+
+
+def to_unity_rotation(R: torch.Tensor) -> torch.Tensor:
+    """Rotations ``(..., 3, 3)`` (global, or local in SMPL's rest-aligned joint frames) as the
+    same rotations in Unity's left-handed frame: ``M R M`` with ``M = diag(-1, 1, 1)``.
+
+    The result maps Unity coordinates to Unity coordinates (``R_u p_u = M (R p)`` for
+    ``p_u = M p``); it is a proper rotation. As a quaternion ``(w, x, y, z)`` it is
+    ``(w, x, -y, -z)`` of the input (see :func:`to_unity_quat`).
+    """
+    M = TO_UNITY.to(R)
+    return M @ R @ M
+
+
+def to_unity_quat(R: torch.Tensor) -> torch.Tensor:
+    """Rotations ``(..., 3, 3)`` in wearpose's world as Unity quaternions in Unity's component
+    order ``(x, y, z, w)`` (the order of ``UnityEngine.Quaternion`` and of the VMC protocol)."""
+    from wearpose.geometry.rotations import matrix_to_quat
+
+    q = matrix_to_quat(to_unity_rotation(R))  # (w, x, y, z)
+    return torch.cat([q[..., 1:], q[..., :1]], dim=-1)
