@@ -37,6 +37,7 @@ from wearpose.geometry.rotations import (
     slerp_matrix,
 )
 from wearpose.geometry.frames import (
+    SMPL_TO_X_FORWARD_BODY,
     Z_UP_TO_Y_UP,
     Y_UP_TO_Z_UP,
     change_world_rotation,
@@ -48,6 +49,9 @@ from wearpose.geometry.frames import (
     to_unity_points,
     to_unity_rotation,
     to_unity_quat,
+    MVN_TO_WEARPOSE,
+    mvn_segment_to_wearpose,
+    wearpose_to_mvn_segment,
 )
 from wearpose.geometry.units import (
     CM_TO_M,
@@ -65,8 +69,9 @@ __all__ = [
     "rot6d_to_matrix", "matrix_to_rot6d", "euler_to_matrix", "matrix_to_euler",
     "geodesic_angle", "slerp_matrix", "project_to_so3", "rotation_between",
     "rotation_x", "rotation_y", "rotation_z", "heading", "vector_heading", "best_yaw",
-    "Z_UP_TO_Y_UP", "Y_UP_TO_Z_UP", "change_world_rotation", "change_world_points",
+    "Z_UP_TO_Y_UP", "Y_UP_TO_Z_UP", "SMPL_TO_X_FORWARD_BODY", "change_world_rotation", "change_world_points",
     "MIRROR_X", "mirror_rotation", "mirror_points",
     "TO_UNITY", "to_unity_points", "to_unity_rotation", "to_unity_quat",
+    "MVN_TO_WEARPOSE", "mvn_segment_to_wearpose", "wearpose_to_mvn_segment",
     "CM_TO_M", "MM_TO_M", "M_TO_MM", "M_TO_CM", "INCH_TO_M", "DEG_TO_RAD", "RAD_TO_DEG", "GRAVITY",
 ]

@@ -14,6 +14,12 @@ import torch
 Z_UP_TO_Y_UP = torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]], dtype=torch.float64)
 #: Inverse of :data:`Z_UP_TO_Y_UP`.
 Y_UP_TO_Z_UP = Z_UP_TO_Y_UP.T.contiguous()
+#: SMPL joint-frame axes (x left, y up, z forward at zero pose) -> the axes of a segment frame
+#: that is x forward, y left, z up (Xsens MVN's segment frames, aligned with its Z-up world in the
+#: T-pose facing +X): ``v_B = SMPL_TO_X_FORWARD_BODY @ v_J``. An MVN segment orientation ``R_GB``
+#: is the SMPL global joint rotation ``Z_UP_TO_Y_UP @ R_GB @ SMPL_TO_X_FORWARD_BODY`` (a T-pose
+#: facing MVN's +X stands facing +X in wearpose's world).
+SMPL_TO_X_FORWARD_BODY = torch.tensor([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], dtype=torch.float64)
 
 
 def change_world_rotation(C: torch.Tensor, R: torch.Tensor) -> torch.Tensor:
@@ -83,3 +89,23 @@ def to_unity_quat(R: torch.Tensor) -> torch.Tensor:
 
     q = matrix_to_quat(to_unity_rotation(R))  # (w, x, y, z)
     return torch.cat([q[..., 1:], q[..., :1]], dim=-1)
+
+
+#: Xsens MVN's Z-up world and segment axes (a segment at the T-pose has identity orientation:
+#: x forward, y to the subject's left, z up) -> wearpose's (x left, y up, z forward): a cyclic
+#: permutation of the axes, ``(x, y, z)_mvn -> (y, z, x)``. Rows: new axes in MVN coordinates.
+MVN_TO_WEARPOSE = torch.tensor([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]], dtype=torch.float64)
+
+
+def mvn_segment_to_wearpose(R: torch.Tensor) -> torch.Tensor:
+    """MVN segment orientations ``(..., 3, 3)`` (segment axes -> MVN world, identity at MVN's
+    T-pose) as wearpose global joint rotations (SMPL-style: identity at the T-pose, Y-up world
+    facing +Z): ``C R C^T`` with ``C`` = :data:`MVN_TO_WEARPOSE` (both frames change)."""
+    C = MVN_TO_WEARPOSE.to(R)
+    return C @ R @ C.T
+
+
+def wearpose_to_mvn_segment(R: torch.Tensor) -> torch.Tensor:
+    """Inverse of :func:`mvn_segment_to_wearpose`."""
+    C = MVN_TO_WEARPOSE.to(R)
+    return C.T @ R @ C
