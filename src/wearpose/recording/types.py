@@ -579,8 +579,6 @@ class Recording:
         """
         out = []
         converted = []
-        C = Z_UP_TO_Y_UP.numpy()
-        g = np.asarray(GRAVITY)
         for s in self.sensors:
             info = s.info
             if info.is_canonical:
@@ -588,34 +586,7 @@ class Recording:
                 continue
             ch = {k: (None if v is None else v.astype(np.float64)) for k, v in s.channels().items()}
             converted.append(info.name)
-            new = {"position_unit": "m", "gyro_unit": "rad/s", "acc_unit": "m/s2", "world_up": "y_up"}
-            if ch.get("position") is not None:
-                ch["position"] = ch["position"] * _POSITION_SCALE[info.position_unit]
-            if ch.get("angular_velocity") is not None and info.gyro_unit == "deg/s":
-                ch["angular_velocity"] = np.deg2rad(ch["angular_velocity"])
-            acc, R = ch.get("acceleration"), ch.get("orientation")
-            acc_frame, acc_gravity = info.acc_frame, info.acc_gravity
-            if acc is not None:
-                if info.acc_unit == "g":
-                    acc = acc * G
-                if acc_frame == "sensor" and R is not None:
-                    acc = np.einsum("nij,nj->ni", R, acc)
-                    acc_frame = "world"
-            if info.world_up == "z_up":
-                if R is not None:
-                    R = C @ R
-                if ch.get("position") is not None:
-                    ch["position"] = ch["position"] @ C.T
-                if acc is not None and acc_frame == "world":
-                    acc = acc @ C.T
-            if acc is not None and acc_gravity == "included" and acc_frame == "world":
-                acc = acc + g
-                acc_gravity = "removed"
-            if acc is not None:
-                ch["acceleration"] = acc
-            if R is not None:
-                ch["orientation"] = R
-            new.update(acc_frame=acc_frame, acc_gravity=acc_gravity)
+            new, ch = canonical_arrays(info, ch)
             # Keep each channel's dtype (float32 by default): conversion precision is float64 above.
             ch = {k: v.astype(getattr(s, k).dtype) for k, v in ch.items()}
             out.append(SensorStream(replace(info, **new), s.timestamps.copy(), s.valid.copy(), **ch))
@@ -730,3 +701,49 @@ class Recording:
         from wearpose.recording.fileformat import save_recording
 
         return save_recording(self, path)
+
+
+def canonical_arrays(info: SensorInfo, ch: dict[str, np.ndarray]) -> tuple[dict[str, str], dict[str, np.ndarray]]:
+    """The conversion of :meth:`Recording.to_canonical` for one sensor's channel arrays.
+
+    Args:
+        info: the sensor's declared conventions.
+        ch: channel -> float64 array ``(N, ...)`` (``orientation`` ``(N, 3, 3)``) as declared.
+
+    Returns:
+        ``(fields, channels)``: the :class:`SensorInfo` fields that change (for ``replace``) and
+        the converted arrays (steps in :meth:`Recording.to_canonical`). Live device frames use
+        this too (``wearpose.stream.inputs.canonical_frame``), so a frame and a file convert alike.
+    """
+    ch = dict(ch)
+    C = Z_UP_TO_Y_UP.numpy()
+    g = np.asarray(GRAVITY)
+    new = {"position_unit": "m", "gyro_unit": "rad/s", "acc_unit": "m/s2", "world_up": "y_up"}
+    if ch.get("position") is not None:
+        ch["position"] = ch["position"] * _POSITION_SCALE[info.position_unit]
+    if ch.get("angular_velocity") is not None and info.gyro_unit == "deg/s":
+        ch["angular_velocity"] = np.deg2rad(ch["angular_velocity"])
+    acc, R = ch.get("acceleration"), ch.get("orientation")
+    acc_frame, acc_gravity = info.acc_frame, info.acc_gravity
+    if acc is not None:
+        if info.acc_unit == "g":
+            acc = acc * G
+        if acc_frame == "sensor" and R is not None:
+            acc = np.einsum("nij,nj->ni", R, acc)
+            acc_frame = "world"
+    if info.world_up == "z_up":
+        if R is not None:
+            R = C @ R
+        if ch.get("position") is not None:
+            ch["position"] = ch["position"] @ C.T
+        if acc is not None and acc_frame == "world":
+            acc = acc @ C.T
+    if acc is not None and acc_gravity == "included" and acc_frame == "world":
+        acc = acc + g
+        acc_gravity = "removed"
+    if acc is not None:
+        ch["acceleration"] = acc
+    if R is not None:
+        ch["orientation"] = R
+    new.update(acc_frame=acc_frame, acc_gravity=acc_gravity)
+    return new, ch
