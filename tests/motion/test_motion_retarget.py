@@ -142,3 +142,57 @@ def test_facing_is_preserved_for_a_turned_body(synthetic: tuple) -> None:
     fwd = res.sequence.pose[:, 0, :, 2].double()  # pelvis +Z (forward) in the world
     want = (rotation_y(torch.tensor(math.pi / 2, dtype=torch.float64)) @ local[:, 0])[:, :, 2]
     assert torch.allclose(fwd, want, atol=1e-4)
+
+
+def test_root_travel_follows_the_limbs_and_height_the_pelvis_drop(synthetic: tuple) -> None:
+    """An SMPL body whose hips sit 6 cm lower under the pelvis but whose limbs match the BVH's:
+    the root travels exactly as the source's (the legs reach as far), while the height is scaled by
+    the pelvis-to-ankle ratio (feet on the floor where the source's are)."""
+    from wearpose.motion import leg_measures
+
+    _, pelvis, motion, _ = synthetic
+    rest = REST.clone().double()
+    below = [JOINT_INDEX[n] for n in ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle",
+                                      "right_ankle", "left_foot", "right_foot")]
+    rest[below, 1] -= 0.06
+    res = retarget_bvh(motion, rest, SYN_MAP, hinge="clip")
+    lm0, lm1 = leg_measures(REST), leg_measures(rest)
+    assert lm1.limb == pytest.approx(lm0.limb, abs=1e-9) and lm1.height == pytest.approx(lm0.height + 0.06, abs=1e-9)
+    assert res.tpose.travel_scale == pytest.approx(1.0, abs=1e-6)
+    assert res.tpose.scale == pytest.approx(lm1.height / lm0.height, rel=1e-6)
+    p = res.sequence.trans.double() + rest[0]
+    assert torch.allclose(p[:, [0, 2]], pelvis[:, [0, 2]], atol=1e-5)
+    assert torch.allclose(p[:, 1], res.tpose.scale * pelvis[:, 1], atol=1e-5)
+    assert res.sequence.meta["retarget"]["travel_scale"] == pytest.approx(1.0, abs=1e-6)
+
+
+def test_legs_travel_keeps_a_planted_foot_still_where_wider_hips_would_slide_it() -> None:
+    """The pelvis yaws +-10 deg over a planted left foot (the right one swings 20 cm up). SMPL's
+    hips sit wider apart than the source's, so a root path scaled from the source pelvis (any
+    scale) slides SMPL's planted foot; the "legs" path keeps it where the source's is."""
+    from wearpose.motion import SkeletonMap, TPose
+    from wearpose.motion.retarget import root_path
+
+    T, fps = 90, 30.0
+    yaw = torch.deg2rad(10.0 * torch.sin(torch.arange(T, dtype=torch.float64) / fps * 2 * math.pi))
+    R = rotation_y(yaw).double()  # (T, 3, 3)
+    pose = torch.eye(3, dtype=torch.float64).repeat(T, 24, 1, 1)
+    pose[:, 0] = R
+    rest = REST.double()
+    la, ra = JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]
+    src_rel = torch.tensor([[0.05, -0.85, 0.0], [-0.05, -0.85, 0.0]], dtype=torch.float64)  # narrow hips
+    assert float((rest[la] - rest[0])[0]) > 0.08  # SMPL's are wider
+    foot_l = torch.tensor([0.3, 0.05, 1.0], dtype=torch.float64)
+    pelvis = foot_l - (R @ src_rel[0])
+    foot_r = pelvis + R @ src_rel[1] + torch.tensor([0.0, 0.2, 0.0], dtype=torch.float64)
+    src = torch.stack([pelvis, foot_l.expand(T, 3), foot_r], dim=1)  # (T, 3, 3)
+    smap = SkeletonMap("toy", {"pelvis": "P", "left_ankle": "LA", "right_ankle": "RA"}, units_to_m=1.0)
+    tpose = TPose({}, 1.0, {}, travel_scale=1.0)
+    _, J = forward_kinematics(pose, rest)
+    speeds = {}
+    for mode in ("limb", "legs"):
+        trans = root_path(pose, src, ("P", "LA", "RA"), smap, tpose, rest, fps, mode)
+        foot = J[:, la] + trans
+        speeds[mode] = float(torch.diff(foot[:, [0, 2]], dim=0).norm(dim=-1).max() * fps)
+        assert torch.allclose(trans[:, 1], pelvis[:, 1] - rest[0, 1])  # height: the source pelvis's
+    assert speeds["limb"] > 0.05 and speeds["legs"] < 1e-9, speeds

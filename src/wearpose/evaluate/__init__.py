@@ -27,6 +27,8 @@ from wearpose.evaluate.metrics import (
     procrustes_align,
     root_relative_global_rotations,
     sip_error,
+    StanceSpeed,
+    stance_foot_speed,
     to_report_units,
 )
 
@@ -35,5 +37,6 @@ __all__ = [
     "compute_all", "cumulative_translation_error", "format_table", "global_angular_error",
     "jerk", "jitter", "joint_angle_errors", "joint_position_errors", "mask_joint_rotations",
     "mesh_error", "mpjae", "mpjae_groups", "mpjpe", "pa_mpjpe", "positional_error",
-    "procrustes_align", "root_relative_global_rotations", "sip_error", "to_report_units",
+    "procrustes_align", "root_relative_global_rotations", "sip_error", "stance_foot_speed", "StanceSpeed",
+    "to_report_units",
 ]

@@ -50,7 +50,8 @@ __all__ = [
     "root_relative_global_rotations", "mask_joint_rotations", "joint_angle_errors",
     "joint_position_errors", "mpjpe", "pa_mpjpe", "procrustes_align", "mpjae", "mpjae_groups",
     "sip_error", "global_angular_error", "positional_error", "mesh_error", "jerk", "jitter",
-    "cumulative_translation_error", "to_report_units", "compute_all", "format_table",
+    "cumulative_translation_error", "stance_foot_speed", "StanceSpeed", "to_report_units", "compute_all",
+    "format_table",
 ]
 
 #: All 24 SMPL joints.
@@ -722,6 +723,74 @@ def cumulative_translation_error(
     drift = torch.where(total > 0, final / total.clamp_min(torch.finfo(total.dtype).tiny),
                         torch.full_like(final, float("nan")))
     return TranslationErrorCurve(travelled, error, thr, error_at, error.mean(-1), final, drift)
+
+
+class StanceSpeed(NamedTuple):
+    """Result of :func:`stance_foot_speed` (m/s, m, frames)."""
+
+    speeds: torch.Tensor  #: ``(N,)`` horizontal speed of the stance foot in each mid-stance frame, m/s
+    foot: torch.Tensor  #: ``(N,)`` int64 foot index (into the ``F`` axis) of each entry
+    frame: torch.Tensor  #: ``(N,)`` int64 frame of each entry
+    stances: int  #: stance phases found (all feet)
+    stance_travel: torch.Tensor  #: ``(stances,)`` horizontal distance each stance foot moves over its whole stance, m
+
+    @property
+    def median(self) -> float:
+        """Median mid-stance speed, m/s (NaN when no stance was found)."""
+        return float(self.speeds.median()) if self.speeds.numel() else float("nan")
+
+
+def stance_foot_speed(feet: torch.Tensor, fps: float, height_tol: float = 0.05, min_stance_s: float = 0.2,
+                      mid_fraction: float = 0.5, max_vertical_speed: float = 0.25) -> StanceSpeed:
+    """Horizontal speed of planted feet in mid-stance: how much a motion's feet skate.
+
+    Stance is found from heights only, so the measure does not assume the stillness it measures:
+    a foot is down where its height is within ``height_tol`` of the clip's lowest foot point and
+    it moves vertically slower than ``max_vertical_speed``; a stance is a run of such frames
+    lasting at least ``min_stance_s``; mid-stance is the middle ``mid_fraction`` of each stance
+    (leaving out touch-down and push-off, where a real foot rolls). Speed: central differences
+    of the horizontal (x, z) position (Y up). A still planted foot gives 0.
+
+    Args:
+        feet: ``(T, F, 3)`` world positions of one point per foot (e.g. SMPL's ``left_foot``,
+            ``right_foot`` toe joints, or a source skeleton's toe joints), metres, Y up.
+        fps: frame rate, Hz.
+
+    Returns:
+        :class:`StanceSpeed`; ``.median`` is the clip's figure.
+    """
+    _check_points(feet, "feet")
+    if feet.dim() != 3:
+        raise ShapeError(f"feet: expected (T, F, 3) metres, got {tuple(feet.shape)}")
+    if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
+        raise ShapeError(f"fps: expected a positive frame rate in Hz, got {fps!r}")
+    p = feet.to(torch.float64)
+    T = p.shape[0]
+    if T < 3:
+        empty = torch.zeros(0, dtype=torch.float64)
+        return StanceSpeed(empty, empty.long(), empty.long(), 0, empty)
+    vel = torch.gradient(p, spacing=1.0 / float(fps), dim=0)[0]
+    hspeed = vel[..., [0, 2]].norm(dim=-1)  # (T, F)
+    down = (p[..., 1] - p[..., 1].min() < height_tol) & (vel[..., 1].abs() < max_vertical_speed)
+    min_len = max(2, int(math.ceil(min_stance_s * fps)))
+    speeds, foot, frame, travel = [], [], [], []
+    for f in range(p.shape[1]):
+        d = down[:, f].to(torch.int8)
+        edges = torch.diff(torch.cat([d.new_zeros(1), d, d.new_zeros(1)]))
+        starts, ends = torch.nonzero(edges == 1).flatten(), torch.nonzero(edges == -1).flatten()
+        for a, b in zip(starts.tolist(), ends.tolist()):
+            if b - a < min_len:
+                continue
+            cut = int(round((b - a) * (1.0 - mid_fraction) / 2.0))
+            idx = torch.arange(a + cut, b - cut)
+            speeds.append(hspeed[idx, f])
+            foot.append(torch.full((len(idx),), f, dtype=torch.int64))
+            frame.append(idx)
+            travel.append((p[b - 1, f, [0, 2]] - p[a, f, [0, 2]]).norm())
+    if not speeds:
+        empty = torch.zeros(0, dtype=torch.float64)
+        return StanceSpeed(empty, empty.long(), empty.long(), 0, empty)
+    return StanceSpeed(torch.cat(speeds), torch.cat(foot), torch.cat(frame), len(travel), torch.stack(travel))
 
 
 # --------------------------------------------------------------------------------------------

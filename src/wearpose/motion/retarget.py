@@ -54,11 +54,23 @@ relative rotation (slerp at 0.5), the other half goes to spine3; hands (and CMU'
 joints) get the identity local rotation (they follow their parent).
 
 Root translation: the SMPL pelvis joint is put on the BVH pelvis joint's world position, scaled
-about the world origin by ``scale = leg_smpl / leg_bvh``, where *leg* is the vertical distance
-from the pelvis joint down to the ankle joints in the T-pose (SMPL rest skeleton / BVH skeleton
-posed by ``T``). Scaling the whole trajectory (height and travel) keeps feet near the floor
-``y = 0`` and strides consistent with the shorter/longer legs:
-``trans(t) = scale * units * pelvis_bvh(t) - rest_joints[0]``.
+about the world origin, with one scale for height and one for travel (:func:`leg_measures`):
+
+- height (``y``): ``scale = height_smpl / height_bvh``, *height* the vertical distance from the
+  pelvis joint down to the ankle joints in the T-pose (SMPL rest skeleton / BVH skeleton posed
+  by ``T``). This puts the feet on the floor ``y = 0`` where the source's are.
+- travel (``x``, ``z``): ``travel_scale = limb_smpl / limb_bvh``, *limb* the hip-to-ankle
+  distance in the T-pose. A stance foot is still when the root moves as far as the legs reach,
+  and the legs are the limbs: the pelvis-to-ankle height also counts the pelvis-to-hip drop
+  (9.6 cm on SMPL, a few cm on the sources), so scaling travel by it made the root travel
+  10-14 % further than the legs on the corpus and the stance feet slide (``docs/pip.md``,
+  "Ground truth that skates"; ``benchmarks/foot_skate.py``).
+
+``trans(t) = diag(travel_scale, scale, travel_scale) @ units * pelvis_bvh(t) - rest_joints[0]`` is
+the ``travel="limb"`` path. The default, ``travel="legs"`` (:func:`root_path`), keeps that height
+but takes the horizontal travel from the legs: while a source foot is planted, the root moves so
+that SMPL's foot moves as the source's does (a scale alone leaves 0.06 m/s of slide on Bandai
+walks, from SMPL's wider hips and other thigh/shin proportions).
 
 The two corpus BVH worlds are Y up, facing +Z with left at +X (the wearpose world), so only the
 unit scale (cm -> m) is applied to positions.
@@ -395,7 +407,8 @@ class TPose:
     Attributes:
         rotations: SMPL joint index -> ``(3, 3)`` BVH joint frame -> world at the T-pose
             (``T_b``; the correction is ``C_j = T_b^T``).
-        scale: SMPL/BVH leg-length ratio (dimensionless, applied after the unit change).
+        scale: SMPL/BVH pelvis-to-ankle height ratio (dimensionless, applied after the unit
+            change): the root's vertical scale.
         hinge_source: SMPL hinge joint -> ``"map"``, ``"clip"`` or ``"parent"`` (fallback).
         twist_offsets: SMPL joint -> twist (radians) applied by the ``mean_twist`` rule.
         twist_refs: SMPL joint -> what fixed its twist about the bone: ``"left_hip-right_hip"``
@@ -403,6 +416,8 @@ class TPose:
         bone_fix: SMPL joint index -> :class:`BoneFix` (per-frame swing onto the source bone).
         bone_ends: SMPL joint -> the SMPL joint its primary bone ends at, when that is not the
             next joint (the next joint sits at the same place in the source: a zero-length bone).
+        travel_scale: SMPL/BVH hip-to-ankle limb length ratio: the root's horizontal scale
+            (``None``: the same as ``scale``, the converter before motion-4).
     """
 
     rotations: dict[int, torch.Tensor]
@@ -412,6 +427,39 @@ class TPose:
     twist_refs: dict[str, str] = field(default_factory=dict)
     bone_fix: dict[int, BoneFix] = field(default_factory=dict)
     bone_ends: dict[str, str] = field(default_factory=dict)
+    travel_scale: float | None = None
+
+    @property
+    def root_scale(self) -> torch.Tensor:
+        """``(3,)`` float64 per-axis scale of the root path: ``(travel, height, travel)``."""
+        t = self.scale if self.travel_scale is None else self.travel_scale
+        return torch.tensor([t, self.scale, t], dtype=torch.float64)
+
+
+@dataclass(frozen=True)
+class LegMeasures:
+    """Leg lengths of a skeleton in its T-pose, metres, mean of both sides.
+
+    Attributes:
+        height: vertical distance from the pelvis joint down to the ankle joints (sets where the
+            feet are: the root's vertical scale).
+        limb: hip-to-ankle distance (how far the legs reach: the root's travel scale).
+    """
+
+    height: float
+    limb: float
+
+
+def leg_measures(rest_joints: torch.Tensor) -> LegMeasures:
+    """:class:`LegMeasures` of an SMPL rest skeleton ``(24, 3)`` metres (``BodyModel.rest_joints``)."""
+    r = rest_joints.to(torch.float64)
+    if tuple(r.shape) != (NUM_JOINTS, 3):
+        raise ShapeError(f"rest_joints: expected ({NUM_JOINTS}, 3) metres, got {tuple(r.shape)}")
+    ankles = [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]
+    hips = [JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]]
+    height = float(r[0, 1] - r[ankles, 1].mean())
+    limb = float((r[ankles] - r[hips]).norm(dim=-1).mean())
+    return LegMeasures(height, limb)
 
 
 def _map_advice(smap: SkeletonMap, joint: str) -> str:
@@ -574,22 +622,27 @@ def solve_tpose(motion: BvhMotion, smap: SkeletonMap, rest_joints: torch.Tensor,
             twist_offsets[name] = phi
             T[j] = axis_angle_to_matrix(_unit(p_s) * phi) @ T[j]
 
-    # Leg scale: pelvis-to-ankle height in SMPL's rest pose / in the BVH T-pose.
-    def bvh_drop(side: str) -> float:
+    # Root scales: SMPL rest / BVH T-pose, pelvis-to-ankle height (vertical) and hip-to-ankle
+    # limb length (travel); see the module doc.
+    def bvh_leg(side: str) -> tuple[float, float]:
         chain = ["pelvis", f"{side}_hip", f"{side}_knee", f"{side}_ankle"]
-        drop = 0.0
+        seg = []
         for a, c in zip(chain[:-1], chain[1:]):
             v = _position_in(skel, offs, bidx[c], bidx[a])
             if v is None:
                 raise RetargetError(f"{smap.name}: cannot measure the {side} leg")
-            drop -= float((T[JOINT_INDEX[a]] @ v)[1])
-        return drop * smap.units_to_m
+            seg.append(T[JOINT_INDEX[a]] @ v)
+        drop = -float(sum(float(v[1]) for v in seg))
+        limb = float((seg[1] + seg[2]).norm())
+        return drop * smap.units_to_m, limb * smap.units_to_m
 
-    smpl_drop = float(rest[0, 1] - 0.5 * (rest[JOINT_INDEX["left_ankle"], 1] + rest[JOINT_INDEX["right_ankle"], 1]))
-    bvh_leg = 0.5 * (bvh_drop("left") + bvh_drop("right"))
-    if bvh_leg <= 1e-6:
-        raise RetargetError(f"{smap.name}: legs do not point down in the T-pose (pelvis-to-ankle height {bvh_leg:.3f} m)")
-    return TPose(T, smpl_drop / bvh_leg, hinge_src, twist_offsets, twist_refs, bone_fix, bone_ends)
+    smpl = leg_measures(rest)
+    (dl, ll), (dr, lr) = bvh_leg("left"), bvh_leg("right")
+    bvh_height, bvh_limb = 0.5 * (dl + dr), 0.5 * (ll + lr)
+    if bvh_height <= 1e-6 or bvh_limb <= 1e-6:
+        raise RetargetError(f"{smap.name}: legs do not point down in the T-pose (pelvis-to-ankle height {bvh_height:.3f} m)")
+    return TPose(T, smpl.height / bvh_height, hinge_src, twist_offsets, twist_refs, bone_fix, bone_ends,
+                 travel_scale=smpl.limb / bvh_limb)
 
 
 # ---------------------------------------------------------------------------- retargeting
@@ -616,9 +669,96 @@ class Retargeted:
     bvh_names: tuple[str, ...] = ()
 
 
+#: How the root's horizontal path is made (:func:`root_path`): ``"legs"`` (default) anchors it to
+#: the source's planted feet, ``"limb"`` scales the source's by the limb ratio, ``"height"`` by
+#: the pelvis-to-ankle ratio (the converter before motion-4; skating feet).
+TravelMode = Literal["legs", "limb", "height"]
+TRAVEL_MODES: tuple[str, ...] = ("legs", "limb", "height")
+#: Source foot contact for ``travel="legs"``: full weight up to the first value, none from the
+#: second (linear between). Height above the clip's lowest foot point (m, after the height
+#: scale) and horizontal speed (m/s, after the travel scale). Swing feet move at 2-5 m/s and sit
+#: 5-13 cm up in mid-swing; planted feet move < 0.1 m/s (Bandai) to 0.4 m/s (CMU-Daz's ankles).
+CONTACT_HEIGHT_M: tuple[float, float] = (0.03, 0.08)
+CONTACT_SPEED_MS: tuple[float, float] = (0.6, 1.2)
+
+
+def _ramp(x: torch.Tensor, full: float, none: float) -> torch.Tensor:
+    """1 at ``x <= full``, 0 at ``x >= none``, linear between."""
+    return ((none - x) / (none - full)).clamp(0.0, 1.0)
+
+
+def foot_joint_pairs(smap: SkeletonMap, names: Sequence[str]) -> list[tuple[int, int]]:
+    """(SMPL joint index, source joint index) of the points that stand on the floor: each side's
+    mapped SMPL foot (toe) joint, else its ankle."""
+    out = []
+    for side in ("left", "right"):
+        for j in (f"{side}_foot", f"{side}_ankle"):
+            if j in smap.joints and smap.joints[j] in names:
+                out.append((JOINT_INDEX[j], list(names).index(smap.joints[j])))
+                break
+    return out
+
+
+def root_path(pose: torch.Tensor, source_pos: torch.Tensor, source_names: Sequence[str], smap: SkeletonMap,
+              tpose: TPose, rest_joints: torch.Tensor, fps: float, travel: TravelMode = "legs") -> torch.Tensor:
+    """The SMPL root translation ``(T, 3)`` metres (float64) of a retargeted clip.
+
+    Height (``y``) always: ``scale * pelvis_src_y - rest_y`` (feet on the floor where the
+    source's are). Horizontal (``x``, ``z``), by ``travel``:
+
+    - ``"height"``: the source pelvis path scaled by the pelvis-to-ankle ratio ``tpose.scale``
+      (the converter before motion-4: the root outruns the legs by 10-14 % on the corpus).
+    - ``"limb"``: scaled by the hip-to-ankle limb ratio ``tpose.travel_scale``.
+    - ``"legs"``: the travel comes from the body's own legs: per frame step, the root moves so
+      that each planted source foot's SMPL counterpart moves as the source foot does (scaled by
+      the limb ratio, so a still source foot gives a still SMPL foot), weighted by how surely
+      the foot is planted (:data:`CONTACT_HEIGHT_M`, :data:`CONTACT_SPEED_MS`; both feet
+      averaged in double support); with no foot planted (flight, a hang) it moves as the
+      ``"limb"`` path does. Why not a scale alone: SMPL's hips sit wider apart than the
+      sources' (+-11 cm on the default body) and its thigh/shin proportions differ, so the
+      pelvis's yaw and the legs' swing move a planted SMPL foot even with the right scale
+      (Bandai walks: 0.06 m/s with ``"limb"``; ``benchmarks/foot_skate.py``). The path
+      starts where the ``"limb"`` path starts; the rule is exact for a body with the source's
+      proportions (it then equals ``"limb"``).
+
+    Args:
+        pose: ``(T, 24, 3, 3)`` SMPL local rotations of the clip.
+        source_pos: ``(T, J, 3)`` source joint world positions, metres (unscaled).
+        source_names: the ``J`` source joint names; smap: the joint map; tpose: its T-pose.
+        rest_joints: ``(24, 3)`` SMPL rest joints, metres; fps: Hz; travel: see above.
+    """
+    if travel not in TRAVEL_MODES:
+        raise WearposeError(f"travel {travel!r}; expected one of {', '.join(TRAVEL_MODES)}")
+    rest = rest_joints.to(torch.float64)
+    P = source_pos.to(torch.float64)
+    pelvis = P[:, list(source_names).index(smap.joints["pelvis"])]
+    k = tpose.root_scale if travel != "height" else torch.full((3,), tpose.scale, dtype=torch.float64)
+    k[1] = tpose.scale
+    trans = k * pelvis - rest[0]
+    pairs = foot_joint_pairs(smap, source_names)
+    if travel != "legs" or len(pairs) == 0 or pelvis.shape[0] < 2:
+        return trans
+    _, J = forward_kinematics(pose.to(torch.float64), rest)  # (T, 24, 3), root at the origin
+    smpl_feet = J[:, [a for a, _ in pairs]]  # (T, F, 3) relative to the root translation
+    src_feet = P[:, [b for _, b in pairs]]
+    h = (src_feet[..., 1] - src_feet[..., 1].min()) * tpose.scale  # above the clip's lowest foot point
+    v = torch.gradient(src_feet[..., [0, 2]] * k[0], spacing=1.0 / float(fps), dim=0)[0].norm(dim=-1)
+    w = _ramp(h, *CONTACT_HEIGHT_M) * _ramp(v, *CONTACT_SPEED_MS)  # (T, F)
+    w_step = 0.5 * (w[1:] + w[:-1])  # weight of each frame step
+    # Root step that moves SMPL foot f as the (scaled) source foot f moves.
+    step_f = torch.diff(k[0] * src_feet[..., [0, 2]] - smpl_feet[..., [0, 2]], dim=0)  # (T-1, F, 2)
+    step_0 = torch.diff(trans[:, [0, 2]], dim=0)  # (T-1, 2)
+    total = w_step.sum(-1, keepdim=True)
+    anchored = (w_step[..., None] * step_f).sum(1) / total.clamp_min(1e-12)
+    alpha = total.clamp(max=1.0)
+    step = alpha * anchored + (1.0 - alpha) * step_0
+    trans[1:, [0, 2]] = trans[0, [0, 2]] + torch.cumsum(step, dim=0)
+    return trans
+
+
 def retarget_bvh(motion: BvhMotion, rest_joints: torch.Tensor, smap: SkeletonMap | None = None,
                  betas: torch.Tensor | None = None, hinge: Literal["auto", "map", "clip"] = "auto",
-                 meta: Mapping[str, Any] | None = None) -> Retargeted:
+                 meta: Mapping[str, Any] | None = None, travel: TravelMode = "legs") -> Retargeted:
     """Retarget a BVH clip to SMPL-24 (method in the module doc).
 
     Args:
@@ -628,6 +768,7 @@ def retarget_bvh(motion: BvhMotion, rest_joints: torch.Tensor, smap: SkeletonMap
         betas: ``(10,)`` shape stored in the sequence (zeros by default).
         hinge: where knee/elbow hinge axes come from (see :func:`solve_tpose`).
         meta: extra entries for ``sequence.meta``.
+        travel: how the root's horizontal path is made (:func:`root_path`; default ``"legs"``).
 
     Returns:
         :class:`Retargeted` whose ``sequence`` has ``pose`` ``(T, 24, 3, 3)``, ``trans`` ``(T, 3)``
@@ -663,8 +804,7 @@ def retarget_bvh(motion: BvhMotion, rest_joints: torch.Tensor, smap: SkeletonMap
             G[j] = parent.clone()  # identity local rotation (hands, unmapped feet)
     G_all = torch.stack(G, dim=1)  # type: ignore[arg-type]
     pose = global_to_local(G_all)
-    pelvis_b = P_b[:, skel.index(smap.joints["pelvis"])] * smap.units_to_m
-    trans = tpose.scale * pelvis_b - rest[0]
+    trans = root_path(pose, P_b * smap.units_to_m, skel.names, smap, tpose, rest, motion.fps, travel)
     b = torch.zeros(NUM_BETAS, dtype=torch.float64) if betas is None else betas.to(torch.float64)
     lowest = lowest_foot_height(pose, trans, rest)
     bvh_feet = [skel.index(n) for n in smap.foot_joints if n in skel.names]
@@ -672,6 +812,7 @@ def retarget_bvh(motion: BvhMotion, rest_joints: torch.Tensor, smap: SkeletonMap
     m: dict[str, Any] = {
         "source_format": "bvh", "skeleton": smap.name, "source_fps": motion.fps,
         "retarget": {"method": "global-orientation transfer with rest-pose correction", "leg_scale": tpose.scale,
+                     "travel_scale": float(tpose.root_scale[0]), "travel": travel,
                      "hinge_axes": tpose.hinge_source, "twist_refs": tpose.twist_refs,
                      "bone_swing_fixed": sorted(JOINT_NAMES[j] for j in tpose.bone_fix),
                      "twist_offsets_deg": {k: math.degrees(v) for k, v in tpose.twist_offsets.items()},

@@ -36,8 +36,9 @@ from wearpose.motion.template import default_rest_joints
 
 INDEX_NAME = "index.json"
 INDEX_VERSION = 1
-#: Bump when the conversion changes so that existing caches are rebuilt.
-CONVERTER_VERSION = "motion-3"
+#: Bump when the conversion changes so that existing caches are rebuilt. motion-4: root travel
+#: scaled by the hip-to-ankle limb ratio, height by the pelvis-to-ankle ratio as before.
+CONVERTER_VERSION = "motion-4"
 #: Clips whose lowest ankle/foot joint is further than this from the floor (y = 0) are counted
 #: as ``floor_suspect`` in :meth:`CorpusStore.summary` (source data placed off the floor).
 FLOOR_TOLERANCE_M = 0.15
