@@ -66,3 +66,40 @@ def npz_problem(path: str | Path, exc: BaseException) -> str:
     if isinstance(exc, (zipfile.BadZipFile, EOFError)):
         return f"a damaged or truncated npz (zip) archive, e.g. an interrupted copy ({exc})"
     return f"not a readable npz file ({type(exc).__name__}: {exc})"
+
+
+def npz_declared_size_problem(path: str | Path) -> tuple[str, str] | None:
+    """``(member, problem)`` for the first ``.npy`` member of the npz at ``path`` whose header
+    declares more data (shape x item size) than the member holds, else ``None``.
+
+    Why: ``np.load`` allocates the declared array before reading it, so a forged or damaged
+    header (shape ``(2**40,)`` over 64 bytes) would claim memory the file cannot fill. Checked
+    from the headers and the zip directory alone, before any array is read. Members numpy cannot
+    parse are left to ``np.load``, which reports them.
+    """
+    import zipfile
+
+    from numpy.lib import format as npy
+
+    with zipfile.ZipFile(path) as z:
+        for info in z.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            with z.open(info) as f:
+                try:
+                    version = npy.read_magic(f)
+                    read = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+                    shape, _, dtype = read(f)
+                    header_bytes = f.tell()
+                except Exception:  # noqa: BLE001 - np.load reads the member again and names its problem
+                    continue
+            count = 1
+            for n in shape:
+                count *= n
+            declared = count * dtype.itemsize
+            held = info.file_size - header_bytes
+            if count < 0 or declared > held:
+                name = info.filename[:-4]
+                return name, (f"the array header declares shape {shape} of {dtype} ({declared} bytes) but the member "
+                              f"holds {max(held, 0)} bytes (truncated or damaged)")
+    return None

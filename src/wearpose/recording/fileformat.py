@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from wearpose.fileio import atomic_savez, npz_problem
+from wearpose.fileio import atomic_savez, npz_declared_size_problem, npz_problem
 from wearpose.errors import InputFileError, ShapeError
 from wearpose.geometry import matrix_to_quat
 from wearpose.recording.checks import check_recording
@@ -143,11 +143,17 @@ def _load(path: Path, check_conventions: bool) -> Recording:
     if not path.is_file():
         raise InputFileError(path, "not a regular file", _EXPECTED_FILE)
     try:
+        forged = npz_declared_size_problem(path)
+        if forged is not None:
+            raise InputFileError(path, forged[1], "arrays of the size their headers declare (" + _EXPECTED_FILE + ")",
+                                 field=forged[0])
         with np.load(path, allow_pickle=False) as npz:
             names = list(npz.files)
             d: dict[str, np.ndarray] = {}
             for k in names:
                 d[k] = npz[k]
+    except InputFileError:
+        raise
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, NotImplementedError, zipfile.LargeZipFile) as exc:
         raise InputFileError(path, npz_problem(path, exc), _EXPECTED_FILE) from exc
 
@@ -175,6 +181,10 @@ def _load(path: Path, check_conventions: bool) -> Recording:
         header = json.loads(str(hdr))
     except ValueError as exc:
         raise InputFileError(path, f"invalid JSON ({exc})", "a JSON object string", field="header") from None
+    except RecursionError:
+        # json.loads recurses per nesting level: ~1000 nested brackets exceed Python's stack.
+        raise InputFileError(path, "JSON nested too deeply to read", "a JSON object of sensor infos, subject and meta "
+                             "(a few levels deep)", field="header") from None
     if not isinstance(header, dict):
         raise InputFileError(path, f"header is a JSON {type(header).__name__}", "a JSON object", field="header")
     known_header = {"sensors", "subject", "meta", "ground_truth"}
