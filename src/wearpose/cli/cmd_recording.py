@@ -1,5 +1,6 @@
 """``wearpose recording import``: turn public real-sensor dataset files (DIP-IMU, TotalCapture,
-EM-POSE) into wearpose Recording ``.npz`` files.
+EM-POSE) and device files (x-IMU3 logs, Xsens MVNX, Movella DOT exports, any CSV with a column
+map) into wearpose Recording ``.npz`` files.
 
 Thin: collects files, calls the converters of :mod:`wearpose.recording.converters` and
 :func:`wearpose.recording.save_recording`, and prints a per-file report (frames, sensors, rate,
@@ -19,7 +20,7 @@ from rich.table import Table
 from wearpose.cli.app import _emit, app, console, err_console, error_text
 
 recording_app = typer.Typer(help="Import real sensor recordings: public datasets (DIP-IMU, TotalCapture, EM-POSE) "
-                                 "and device logs (x-IMU3).\n\n"
+                                 "and device files (x-IMU3 logs, Xsens MVNX, Movella DOT CSV, any CSV with a column map).\n\n"
                                  "Example: wearpose recording import dip-imu DIP_IMU/s_09 --out recordings/",
                             no_args_is_help=True)
 app.add_typer(recording_app, name="recording")
@@ -31,7 +32,14 @@ FORMATS: dict[str, tuple[tuple[str, ...], str]] = {
     "empose": (("_clean.npz",), "EM-POSE *_clean.npz"),
     # a log folder, not a file: one sub-folder per device (Inertial.csv, Quaternion.csv, Command.json)
     "ximu3": ((), "x-IMU3 log folder (device sub-folders with Inertial.csv, Quaternion.csv)"),
+    "mvnx": ((".mvnx",), "Xsens MVNX (.mvnx)"),
+    # a CSV file, or a folder of one session's CSVs (one per sensor) -> one recording
+    "movella-dot": ((), "Movella DOT CSV export (a .csv or a folder of them, one per sensor)"),
+    "csv": ((".csv",), "CSV with a --map column map"),
 }
+#: Formats whose import runs the convention checks (what load_recording would refuse is
+#: refused at import, naming the declaration to fix, and nothing is written).
+CHECKED_FORMATS = ("mvnx", "movella-dot", "csv")
 
 
 def _parse_sensors(fmt: str, sensors: str | None) -> Any:
@@ -57,15 +65,26 @@ def _parse_sensors(fmt: str, sensors: str | None) -> Any:
     return idx
 
 
-def _converter(fmt: str, sensors: Any, fps: float | None, ground_truth: bool) -> Callable[[Path], Any]:
+def _converter(fmt: str, sensors: Any, fps: float | None, ground_truth: bool,
+               column_map: Path | None = None) -> Callable[[Path], Any]:
     """One-argument converter with the options bound (options left unset keep the converter's default)."""
-    from wearpose.recording import from_dip_imu, from_empose, from_totalcapture, from_ximu3
+    from wearpose.recording import (
+        from_csv, from_dip_imu, from_empose, from_movella_dot, from_mvnx, from_totalcapture, from_ximu3, load_column_map,
+    )
 
-    if fmt == "ximu3":
+    if (column_map is not None) != (fmt == "csv"):
+        raise typer.BadParameter("csv needs --map FILE (the YAML column map, docs/devices.md); other formats take none",
+                                 param_hint="--map")
+    if fmt in ("ximu3", "mvnx", "movella-dot", "csv"):
         if sensors is not None or fps is not None:
-            raise typer.BadParameter("ximu3 takes every device at its own rate; leave out --sensors and --fps",
+            raise typer.BadParameter(f"{fmt} takes every device at its own rate and every sensor; leave out --sensors and --fps",
                                      param_hint="--sensors/--fps")
-        return from_ximu3
+        if fmt == "csv":
+            load_column_map(column_map)  # checked once, before any file: InputFileError naming the map's key
+            return lambda p: from_csv(p, column_map)
+        if fmt == "mvnx":
+            return lambda p: from_mvnx(p, with_ground_truth=ground_truth)
+        return {"ximu3": from_ximu3, "movella-dot": from_movella_dot}[fmt]
     kw: dict[str, Any] = {}
     if sensors is not None:
         kw["sensors"] = sensors
@@ -82,6 +101,8 @@ def _collect(fmt: str, paths: list[Path]) -> list[tuple[Path, Path]]:
     recursively for the format's files (their layout kept, e.g. ``s_09/01.npz``)."""
     if fmt == "ximu3":
         return _collect_logs(paths)
+    if fmt == "movella-dot":
+        return _collect_sessions(paths)
     suffixes = FORMATS[fmt][0]
     found: list[tuple[Path, Path]] = []
     for p in paths:
@@ -112,6 +133,20 @@ def _collect_logs(paths: list[Path]) -> list[tuple[Path, Path]]:
     return [(d, Path(d.name).with_suffix(".npz")) for d in logs]
 
 
+def _collect_sessions(paths: list[Path]) -> list[tuple[Path, Path]]:
+    """Movella DOT exports: a CSV given as a file is one recording (``<stem>.npz``); a folder
+    holding CSVs is one session (``<folder>.npz``), and so is every folder below it that holds some."""
+    out: list[tuple[Path, Path]] = []
+    for p in paths:
+        if p.is_file():
+            out.append((p, Path(p.name).with_suffix(".npz")))
+            continue
+        for d in [p] + sorted(x for x in p.rglob("*") if x.is_dir()):
+            if any(f.suffix.lower() == ".csv" for f in d.iterdir() if f.is_file()):
+                out.append((d, Path(d.name).with_suffix(".npz")))
+    return out
+
+
 def _summary(rec: Any) -> dict[str, Any]:
     """Frames, sensors, rate and valid share of one converted recording."""
     import numpy as np
@@ -123,7 +158,9 @@ def _summary(rec: Any) -> dict[str, Any]:
             "rate_hz": rates[0] if len(rates) == 1 else rates,
             "valid_pct": round(100.0 * float(valid.mean()), 2) if valid.size else 0.0,
             "ground_truth": rec.ground_truth is not None,
-            **({"devices": rec.meta["import"]["devices"]} if "devices" in (rec.meta or {}).get("import", {}) else {})}
+            **({"devices": rec.meta["import"]["devices"]} if "devices" in (rec.meta or {}).get("import", {}) else {}),
+            "import_notes": [f"{k.replace('_', ' ')}: {v}" for k, v in (rec.meta or {}).get("import", {}).items()
+                             if k in ("clock", "ground_truth", "rewritten") and v]}
 
 
 def import_recordings(fmt: str, files: list[tuple[Path, Path]], out: Path, convert: Callable[[Path], Any],
@@ -139,6 +176,8 @@ def import_recordings(fmt: str, files: list[tuple[Path, Path]], out: Path, conve
             if dest.resolve() == f.resolve():
                 raise WearposeError(f"{f}: the output would overwrite the input file; choose another --out")
             rec = convert(f)
+            if fmt in CHECKED_FORMATS:
+                _check_conventions(f, rec)
             dest.parent.mkdir(parents=True, exist_ok=True)
             save_recording(rec, dest)
             rows.append({"file": str(f), "ok": True, "out": str(dest), **_summary(rec)})
@@ -149,6 +188,21 @@ def import_recordings(fmt: str, files: list[tuple[Path, Path]], out: Path, conve
             on_file(f)
     failed = sum(not r["ok"] for r in rows)
     return {"format": fmt, "out": str(out), "converted": len(rows) - failed, "failed": failed, "files": rows}
+
+
+def _check_conventions(f: Path, rec: Any) -> None:
+    """Refuse what :func:`wearpose.recording.load_recording` would refuse, before writing: the
+    data does not look like its declared units or frames (every suspicion about the first field)."""
+    from wearpose.errors import InputFileError
+    from wearpose.recording import check_recording
+
+    issues = check_recording(rec.sensors)
+    if issues:
+        first = issues[0]
+        same = [i for i in issues if (i.sensor, i.field) == (first.sensor, first.field)]
+        raise InputFileError(f, "convention check: " + "; ".join(i.problem for i in same),
+                             "; ".join(i.expected for i in same) + " (for csv: in the column map)",
+                             field=f"sensors/{first.sensor}/{first.field}")
 
 
 def _report_table(res: dict[str, Any]) -> Table:
@@ -167,26 +221,42 @@ def _report_table(res: dict[str, Any]) -> Table:
     return t
 
 
+def _short_units(units: dict[str, str]) -> str:
+    """The declared units of one device in a few words: ``acc g sensor +grav, gyro deg/s, z_up``."""
+    short = {"acceleration": "acc", "angular_velocity": "gyro", "magnetic_field": "mag", "position": "pos", "world": ""}
+    parts = []
+    for k, v in units.items():
+        v = v.replace(" frame", "").replace("gravity included", "+grav").replace("gravity removed", "-grav")
+        v = v.replace(", sensor", "") if k in ("angular_velocity", "magnetic_field") else v
+        parts.append(f"{short.get(k, k)} {v.replace(',', '')}".strip())
+    return ", ".join(parts) or "-"
+
+
 def _device_table(row: dict[str, Any]) -> Table:
-    """Per device of a device log: rate, samples, lost samples (masked, not filled), clock start."""
+    """Per device of a device file: rate, samples, lost samples and every masked slot (masked,
+    never filled), the units and frames declared, where its clock started."""
     t = Table(title=f"devices of {escape(Path(row['file']).name)}")
-    for c in ("device", "rate (Hz)", "samples", "lost", "clock start (us)"):
-        t.add_column(c, justify="left" if c == "device" else "right", overflow="fold")
+    for c in ("device", "rate (Hz)", "samples", "lost", "masked", "units declared", "clock start"):
+        t.add_column(c, justify="right" if c in ("rate (Hz)", "samples", "lost", "masked") else "left", overflow="fold")
     for d in row["devices"]:
-        t.add_row(escape(d["device"]), f"{d['rate_hz']:.2f}", str(d["samples"]), str(d["lost"]), str(d["clock_start_us"]))
+        units = _short_units(d.get("units", {}))
+        clock = d.get("clock_start") or (f"{d['clock_start_us']} us" if "clock_start_us" in d else "-")
+        t.add_row(escape(str(d["device"])), f"{d['rate_hz']:.2f}", str(d["samples"]), str(d["lost"]),
+                  str(d.get("masked", d["lost"])), escape(units), escape(str(clock)))
     return t
 
 
 @recording_app.command("import")
 def recording_import(
-    fmt: str = typer.Argument(..., metavar="FORMAT", help="Source layout: dip-imu, totalcapture, empose or ximu3."),
-    paths: list[Path] = typer.Argument(..., help="Dataset files or folders (searched recursively: *.pkl for dip-imu, *.sensors for totalcapture, *_clean.npz for empose, log folders for ximu3)."),
+    fmt: str = typer.Argument(..., metavar="FORMAT", help="Source layout: dip-imu, totalcapture, empose, ximu3, mvnx, movella-dot or csv."),
+    paths: list[Path] = typer.Argument(..., help="Dataset files or folders (searched recursively: *.pkl for dip-imu, *.sensors for totalcapture, *_clean.npz for empose, log folders for ximu3, *.mvnx for mvnx, *.csv for csv; movella-dot: a .csv, or a folder of one session's CSVs = one recording)."),
     out: Path = typer.Option(Path("recordings"), "--out", help="Output folder: one Recording .npz per input file (folder layout kept)."),
     sensors: Optional[str] = typer.Option(None, help="Sensors to keep. dip-imu: six (default), all or indices into the 17; "
                                                      "empose: all (default), six or indices into the 12; "
                                                      "totalcapture: comma-separated sensor names (default all), e.g. Head,Pelvis,L_LowArm."),
     fps: Optional[float] = typer.Option(None, help="Sample rate, Hz (default: the dataset's: DIP-IMU 60, TotalCapture 60, EM-POSE 30)."),
-    ground_truth: bool = typer.Option(True, "--ground-truth/--no-ground-truth", help="Attach the dataset's SMPL reference (dip-imu, empose)."),
+    ground_truth: bool = typer.Option(True, "--ground-truth/--no-ground-truth", help="Attach the dataset's SMPL reference (dip-imu, empose; mvnx: the segment kinematics)."),
+    column_map: Optional[Path] = typer.Option(None, "--map", help="csv only: the YAML column map (names, units, quaternion order wxyz/xyzw, frames; docs/devices.md)."),
     as_json: bool = typer.Option(False, "--json", help="Print the per-file summary as JSON."),
 ) -> None:
     """Convert real sensor files of a public dataset to wearpose Recording .npz files.
@@ -198,7 +268,14 @@ def recording_import(
     be read is reported with the reason and the others are converted (exit code 1 if any failed).
     See docs/formats.md.
 
+    Device files (ximu3, mvnx, movella-dot, csv) keep each device's own rate and clock; the
+    report lists per device the rate, lost samples (masked), units declared and clock start,
+    and mvnx, movella-dot and csv files are refused, naming the declaration to fix, when their
+    data does not look like the declared units or frames (docs/devices.md).
+
     Example: wearpose recording import totalcapture TotalCapture/s1/ --out recordings/tc --sensors Head,Pelvis,L_LowArm,R_LowArm,L_LowLeg,R_LowLeg
+
+    Example: wearpose recording import csv trial.csv --map columns.yaml --out recordings/
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -215,7 +292,9 @@ def recording_import(
     if not files:
         err_console.print(f"[red]error:[/] no {escape(FORMATS[fmt][1])} files in {escape(', '.join(map(str, paths)))}")
         raise typer.Exit(code=1)
-    convert = _converter(fmt, parsed, fps, ground_truth)
+    if column_map is not None and not column_map.is_file():
+        raise typer.BadParameter(f"no such file: {column_map}", param_hint="--map")
+    convert = _converter(fmt, parsed, fps, ground_truth, column_map)
     columns = (TextColumn("[bold]importing recordings"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TextColumn("{task.description}"))
     with Progress(*columns, console=err_console, disable=as_json, transient=True) as bar:
@@ -228,6 +307,8 @@ def recording_import(
         for row in r["files"]:
             if row.get("devices"):
                 console.print(_device_table(row))
+                for note in row.get("import_notes", []):
+                    console.print(f"  {escape(Path(row['file']).name)}: {escape(note)}")
         for row in r["files"]:
             if not row["ok"]:
                 err_console.print(f"[red]failed[/] {escape(row['error'])}")

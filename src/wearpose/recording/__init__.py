@@ -8,7 +8,8 @@ Public API:
   ``wearpose.recording`` v1 (``docs/formats.md``)
 - :func:`check_stream` / :func:`check_recording`: does the data look like its declared units?
 - converters: :func:`from_dip_imu`, :func:`from_totalcapture`, :func:`from_empose`, :func:`from_ximu3`,
-  :func:`amass_ground_truth`
+  :func:`amass_ground_truth`; device files: :func:`from_mvnx` (Xsens MVNX), :func:`from_movella_dot`
+  (Movella DOT CSV exports), :func:`from_csv` (any CSV with a YAML column map, :func:`load_column_map`)
 - :func:`recording_from_simulation` (also ``Recording.from_simulation``): a
   :func:`wearpose.sensors.simulate` result as a recording
 - :func:`prepend_tpose` / :func:`calibration_window` / :func:`use_calibration_window`: a
@@ -48,6 +49,9 @@ from wearpose.recording.converters import (
     from_totalcapture,
     from_ximu3,
 )
+from wearpose.recording.mvnx import from_mvnx
+from wearpose.recording.movella import from_movella_dot
+from wearpose.recording.csvmap import from_csv, load_column_map
 
 __all__ = [
     "Recording", "SensorStream", "SensorInfo", "CommonGrid", "RecordingError",
@@ -58,5 +62,6 @@ __all__ = [
     "decimate", "decimation_factor",
     "CALIBRATION_WINDOW_KEY", "prepend_tpose", "calibration_window", "use_calibration_window",
     "from_dip_imu", "from_totalcapture", "from_empose", "from_ximu3", "amass_ground_truth",
+    "from_mvnx", "from_movella_dot", "from_csv", "load_column_map",
     "DIP_IMU_SENSORS", "DIP_IMU_SIX", "EMPOSE_SENSORS", "EMPOSE_SITES", "EMPOSE_SIX", "TOTALCAPTURE_SITES",
 ]

@@ -493,22 +493,12 @@ def _ximu3_csv(path: Path, columns: int) -> np.ndarray:
 
 
 def _ximu3_grid(stamps_us: np.ndarray, path: Path, t0_us: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """Slots on the device's nominal sample grid: ``(slot of each sample, timestamps (K,) s from
-    ``t0_us``, rate Hz)``. A lost sample gets a slot (masked) whose timestamp is the nominal one;
-    the samples keep their own stamps (the device's clock, microseconds)."""
-    dt = np.diff(stamps_us)
-    if np.any(dt <= 0):
-        i = int(np.flatnonzero(dt <= 0)[0]) + 2
-        raise InputFileError(path, f"timestamp of data row {i} is not after the one before", "increasing device timestamps (us)",
-                             field="Timestamp (us)")
-    period = float(np.median(dt))
-    slot = np.round((stamps_us - stamps_us[0]) / period).astype(np.int64)
-    if np.any(np.diff(slot) < 1):
-        raise InputFileError(path, "two samples fall in one sample period", "one sample per period of the device's rate",
-                             field="Timestamp (us)")
-    ts = (stamps_us[0] - t0_us + np.arange(slot[-1] + 1) * period) * 1e-6
-    ts[slot] = (stamps_us - t0_us) * 1e-6
-    return slot, ts, 1e6 / period
+    """Slots on the device's nominal sample grid (:func:`wearpose.recording.devicelog.sample_grid`,
+    the device's clock in microseconds): ``(slot of each sample, timestamps (K,) s from ``t0_us``,
+    rate Hz)``."""
+    from wearpose.recording.devicelog import sample_grid
+
+    return sample_grid(stamps_us, path, "Timestamp (us)", t0_us, 1e-6, row_offset=2)
 
 
 #: Devices whose first samples lie further apart than this do not share a clock.
