@@ -209,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
                                                         "heading_offset_diagnostic": "noise scenario + per-sensor constant heading offset U(-45, 45) deg, seeded per clip",
                                                         "wall_seconds": time.time() - t0})
     if "calibration" in sections:
-        from wearpose.estimators.birae.plots import reliability_diagram
+        from wearpose.viewer.demos.birae_plots import reliability_diagram
 
         out: dict[str, Any] = {}
         curves = {}

@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
-    from wearpose.estimators.pip.demo import run_demo
+    from wearpose.viewer.demos.pip import run_demo
     from wearpose.motion import CorpusStore
 
     ids = CorpusStore().clips(split=a.split)

@@ -46,7 +46,7 @@ def main() -> int:
     from wearpose.body import BodyModel
     from wearpose.estimators.empose.data import clip_seed
     from wearpose.estimators.pip.data import simulate_clip
-    from wearpose.estimators.pip.demo import G, physical_plots
+    from wearpose.viewer.demos.pip import G, physical_plots
     from wearpose.estimators.pip.estimator import PipEstimator
     from wearpose.estimators.pip.evaluate import _init
     from wearpose.motion import CorpusStore

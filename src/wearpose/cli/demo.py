@@ -30,9 +30,9 @@ from wearpose.viewer import write_html
 KIT_DEMOS: dict[str, str] = {
     "em12": "wearpose.cli.demo:run_sensor_demo",
     "em6": "wearpose.cli.demo:run_sensor_demo_em6",
-    "imu6": "wearpose.estimators.pip.demo:run_demo",
-    "mimu6": "wearpose.estimators.birae.demo:run_demo",
-    "miposer": "wearpose.estimators.miposer.demo:run_demo",
+    "imu6": "wearpose.viewer.demos.pip:run_demo",
+    "mimu6": "wearpose.viewer.demos.birae:run_demo",
+    "miposer": "wearpose.viewer.demos.miposer:run_demo",
 }
 
 

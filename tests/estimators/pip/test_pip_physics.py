@@ -53,7 +53,7 @@ def test_single_pd_option_reaches_the_optimizer(est) -> None:
 
 @pytest.mark.corpus
 def test_demo_on_a_test_clip(body, tmp_path, corpus_store) -> None:
-    from wearpose.estimators.pip.demo import run_demo
+    from wearpose.viewer.demos.pip import run_demo
     from wearpose.motion import CorpusStore
 
     # Kinematics only: the physics path of the estimator is covered above; with an untrained

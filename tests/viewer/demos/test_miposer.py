@@ -10,7 +10,7 @@ import pytest
 
 def test_kit_dispatch() -> None:
     from wearpose.cli.demo import kit_demo
-    from wearpose.estimators.miposer.demo import run_demo
+    from wearpose.viewer.demos.miposer import run_demo
 
     assert kit_demo("miposer") is run_demo
 
@@ -18,7 +18,7 @@ def test_kit_dispatch() -> None:
 @pytest.mark.corpus
 def test_demo_writes_timeline_viewer_and_metrics(tmp_path: Path, corpus_store: Path) -> None:
     pytest.importorskip("matplotlib")
-    from wearpose.estimators.miposer.demo import run_demo
+    from wearpose.viewer.demos.miposer import run_demo
     from wearpose.weights import list_weights
 
     if "miposer_cpu" not in list_weights():

@@ -58,7 +58,7 @@ def scenario_recordings(split: str = "test", scenario: str = "clean", rate: floa
 def group_errors(pred: torch.Tensor, gt: torch.Tensor) -> dict[str, torch.Tensor]:
     """Per-frame MPJAE (rad) per group and ``all`` for local rotations ``(T, 24, 3, 3)``."""
     from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.evaluate import mpjae, mpjae_groups
+    from wearpose.evaluate.metrics import mpjae, mpjae_groups
 
     g = mpjae_groups(pred, gt)
     g["all"] = mpjae(pred, gt, MAJOR_JOINTS)
@@ -81,7 +81,7 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
     """
     from wearpose.body.skeleton import MAJOR_JOINTS
     from wearpose.estimators.birae.representations import pose_to_target
-    from wearpose.evaluate import joint_angle_errors
+    from wearpose.evaluate.metrics import joint_angle_errors
 
     acc: dict[str, list[torch.Tensor]] = {g: [] for g in GROUP_ORDER}
     res_l, sig_l, je_l, js_l = [], [], [], []

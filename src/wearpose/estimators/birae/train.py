@@ -78,7 +78,7 @@ class BiraeTask:
 
     @torch.no_grad()
     def validate(self, device: torch.device) -> dict[str, float]:
-        from wearpose.evaluate import mpjae
+        from wearpose.evaluate.metrics import mpjae
 
         if self.val_data is None:
             return {}

@@ -128,7 +128,7 @@ def reliability_curve(residual: torch.Tensor, sigma: torch.Tensor, levels: torch
 def major_groups() -> dict[str, list[int]]:
     """BiRAE's joint groups as positions in :data:`wearpose.body.MAJOR_JOINTS` order."""
     from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.evaluate import BIRAE_JOINT_GROUPS
+    from wearpose.evaluate.metrics import BIRAE_JOINT_GROUPS
 
     pos = {j: i for i, j in enumerate(MAJOR_JOINTS)}
     return {g: [pos[j] for j in js] for g, js in BIRAE_JOINT_GROUPS.items()}

@@ -137,7 +137,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
     from wearpose.body.skeleton import MAJOR_JOINTS
     from wearpose.estimators.empose.baselines import load_any
     from wearpose.estimators.empose.data import recording_from_clip
-    from wearpose.evaluate import mpjae, mpjpe, pa_mpjpe
+    from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
     from wearpose.motion import CorpusStore
 
     if not checkpoints:
@@ -346,7 +346,7 @@ def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit:
     from wearpose.body.skeleton import MAJOR_JOINTS
     from wearpose.estimators.empose.baselines import load_any
     from wearpose.estimators.empose.data import clip_seed, recording_from_clip, simulate_clip
-    from wearpose.evaluate import mpjae, mpjpe, pa_mpjpe
+    from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
     from wearpose.motion import CorpusStore
 
     if not checkpoints:

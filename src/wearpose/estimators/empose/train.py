@@ -36,7 +36,7 @@ class EmposeTask(WindowTask):
     @torch.no_grad()
     def validate(self, device: torch.device) -> dict[str, float]:
         from wearpose.body.skeleton import MAJOR_JOINTS
-        from wearpose.evaluate import mpjae, mpjpe
+        from wearpose.evaluate.metrics import mpjae, mpjpe
 
         if self.val_data is None:
             return {}
@@ -92,7 +92,7 @@ def evaluate_empose(checkpoint: str | Path | EmposeEstimator, split: str = "test
     frame, like the estimate. Units: mm and degrees.
     """
     from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.evaluate import mpjae, mpjpe, pa_mpjpe
+    from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
     from wearpose.motion import CorpusStore
 
     est = checkpoint if isinstance(checkpoint, EmposeEstimator) else EmposeEstimator.load(checkpoint)

@@ -300,7 +300,7 @@ def _make_task(est: TwoStageEstimator, train_data: EmposeData, val_data: EmposeD
 
     from wearpose.body.skeleton import MAJOR_JOINTS
     from wearpose.estimators.empose.train import EmposeTask
-    from wearpose.evaluate import mpjpe
+    from wearpose.evaluate.metrics import mpjpe
 
     class TwoStageTask(EmposeTask):
         """:class:`EmposeTask` batches with the two-stage losses and validation."""

@@ -45,7 +45,7 @@ class MiposerTask(WindowTask):
 
     @torch.no_grad()
     def validate(self, device: torch.device) -> dict[str, float]:
-        from wearpose.evaluate import mpjpe
+        from wearpose.evaluate.metrics import mpjpe
 
         if self.val_data is None:
             return {}

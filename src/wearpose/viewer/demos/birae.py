@@ -30,7 +30,7 @@ def run_demo(clip: str, out: str | Path, max_seconds: float = 10.0, seed: int = 
     from wearpose.estimators.birae.data import SCENARIOS, clip_seed, make_recording, synthesize
     from wearpose.estimators.birae.estimator import BiraeEstimator
     from wearpose.estimators.birae.evaluate import group_errors
-    from wearpose.estimators.birae.plots import uncertainty_bands
+    from wearpose.viewer.demos.birae_plots import uncertainty_bands
     from wearpose.estimators.birae.uncertainty import coverage
     from wearpose.motion import load_motion
     from wearpose.viewer import write_html
