@@ -17,7 +17,7 @@ from wearpose.motion.paths import cache_dir, data_dir
 from wearpose.motion.resample import resample
 from wearpose.motion.retarget import (
     BANDAI, BUILTIN_MAPS, CMU_DAZ, LegMeasures, RetargetError, Retargeted, SkeletonMap, TPose, bone_direction_errors,
-    detect_skeleton_map, estimate_hinge_axes, leg_measures, lowest_foot_height, retarget_bvh, solve_tpose,
+    detect_skeleton_map, estimate_hinge_axes, leg_measures, lowest_foot_height, refit_to_body, retarget_bvh, solve_tpose,
 )
 from wearpose.motion.sequence import FORMAT_VERSION, MotionSequence
 from wearpose.motion.smpl_bvh import is_smpl_bvh, read_smpl_bvh
@@ -28,7 +28,7 @@ __all__ = [
     "MotionSequence", "FORMAT_VERSION", "resample", "load_motion", "mirror", "play_speed",
     "read_bvh", "parse_bvh_text", "BvhMotion", "BvhSkeleton", "bvh_forward_kinematics", "end_site_positions",
     "retarget_bvh", "Retargeted", "SkeletonMap", "TPose", "solve_tpose", "detect_skeleton_map", "estimate_hinge_axes",
-    "bone_direction_errors", "lowest_foot_height", "leg_measures", "LegMeasures", "RetargetError", "CMU_DAZ", "BANDAI", "BUILTIN_MAPS",
+    "bone_direction_errors", "lowest_foot_height", "leg_measures", "LegMeasures", "refit_to_body", "RetargetError", "CMU_DAZ", "BANDAI", "BUILTIN_MAPS",
     "read_amass", "save_amass", "read_asf", "read_asf_amc", "parse_asf_text", "parse_amc_text", "find_asf_for",
     "AsfSkeleton", "read_smpl_bvh", "is_smpl_bvh",
     "import_motion", "import_paths", "collect_motion_files", "ImportReport", "Imported",

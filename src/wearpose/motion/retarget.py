@@ -866,3 +866,51 @@ def bone_direction_errors(result: Retargeted, rest_joints: torch.Tensor,
         out[f"{a}->{b}"] = torch.arccos(cos).numpy()
     return out
 
+
+
+# ---------------------------------------------------------------------------- other bodies
+#: SMPL onto itself: the map :func:`refit_to_body` hands to :func:`root_path`.
+SMPL_SELF = SkeletonMap(name="smpl", joints={n: n for n in JOINT_NAMES}, units_to_m=1.0,
+                        description="SMPL-24 onto SMPL-24 (re-fitting a motion to another body shape)")
+
+
+def refit_to_body(motion: MotionSequence, body: Any, betas: torch.Tensor, travel: TravelMode = "legs") -> MotionSequence:
+    """The same motion on another body shape, its root re-fitted to that body's legs.
+
+    Joint rotations are kept. The root path is rebuilt as retargeting builds it (:func:`root_path`),
+    with the motion on its own body (``motion.betas``) as the source: height scaled by the two
+    bodies' standing pelvis height above the soles (the rest pose's pelvis joint over its lowest
+    skin point: the sole sits below the ankle by a different amount on every body, so this, not
+    the pelvis-to-ankle height, keeps the soles on the floor), travel by default anchored to the
+    planted feet (a planted foot stays planted on the new body; ``"limb"``: the travel scaled by
+    the hip-to-ankle ratio, :func:`leg_measures`).
+
+    Args:
+        motion: the clip (``pose`` ``(T, 24, 3, 3)``, ``trans`` ``(T, 3)`` m, its ``betas``).
+        body: the :class:`wearpose.body.BodyModel` both shapes belong to.
+        betas: ``(S,)`` the new shape, stored in the result.
+        travel: ``"legs"`` (default) or ``"limb"`` (:data:`TRAVEL_MODES`).
+
+    Returns:
+        a new :class:`MotionSequence` (float32), ``meta["refit"]`` holding the two scales.
+    """
+    if tuple(betas.shape) != tuple(motion.betas.shape):
+        raise ShapeError(f"refit_to_body: betas expected {tuple(motion.betas.shape)} like the motion's, got {tuple(betas.shape)}")
+    eye = torch.eye(3).expand(1, NUM_JOINTS, 3, 3)
+
+    def standing(b: torch.Tensor) -> tuple[torch.Tensor, float]:
+        rest = body.rest_joints(b.to(body.dtype)).to(torch.float64)
+        sole = float(body.lowest_height(eye, b.to(body.dtype))[0])
+        return rest, float(rest[0, 1]) - sole
+
+    (rest_from, h_from), (rest_to, h_to) = standing(motion.betas), standing(betas)
+    a, b = leg_measures(rest_from), leg_measures(rest_to)
+    tpose = TPose({}, h_to / h_from, {}, travel_scale=b.limb / a.limb)
+    pose = motion.pose.to(torch.float64)
+    _, J = forward_kinematics(pose, rest_from)
+    world = J + motion.trans.to(torch.float64)[:, None]
+    trans = root_path(pose, world, JOINT_NAMES, SMPL_SELF, tpose, rest_to, motion.fps, travel)
+    meta = dict(motion.meta)
+    meta["refit"] = {"height_scale": tpose.scale, "travel_scale": tpose.travel_scale, "travel": travel,
+                     "from_betas": [float(x) for x in motion.betas], "betas": [float(x) for x in betas]}
+    return MotionSequence(motion.pose.clone(), betas.to(torch.float32).clone(), trans.to(torch.float32), motion.fps, meta)

@@ -8,7 +8,14 @@ runs its simulator on its sites: EM (:mod:`.em`), IMU (:mod:`.imu`), MIMU (:mod:
 
 Randomness: one ``seed`` per call. Every sensor gets its own generator seeded from
 ``(seed, sensor name)``, so a sensor's noise does not change when other sensors are added to or
-removed from a kit. The per-sequence EM offset draw (EM-POSE supp. 2.2) uses ``(seed, "offsets")``.
+removed from a kit. The per-sequence EM offset draw (EM-POSE supp. 2.2) uses ``(seed, "offsets")``,
+a random wearer's body shape (``shape="random"``, :func:`random_body_shape`) ``(seed, "body-shape")``.
+
+Bodies of every size: ``shape`` (default ``None``: the motion's own ``betas``, unchanged) puts
+the kit on another body shape, the motion re-fitted to it first
+(:func:`wearpose.motion.refit_to_body`: joint rotations kept, root height and travel from that
+body's legs, planted feet kept planted); the re-fitted motion is the ground truth
+(:attr:`SimulationResult.motion`).
 """
 
 from __future__ import annotations
@@ -19,8 +26,10 @@ from typing import Any, Sequence
 
 import torch
 
+from wearpose.body.shapes import sample_betas
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.motion.resample import resample
+from wearpose.motion.retarget import refit_to_body
 from wearpose.motion.sequence import MotionSequence
 from wearpose.sensors.em import EMNoise, EMOffsets, random_subject_offsets, simulate_em
 from wearpose.sensors.imu import ImuNoise, simulate_imu
@@ -101,7 +110,9 @@ class SimulationResult:
         em_source: ground-truth source pose per EM rate: ``{rate: {"position": (T, 3),
             "orientation": (T, 3, 3)}}`` (world), for calibration and evaluation.
         site_substitutions: sensor -> "wanted -> used" for sites the body lacks.
-        meta: body asset id, motion fps, frames.
+        meta: body asset id, motion fps, frames (and the wearer's ``betas`` when ``shape`` was given).
+        motion: the motion that was simulated when ``shape`` re-fitted it to another body (the
+            ground truth to store with the streams); ``None`` when the input motion was used.
     """
 
     kit: SensorKit
@@ -112,6 +123,7 @@ class SimulationResult:
     em_source: dict[float, dict[str, torch.Tensor]] = field(default_factory=dict)
     site_substitutions: dict[str, str] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
+    motion: MotionSequence | None = None
 
     def __getitem__(self, name: str) -> SensorData:
         return self.sensors[name]
@@ -126,6 +138,27 @@ def _generator(seed: int, key: str) -> torch.Generator:
     g = torch.Generator()
     g.manual_seed((int(seed) * 1_000_003 + zlib.crc32(key.encode())) % (2 ** 63 - 1))
     return g
+
+
+def random_body_shape(seed: int, num_betas: int = 10) -> torch.Tensor:
+    """The body shape ``(num_betas,)`` that ``simulate(..., seed=seed, shape="random")`` puts the
+    kit on: :func:`wearpose.body.shapes.sample_betas` (the asset's adult distribution) from the
+    ``(seed, "body-shape")`` stream. The seed is the clip's simulation seed, so the clip's seed
+    namespace (training or evaluation draws) decides which wearers it meets."""
+    return sample_betas(_generator(seed, "body-shape"), num_betas)
+
+
+def _shaped(motion: MotionSequence, body: Any, shape: str | torch.Tensor, seed: int) -> MotionSequence:
+    if isinstance(shape, str):
+        if shape != "random":
+            raise ConfigError(f"simulate: shape must be 'random', a (num_betas,) tensor or None, got {shape!r}")
+        betas = random_body_shape(seed, int(motion.betas.shape[-1]))
+    else:
+        betas = torch.as_tensor(shape, dtype=torch.float32)
+        if tuple(betas.shape) != tuple(motion.betas.shape):
+            raise ShapeError(f"simulate: shape expected {tuple(motion.betas.shape)} betas like the motion's, "
+                             f"got {tuple(betas.shape)}")
+    return refit_to_body(motion, body, betas)
 
 
 def _noise_config(noise: str | NoiseConfig) -> NoiseConfig:
@@ -143,7 +176,8 @@ def _noise_config(noise: str | NoiseConfig) -> NoiseConfig:
 def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: int = 0,
              noise: str | NoiseConfig = "default", offsets: EMOffsets | Sequence[EMOffsets] | str | None = None,
              rate: float | None = None, imu_smooth_n: int | None = None, acc_ends: str = "one_sided",
-             em_fill: str = "nan", imu_orientation: str = "site", mimu_fusion: str | None = None) -> SimulationResult:
+             em_fill: str = "nan", imu_orientation: str = "site", mimu_fusion: str | None = None,
+             shape: str | torch.Tensor | None = None) -> SimulationResult:
     """Simulate a sensor kit worn by a body performing ``motion``.
 
     Args:
@@ -177,6 +211,10 @@ def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: i
         mimu_fusion: ``None`` (analytic BiRAE-style error model) or ``"madgwick"`` /
             ``"madgwick_imu"`` (a real AHRS filter, optional package ``ahrs``;
             :func:`wearpose.sensors.mimu.simulate_mimu`).
+        shape: the wearer's body shape: ``None`` (default) the motion's ``betas``; ``"random"``
+            one drawn from ``seed`` (:func:`random_body_shape`); or ``(num_betas,)`` betas. Any
+            other than ``None`` re-fits the motion to that body first (module doc) and returns
+            it as :attr:`SimulationResult.motion`.
 
     Returns:
         :class:`SimulationResult`.
@@ -186,6 +224,8 @@ def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: i
     kit = get_kit(kit)
     if rate is not None:
         kit = kit.with_rate(rate)
+    shaped = _shaped(motion, body, shape, seed) if shape is not None else None
+    motion = shaped if shaped is not None else motion
     cfg = _noise_config(noise)
     if imu_orientation not in ("site", "segment"):
         raise ConfigError(f"simulate: imu_orientation must be 'site' or 'segment', got {imu_orientation!r}")
@@ -288,4 +328,6 @@ def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: i
     ordered = {s.name: out[s.name] for s in kit.sensors}
     return SimulationResult(kit, ordered, int(seed), cfg, em_off, em_source, subs,
                             {"body_asset": getattr(body, "asset_id", "?"), "motion_fps": motion.fps,
-                             "motion_frames": motion.num_frames, "offsets_index": offsets_index})
+                             "motion_frames": motion.num_frames, "offsets_index": offsets_index,
+                             **({"betas": [float(x) for x in motion.betas]} if shaped is not None else {})},
+                            motion=shaped)
