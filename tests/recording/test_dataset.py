@@ -138,3 +138,30 @@ def test_imu6_clips_open_with_a_marked_tpose_by_default(mini, em_set, tmp_path):
     rec0 = load_recording(tmp_path / "imu0" / row["file"])
     assert "tpose_s" not in res0["settings"] and calibration_window(rec0) is None
     assert rec0.ground_truth.num_frames == clip.num_frames
+
+
+@pytest.mark.corpus
+def test_sets_of_every_body_size(mini, em_set, tmp_path):
+    """--shapes random / heldout: each clip's recording is simulated on its own wearer (seeded by
+    the clip seed), its ground truth re-fitted to that body (betas stored, rotations kept); the two
+    draws differ; sets without the option keep their settings key."""
+    from wearpose.motion import CorpusStore
+    from wearpose.sensors import random_body_shape
+
+    cache, ids = mini
+    assert "shapes" not in em_set[1]["settings"]
+    betas = {}
+    for draw in ("random", "heldout"):
+        res = simulate_corpus(tmp_path / draw, "em12", None, cache_dir=cache, limit=1, workers=1, progress=False,
+                              shapes=draw, seed=5)
+        assert res["failed"] == 0 and res["settings"]["shapes"] == draw
+        row = load_index(tmp_path / draw)["clips"][ids[0]]
+        rec = load_recording(tmp_path / draw / row["file"])
+        gt, clip = rec.ground_truth, CorpusStore(cache).load(ids[0])
+        want = random_body_shape(clip_seed(5, ids[0]), draw=draw)
+        assert np.allclose(np.asarray(gt.betas), want.numpy()) and float(np.abs(gt.betas).max()) > 0
+        assert np.allclose(np.asarray(gt.pose), clip.pose.numpy(), atol=1e-6)
+        betas[draw] = np.asarray(gt.betas)
+    assert not np.allclose(betas["random"], betas["heldout"])
+    with pytest.raises(ConfigError, match="shapes"):
+        simulate_corpus(tmp_path / "x", "em12", None, cache_dir=cache, limit=1, workers=1, progress=False, shapes="tall")

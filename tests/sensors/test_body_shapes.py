@@ -70,3 +70,13 @@ def test_default_shape_is_the_motions_own(body_all_sites) -> None:
     assert c.motion is not None and torch.equal(c.motion.betas, random_body_shape(1))
     first = a.kit.sensor_names[0]
     assert not torch.allclose(c[first].acceleration, a[first].acceleration)
+
+
+def test_heldout_wearers_are_another_stream() -> None:
+    """Evaluation wearers ("heldout") come from a stream no training draw uses: for the same clip
+    seed they differ from the training wearer, and no heldout draw repeats a training draw."""
+    train = torch.stack([random_body_shape(s) for s in range(200)])
+    held = torch.stack([random_body_shape(s, draw="heldout") for s in range(200)])
+    assert not torch.isclose(train[:, None], held[None]).all(-1).any()
+    with pytest.raises(Exception, match="heldout"):
+        random_body_shape(0, draw="test")

@@ -41,6 +41,10 @@ def simulate(
                                           help="Hold a calibration T-pose this long before each clip (marked in the "
                                                "recording's meta; IMU estimators such as pip_cpu calibrate from it). "
                                                "Default: 1 for imu6, 0 (none) for the other kits."),
+    shapes: str = typer.Option("none", help="Wearers' body shapes: none (the motion's own), random (one per clip "
+                                            "from the body's adult shape space, for training sets) or heldout "
+                                            "(a draw no training set uses, for test sets); the motion is re-fitted "
+                                            "to each body."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (progress goes to stderr)."),
 ) -> None:
     """Simulate a sensor kit on every clip of a corpus split: a recording set for training or tests.
@@ -53,6 +57,7 @@ def simulate(
     Example: wearpose simulate --kit em12 --split train --out data/sim/em12-train --seed 0
     IMUs (each clip opens with 1 s of T-pose for the calibration): wearpose simulate --kit imu6 --split test --out sims/
     On a Ray cluster: wearpose simulate --kit imu6 --split all --out /shared/sim/imu6 --executor ray --ray-address auto
+    Unseen wearers of every size: wearpose simulate --kit imu6 --split test --shapes heldout --out sims/imu6-bodies
     """
     from wearpose.recording.dataset import simulate_corpus
 
@@ -60,7 +65,7 @@ def simulate(
                           licence=licence or None, include_nc=include_nc, seed=seed, noise=noise, offsets=offsets,
                           rate=rate, limit=limit, workers=workers, source_pose=source_pose, body=body,
                           overwrite=overwrite, progress=True, executor=executor, ray_address=ray_address,
-                          tpose=tpose)
+                          tpose=tpose, shapes=shapes)
 
     def render(r: dict[str, Any]) -> None:
         t = Table(title=f"simulated {r['kit']} ({r['split'] or 'all splits'}) -> {r['out']}", show_header=False)

@@ -52,6 +52,10 @@ GENERATOR_VERSION = "simset-1"
 NOISE_CHOICES = ("default", "none", "ximu3")
 EXECUTORS = ("local", "ray")
 OFFSETS_CHOICES = ("random", "none")
+#: Wearers' body shapes: the motion's own (``none``), or one per clip drawn from the body
+#: asset's shape space (:func:`wearpose.sensors.random_body_shape`): ``random`` for training
+#: sets, ``heldout`` (a stream no training draw uses) for evaluation sets.
+SHAPES_CHOICES = ("none", "random", "heldout")
 #: How often (seconds) the index is rewritten during a long run, so an interrupted run keeps
 #: most of its work (the next run skips what the index lists).
 INDEX_FLUSH_S = 30.0
@@ -95,13 +99,15 @@ def is_noncommercial(licence: str | None) -> bool:
 
 
 def _settings(kit: str, rate: float | None, noise: str, offsets: str, source_pose: bool, body_asset: str,
-              base_seed: int, include_nc: bool, tpose: float = 0.0) -> dict[str, Any]:
+              base_seed: int, include_nc: bool, tpose: float = 0.0, shapes: str = "none") -> dict[str, Any]:
     # include_nc is a setting (not a filter like split): a set that promises "no NonCommercial
     # clips" must not silently accumulate them from an earlier run into the same directory.
     s = {"generator": GENERATOR_VERSION, "kit": kit, "rate": rate, "noise": noise, "offsets": offsets,
          "source_pose": source_pose, "body_asset": body_asset, "base_seed": int(base_seed), "include_nc": include_nc}
     if tpose:  # only when used, so sets made before the option keep their settings key
         s["tpose_s"] = float(tpose)
+    if shapes != "none":  # likewise
+        s["shapes"] = shapes
     return s
 
 
@@ -162,7 +168,9 @@ def _simulate_one(job: dict[str, Any]) -> dict[str, Any]:
             motion, extra[CALIBRATION_WINDOW_KEY] = prepend_tpose(motion, job["tpose"])
         with torch.no_grad():
             res = simulate(motion, job["kit"], _BODY, seed=job["seed"], noise=job["noise"], rate=job["rate"],
-                           offsets="random" if job["offsets"] == "random" else None)
+                           offsets="random" if job["offsets"] == "random" else None,
+                           shape=None if job.get("shapes", "none") == "none" else job["shapes"])
+        motion = res.motion if res.motion is not None else motion  # re-fitted to the wearer's body
         # save_recording writes atomically: an interrupted run never leaves a half-written file.
         rec = recording_from_simulation(res, motion, job["subject"], source_pose=job["source_pose"],
                                         meta={"clip_id": job["id"], "clip_seed": job["seed"], "base_seed": job["base_seed"], **extra})
@@ -192,7 +200,7 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
                     limit: int | None = None, workers: int | None = None, source_pose: bool = True,
                     body: str | None = None, overwrite: bool = False, progress: bool = True,
                     clip_ids: Sequence[str] | None = None, executor: str = "local",
-                    ray_address: str | None = None, tpose: float | None = None) -> dict[str, Any]:
+                    ray_address: str | None = None, tpose: float | None = None, shapes: str = "none") -> dict[str, Any]:
     """Simulate ``kit`` on the prepared corpus clips and write one recording per clip + an index.
 
     Args:
@@ -229,6 +237,10 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
             :func:`default_tpose` of the kit, 1 s for ``imu6``). The recording's
             ``meta["calibration_window"]`` marks it (:mod:`wearpose.recording.tpose`) and its
             ground truth includes it; the index's ``motion_frames``/``seconds`` count it too.
+        shapes: the wearers (:data:`SHAPES_CHOICES`): ``"none"`` the motion's own body;
+            ``"random"`` / ``"heldout"`` a body shape per clip from the clip seed
+            (:func:`wearpose.sensors.simulate`'s ``shape``), the motion re-fitted to it and
+            stored as the ground truth (its ``betas`` in the recording).
 
     Returns:
         ``{"out", "index", "selected", "simulated", "skipped", "failed", "excluded_nc",
@@ -256,6 +268,8 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         raise ConfigError(f"limit must be >= 1, got {limit!r}")
     if executor not in EXECUTORS:
         raise ConfigError(f"executor must be one of {EXECUTORS}, got {executor!r}")
+    if shapes not in SHAPES_CHOICES:
+        raise ConfigError(f"shapes must be one of {SHAPES_CHOICES}, got {shapes!r}")
     if tpose is None:
         tpose = default_tpose(kit_obj)
     if not (tpose == 0 or tpose >= 0.1):
@@ -284,7 +298,7 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
 
     body_id = _body_asset_id(body)
     settings = _settings(kit_obj.name, None if rate is None else float(rate), noise, offsets, source_pose, body_id, seed,
-                         include_nc, tpose)
+                         include_nc, tpose, shapes)
     key = _key(settings)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -321,7 +335,7 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         s = clip_seed(seed, cid)
         todo.append({"id": cid, "motion_file": str(store.root / e["file"]), "out": str(f), "seed": s, "base_seed": int(seed),
                      "kit": kit_obj.name, "rate": rate, "noise": noise, "offsets": offsets, "source_pose": source_pose,
-                     "tpose": float(tpose), "subject": {"id": f"{e['source']}/{e['subject']}", "note": subject_note},
+                     "tpose": float(tpose), "shapes": shapes, "subject": {"id": f"{e['source']}/{e['subject']}", "note": subject_note},
                      "_row": {"file": rel, "seed": s, "kit": kit_obj.name, "split": e["split"], "source": e["source"],
                               "subject": e["subject"], "licence": e.get("licence"),
                               "noncommercial": is_noncommercial(e.get("licence")), "motion_stamp": e.get("stamp")}})

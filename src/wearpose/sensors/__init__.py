@@ -14,11 +14,11 @@ from wearpose.sensors.mimu import (
     EARTH_FIELD, MimuNoise, ahrs_fusion, birae_3param, birae_6param, birae_6param_to_matrix, simulate_mimu, zhou_6d,
 )
 from wearpose.sensors.normalize import empose_normalize, root_relative_orientations
-from wearpose.sensors.simulate import NoiseConfig, SensorData, SimulationResult, random_body_shape, simulate
+from wearpose.sensors.simulate import SHAPE_STREAMS, NoiseConfig, SensorData, SimulationResult, random_body_shape, simulate
 from wearpose.sensors.vio import VioNoise, simulate_vio
 
 __all__ = [
-    "simulate", "SimulationResult", "SensorData", "NoiseConfig", "random_body_shape",
+    "simulate", "SimulationResult", "SensorData", "NoiseConfig", "random_body_shape", "SHAPE_STREAMS",
     "SensorKit", "SensorSpec", "SENSOR_KINDS", "SITE_SEGMENT", "KitError", "get_kit", "list_kits", "register_kit", "resolve_sites",
     "ImuNoise", "synthetic_acceleration", "angular_velocity", "integrate_gyro", "specific_force", "free_acceleration",
     "simulate_imu",

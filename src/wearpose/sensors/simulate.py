@@ -9,7 +9,8 @@ runs its simulator on its sites: EM (:mod:`.em`), IMU (:mod:`.imu`), MIMU (:mod:
 Randomness: one ``seed`` per call. Every sensor gets its own generator seeded from
 ``(seed, sensor name)``, so a sensor's noise does not change when other sensors are added to or
 removed from a kit. The per-sequence EM offset draw (EM-POSE supp. 2.2) uses ``(seed, "offsets")``,
-a random wearer's body shape (``shape="random"``, :func:`random_body_shape`) ``(seed, "body-shape")``.
+a random wearer's body shape (``shape="random"`` / ``"heldout"``, :func:`random_body_shape`)
+``(seed, "body-shape")`` / ``(seed, "body-shape:heldout")``.
 
 Bodies of every size: ``shape`` (default ``None``: the motion's own ``betas``, unchanged) puts
 the kit on another body shape, the motion re-fitted to it first
@@ -140,19 +141,28 @@ def _generator(seed: int, key: str) -> torch.Generator:
     return g
 
 
-def random_body_shape(seed: int, num_betas: int = 10) -> torch.Tensor:
-    """The body shape ``(num_betas,)`` that ``simulate(..., seed=seed, shape="random")`` puts the
-    kit on: :func:`wearpose.body.shapes.sample_betas` (the asset's adult distribution) from the
-    ``(seed, "body-shape")`` stream. The seed is the clip's simulation seed, so the clip's seed
-    namespace (training or evaluation draws) decides which wearers it meets."""
-    return sample_betas(_generator(seed, "body-shape"), num_betas)
+#: ``shape`` values that draw a wearer, and the generator stream each draws from. ``"random"``
+#: is for training data; ``"heldout"`` for evaluation: a stream no training path draws from, on
+#: top of the evaluation seed namespaces the estimators already use (``clip_seed(..., "eval")``).
+SHAPE_STREAMS: dict[str, str] = {"random": "body-shape", "heldout": "body-shape:heldout"}
+
+
+def random_body_shape(seed: int, num_betas: int = 10, draw: str = "random") -> torch.Tensor:
+    """The body shape ``(num_betas,)`` that ``simulate(..., seed=seed, shape=draw)`` puts the kit
+    on: :func:`wearpose.body.shapes.sample_betas` (the asset's adult distribution) from the
+    ``(seed, SHAPE_STREAMS[draw])`` stream. The seed is the clip's simulation seed, so a clip's
+    wearer is reproducible and the clip's seed namespace also separates training from
+    evaluation wearers."""
+    if draw not in SHAPE_STREAMS:
+        raise ConfigError(f"body shape draw {draw!r}; expected one of {', '.join(SHAPE_STREAMS)}")
+    return sample_betas(_generator(seed, SHAPE_STREAMS[draw]), num_betas)
 
 
 def _shaped(motion: MotionSequence, body: Any, shape: str | torch.Tensor, seed: int) -> MotionSequence:
     if isinstance(shape, str):
-        if shape != "random":
-            raise ConfigError(f"simulate: shape must be 'random', a (num_betas,) tensor or None, got {shape!r}")
-        betas = random_body_shape(seed, int(motion.betas.shape[-1]))
+        if shape not in SHAPE_STREAMS:
+            raise ConfigError(f"simulate: shape must be 'random', 'heldout', a (num_betas,) tensor or None, got {shape!r}")
+        betas = random_body_shape(seed, int(motion.betas.shape[-1]), shape)
     else:
         betas = torch.as_tensor(shape, dtype=torch.float32)
         if tuple(betas.shape) != tuple(motion.betas.shape):
@@ -212,7 +222,8 @@ def simulate(motion: MotionSequence, kit: str | SensorKit, body: Any, *, seed: i
             ``"madgwick_imu"`` (a real AHRS filter, optional package ``ahrs``;
             :func:`wearpose.sensors.mimu.simulate_mimu`).
         shape: the wearer's body shape: ``None`` (default) the motion's ``betas``; ``"random"``
-            one drawn from ``seed`` (:func:`random_body_shape`); or ``(num_betas,)`` betas. Any
+            (training data) or ``"heldout"`` (evaluation) one drawn from ``seed``
+            (:func:`random_body_shape`, :data:`SHAPE_STREAMS`); or ``(num_betas,)`` betas. Any
             other than ``None`` re-fits the motion to that body first (module doc) and returns
             it as :attr:`SimulationResult.motion`.
 
