@@ -82,3 +82,22 @@ def tiny_recording(T: int = 120, rate: float = 60.0, seed: int = 0) -> Recording
 @pytest.fixture
 def recording() -> Recording:
     return tiny_recording()
+
+
+#: SessionID of the test liblsl configuration: an outlet reports it, which proves the file was read.
+LSL_TEST_SESSION = "wearpose-tests"
+
+
+@pytest.fixture(scope="session", autouse=True)
+def lsl_loopback(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """Every stream test's LSL traffic stays on this machine: ``LSLAPICFG`` points at a generated
+    liblsl configuration (``ResolveScope = machine``, ``KnownPeers = {127.0.0.1}``, IPv6 off),
+    set before any test touches pylsl (liblsl reads it at its first call)."""
+    import os
+
+    from wearpose.stream.inputs.lsl import LOOPBACK_CONFIG
+
+    p = tmp_path_factory.mktemp("lsl") / "lsl_api.cfg"
+    p.write_text(LOOPBACK_CONFIG + f"SessionID = {LSL_TEST_SESSION}\n")
+    os.environ["LSLAPICFG"] = str(p)
+    return str(p)

@@ -11,7 +11,9 @@ Conventions (see DESIGN.md):
   (``"ZXY"`` means ``R = Rz @ Rx @ Ry``).
 
 Rotation maths delegates to ``roma`` (BSD-3, well tested, differentiable, numerically careful
-near 0 and pi) wherever it has the function; this module fixes our conventions on top of it.
+near 0 and pi), imported on first use; axis-angle, 6D and quaternion to matrix are written in
+``rotations`` with roma's arithmetic (equal results, tested), so importing the library does not
+import roma (and torch._dynamo with it). This module fixes our conventions on top of it.
 All functions accept any leading batch shape and work on torch tensors; numpy arrays are
 accepted by the ``*_np`` helpers only where file readers need them.
 """

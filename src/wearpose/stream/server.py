@@ -424,6 +424,12 @@ class StreamServer:
         self._server: Any = None
         self._closing = False
         self._tasks: set[asyncio.Task] = set()
+        #: Pose sinks (``wearpose serve --output``): objects with ``pose(PosePacket, rate_hz)``,
+        #: ``stats()`` and ``close()``; called on the event loop for every published pose.
+        self.outputs: list[Any] = []
+        #: Live device inputs feeding subjects (:class:`wearpose.stream.live.InputBridge`), for ``stats``.
+        self.inputs: list[Any] = []
+        self.output_errors = 0
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> StreamServer:
@@ -506,7 +512,9 @@ class StreamServer:
                 "subscriber_queues": [sub.stats() for sub in self.subscribers.values()],
                 "security": {**self.security, "token_required": self.token_required,
                              "allowed_origins": [o for o in self.policy.origin_list if o]},
-                "subjects": {str(k): s.stats() for k, s in self.subjects.items()}, "finished": dict(self.finished)}
+                "subjects": {str(k): s.stats() for k, s in self.subjects.items()}, "finished": dict(self.finished),
+                "inputs": [i.stats() for i in self.inputs], "outputs": [o.stats() for o in self.outputs],
+                "output_errors": self.output_errors}
 
     def _http(self, connection: Any, request: Any) -> Any:
         """The handshake hook: the access rules first (for ``/stats`` too), then ``/stats``."""
@@ -741,6 +749,38 @@ class StreamServer:
         except PacketError as exc:
             self.subjects[subject].counts["malformed"] += 1
             raise exc
+
+    # ------------------------------------------------------------------ local (in-process) subjects
+    async def open_local_subject(self, peer: Any, hello: Hello) -> dict[str, Any]:
+        """Open subject ``hello.subject`` for an in-process source (a live device input): the
+        same path as a connection's ``hello`` (estimator, stride, warm-up), owned by ``peer`` (an
+        object with ``async send(msg)``, which receives the ``ready`` / ``error`` reply and the
+        subject's poses). Returns the ``ready`` reply; StreamError with the server's ``error``."""
+        from wearpose.stream.client import StreamError
+
+        await self._on_hello(peer, hello)
+        s = self.subjects.get(hello.subject)
+        if s is None or s.owner is not peer or s.estimator is None:
+            reply = getattr(peer, "last_control", None) or {}
+            raise StreamError(f"subject {hello.subject} refused: {reply.get('error', 'no ready reply')}")
+        return getattr(peer, "last_control", None) or {}
+
+    def feed_local(self, peer: Any, pkt: FramePacket) -> bool:
+        """One frame of an in-process source's subject, as if it had arrived on the wire (reorder
+        buffer, stride, estimator queue). False when the subject is not open for ``peer``."""
+        s = self.subjects.get(pkt.subject)
+        if s is None or s.owner is not peer:
+            return False
+        self._on_frame(s, pkt, time.perf_counter())
+        return True
+
+    def local_malformed(self, peer: Any, subject: int | None, exc: Exception) -> None:
+        """A packet an in-process source could not decode: counted like a malformed message."""
+        self._malformed(exc, peer, subject)
+
+    async def end_local_subject(self, subject: int) -> dict[str, Any]:
+        """End an in-process source's subject (its device stopped): estimate what arrived, send it."""
+        return await self._end_subject(subject)
 
     # ------------------------------------------------------------------ subjects
     async def _on_hello(self, ws: Any, hello: Hello) -> None:
@@ -987,6 +1027,14 @@ class StreamServer:
             # reported to it) and never stalls the estimation (_Subscriber).
             if sub.wants(pose.subject) and not sub.offer(msg(sub.fmt)):
                 self.subscriber_dropped += 1
+        for out in self.outputs:
+            try:
+                out.pose(pose, s.hello.rate / s.stride)
+            except Exception as exc:  # noqa: BLE001 - a broken output must not stop the stream
+                self.output_errors += 1
+                if self.output_errors <= 20 or self.output_errors % 100 == 0:
+                    log.warning("output %s failed on subject %d seq %d: %s", getattr(out, "name", out), pose.subject,
+                                pose.seq, exc)
         s.counts["published"] += int(sent)
 
     @staticmethod
@@ -1065,49 +1113,52 @@ def _warm_up(est: Estimator, hello: Hello, steps: int, seed: int = 0) -> None:
 
 def estimator_factory(model: str, method: str | None = None, threads: int | None = None) -> Callable[[], Estimator]:
     """``() -> Estimator`` for shipped weights (``wearpose.weights`` name, e.g. ``empose12_cpu``),
-    a checkpoint file, or ``"null"`` (:class:`NullEstimator`, transport only); ``method``
-    overrides the registry name read from the card/checkpoint."""
-    from pathlib import Path
-
-    from wearpose.errors import ConfigError
-    from wearpose.estimators.checkpoint import load_checkpoint
-    from wearpose.estimators.registry import get_estimator
-    from wearpose.weights import card, list_weights, weight_path
+    a checkpoint file (read once, here: :func:`wearpose.estimators.run.open_model`), or ``"null"``
+    (:class:`NullEstimator`, transport only); ``method`` overrides the registry name read from
+    the card/checkpoint."""
+    from wearpose.estimators.run import open_model
 
     if model == "null":
         return NullEstimator
-    if model in list_weights():
-        path, name = weight_path(model), method or card(model)["method"]
-    elif Path(model).is_file():
-        path, name = Path(model), method or load_checkpoint(model).method
-    else:
-        raise ConfigError(f"--model {model!r}: neither shipped weights ({', '.join(list_weights()) or 'none'}) "
-                          f"nor a checkpoint file")
-    cls = get_estimator(name)
+    factory = open_model(model, method).factory
     if threads is not None:
         import torch
 
         torch.set_num_threads(threads)
-
-    def make() -> Estimator:
-        return cls.load(path)
-
-    return make
+    return factory
 
 
 def run_server(estimator_factory: Callable[[], Estimator], host: str = "127.0.0.1", port: int = 8765,
-               on_start: Callable[[StreamServer], None] | None = None, **kwargs: Any) -> dict[str, Any]:
-    """Serve until SIGINT/SIGTERM, then shut down cleanly; returns the final stats."""
+               on_start: Callable[[StreamServer], None] | None = None, *, inputs: Sequence[Any] = (),
+               outputs: Sequence[Any] = (), input_subject: int = 0, **kwargs: Any) -> dict[str, Any]:
+    """Serve until SIGINT/SIGTERM, then shut down cleanly; returns the final stats.
+
+    ``inputs``: live device inputs (:class:`wearpose.stream.inputs.LiveInput`), each feeding
+    subject ``input_subject + i``; ``outputs``: pose sinks (:mod:`wearpose.stream.outputs`), fed
+    every published pose. Inputs are opened after the server started and closed (their buffered
+    frames handed on) before it stops; outputs are closed last."""
     async def main() -> dict[str, Any]:
+        from wearpose.stream.live import InputBridge
+
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
         server = await StreamServer(estimator_factory, host, port, **kwargs).start()
-        if on_start is not None:
-            on_start(server)
-        await stop.wait()
-        await server.stop()
+        server.outputs.extend(outputs)
+        bridges = [InputBridge(server, src, input_subject + i) for i, src in enumerate(inputs)]
+        try:
+            for b in bridges:
+                await b.start()
+            if on_start is not None:
+                on_start(server)
+            await stop.wait()
+        finally:
+            for b in bridges:
+                await b.stop()
+            await server.stop()
+            for out in server.outputs:
+                out.close()
         return server.stats()
 
     return asyncio.run(main())
