@@ -138,6 +138,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--limit", type=int, default=None, help="N clips spread over the split")
     ap.add_argument("--noise", default="default", choices=("default", "none"))
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--bodies", default="corpus", choices=("corpus", "heldout"),
+                    help="wearers: the clips' own body, or one per clip from the held-out shape stream (issue 23)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--sit-hours", type=float, default=1.0, help="length of the still-sitting input (0 = skip)")
     ap.add_argument("--sit-transitions", default="slerp", choices=("slerp", "lean"),
@@ -180,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
         if d % 5 == 0 or d == t:
             print(f"  {d}/{t} clips ({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
 
-    res = evaluate_variants(variants, a.split, a.limit, noise=a.noise, seed=a.seed, progress=prog)
+    res = evaluate_variants(variants, a.split, a.limit, noise=a.noise, seed=a.seed, progress=prog, bodies=a.bodies)
     res["skipped"] = skipped
     sitting = []
     if a.sit_hours > 0:

@@ -112,8 +112,13 @@ def edge_cut(T: int, trim: int) -> slice | None:
 
 
 def simulate_clip(motion: Any, cfg: PipConfig, body: Any, seed: int, noise: str | None = None,
-                  trim: int = EDGE_FRAMES) -> dict[str, Any]:
+                  trim: int = EDGE_FRAMES, shape: str | None = None) -> dict[str, Any]:
     """Simulate one clip for PIP (module doc, steps 1-4).
+
+    ``shape`` (default ``None``: the clip's own body): the wearer's body shape as
+    :func:`wearpose.sensors.simulate` takes it (``"random"`` for training, ``"heldout"`` for
+    evaluation); the clip is then re-fitted to that body and the result's ``motion``, ``pose``,
+    ``trans``, ``betas`` and targets are the re-fitted motion's.
 
     ``trim`` frames are cut from both ends after simulating: the smoothed acceleration stencil
     is one-sided there, and many clips begin or end with a jump into or out of a rest pose
@@ -133,7 +138,8 @@ def simulate_clip(motion: Any, cfg: PipConfig, body: Any, seed: int, noise: str 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the kit's documented site substitutions warn per call
         sim = simulate(m, cfg.kit, body, seed=seed, noise=noise or cfg.train_noise, rate=cfg.rate,
-                       imu_orientation="segment")
+                       imu_orientation="segment", shape=shape)
+    m = sim.motion if sim.motion is not None else m
     names = list(sim.kit.sensor_names)
     acc = torch.stack([sim[n].acceleration for n in names], 1).float()
     ori = torch.stack([sim[n].orientation for n in names], 1).float()

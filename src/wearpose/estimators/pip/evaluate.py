@@ -120,13 +120,20 @@ def clip_metrics(est: Any, r: dict[str, Any], body: Any, gt: Any = None) -> tupl
 
 def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int | None = None, *, noise: str = "default",
                       seed: int = 0, store: Any = None, progress: Callable[[int, int], None] | None = None,
-                      min_travel: float = 0.0) -> dict[str, Any]:
+                      min_travel: float = 0.0, bodies: str = "corpus") -> dict[str, Any]:
     """Evaluate several estimators (name -> :class:`PipEstimator`, all with one body) on the same
     simulated clips (module doc); ``min_travel`` > 0 keeps only the clips whose
-    :func:`clip_travel_m` reaches it (m; applied before ``limit``). Returns ``{"rows": {name:
-    {...}}, "clips", "frames", ...}``."""
+    :func:`clip_travel_m` reaches it (m; applied before ``limit``). ``bodies``: ``"corpus"``
+    (default) the clips' own body (beta = 0); ``"heldout"`` a wearer per clip drawn from the
+    body asset's shape space in the held-out stream of the evaluation seed
+    (:func:`wearpose.sensors.random_body_shape`; never a training draw), the clip re-fitted to it
+    (its shape is part of the known initial state). Returns ``{"rows": {name: {...}}, "clips",
+    "frames", ...}``."""
+    from wearpose.errors import ConfigError
     from wearpose.motion import CorpusStore
 
+    if bodies not in ("corpus", "heldout"):
+        raise ConfigError(f"bodies must be 'corpus' or 'heldout', got {bodies!r}")
     store = store or CorpusStore()
     ids = store.clips(split=split)
     first = next(iter(variants.values()))
@@ -140,7 +147,8 @@ def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int 
     frames = 0
     gt_zmp = [0.0, 0]
     for c, cid in enumerate(ids):
-        r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, seed, "pip-eval"), noise=noise)
+        r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, seed, "pip-eval"), noise=noise,
+                          shape="heldout" if bodies == "heldout" else None)
         T = int(r["x"].shape[0])
         frames += T
         gt = body(r["pose"], r["betas"], r["trans"], return_normals=False)
@@ -167,6 +175,7 @@ def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int 
                 a["pen"].append(info["max_penetration_m"])
             a["per_clip"].append({"clip": cid, "frames": T, "translation_error_cm": info["translation_error_cm"],
                                   "final_error_m": info["final_error_m"], "travelled_m": info["travelled_m"],
+                                  **({"betas": [round(float(x), 4) for x in r["betas"]]} if bodies != "corpus" else {}),
                                   "zmp_distance_m": info["zmp_sum_m"] / max(info["zmp_frames"], 1),
                                   **{k: info[k] for k in ("max_penetration_m", "penetration_at") if k in info}})
         if progress is not None:
@@ -198,6 +207,7 @@ def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int 
     ground_truth = {"zmp_distance_m": gt_zmp[0] / gt_zmp[1] if gt_zmp[1] else None,
                     "zmp_frames_pct": gt_zmp[1] / max(frames, 1) * 100}
     return {"split": split, "clips": len(ids), "frames": frames, "noise": noise, "seed": seed, "rows": rows,
+            **({"bodies": bodies} if bodies != "corpus" else {}),
             "ground_truth": ground_truth,
             "protocol": "simulated imu6 (bone orientations, free acc, default IMU noise), known initial state, "
                         "rotation metrics with ignored joints masked (PIP protocol)"}
