@@ -160,7 +160,8 @@ def stream_replay(
         t = Table(title=f"{recording.name} -> {url} (subject {subject}, {r['rate_hz']:.0f} Hz, {r['format']})")
         t.add_column("")
         t.add_column("value")
-        for k in ("frames_sent", "frames_expected", "poses_received", "frames_lost", "invalid_pose_frames"):
+        for k in ("frames_sent", "frames_expected", "poses_received", "frames_lost", "frames_shed_by_server",
+                  "invalid_pose_frames"):
             t.add_row(k, str(r[k]))
         for k in ("latency_ms", "transport_ms", "server_ms", "compute_ms"):
             s = r[k]
@@ -173,6 +174,8 @@ def stream_replay(
     if note:  # e.g. a 120 Hz stream into weights trained at 30 Hz on a server started without --stride auto
         err_console.print(f"[yellow]warning[/]: the server says: {escape(note)}. Start it with --stride auto "
                           f"or stream at the estimator's rate.")
+    for w in res.get("warnings", ()):  # overload: frames shed by the server, latency of a starved machine
+        err_console.print(f"[yellow]warning[/]: {escape(w)}")
     if res.get("ended_by_server"):
         err_console.print(f"[bold red]error:[/] the stream stopped early after {res['frames_sent']} frames: "
                           f"{escape(res['ended_by_server'])}")

@@ -135,7 +135,9 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         e.g. shutting down, or closed the connection): the replay stops sending at once and
         returns what it has, it never waits for a server that is gone; ``frames_cut_at_end``:
         frames sent while the server was already ending the subject (it did not accept them;
-        not counted in ``frames_expected`` / ``frames_lost``).
+        not counted in ``frames_expected`` / ``frames_lost``); ``frames_shed_by_server``: frames
+        the overloaded server shed (``Limits.max_lag_s``; part of ``frames_lost``) and
+        ``warnings``: sentences for the user (shedding, a median latency over 100 ms).
     """
     faults = faults or Faults()
     rng = np.random.default_rng(faults.seed)
@@ -259,11 +261,21 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
                 "transport_ms_mean": round(float((a_e2e - a_srv)[top].mean()), 3),
                 "swapped_pair_frames": int(sum(1 for q in seqs if q in swapped or q - 1 in swapped)),
                 "in_first_second": int((seqs < st.rate).sum())}
+    shed = int(server_stats.get("shed", 0))
+    warnings_: list[str] = []
+    if shed:
+        warnings_.append(f"the server was overloaded and shed {shed} of {len(expected)} frames unestimated (each had "
+                         "waited longer than its max lag with newer frames queued: the overload policy, "
+                         "docs/streaming.md); give it more CPU or stream at the estimator's rate (--stride auto)")
+    late = _summary_ms(e2e)
+    if late["median"] is not None and late["median"] > 100.0:
+        warnings_.append(f"median latency {late['median']:.0f} ms: the server or this client is starved of CPU")
     return {
+        "warnings": warnings_, "frames_shed_by_server": shed,
         "subject": subject, "format": fmt, "rate_hz": st.rate, "sensors": len(st.names), "channels": list(st.channels),
         "frames_sent": len(sent), "frames_expected": len(expected), "poses_received": len(recv),
         "frames_lost": len(expected) - len(got),
-        "frames_lost_by_server": int(server_stats.get("lost", 0)) + int(server_stats.get("late", 0)),
+        "frames_lost_by_server": int(server_stats.get("lost", 0)) + int(server_stats.get("late", 0)) + shed,
         "gave_up_waiting": gave_up, "drain_s": round(drain_s, 3), "ended_by_server": ended, "frames_cut_at_end": cut,
         "frames_queued_at_server_at_end": server_stats.get("queue_now") if gave_up else 0,
         "invalid_pose_frames": sum(1 for s in got if not recv[s][3]),

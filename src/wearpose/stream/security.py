@@ -256,6 +256,10 @@ class Limits:
         subjects: subjects one connection may have open at once.
         subscriber_queue: poses queued per subscriber; beyond it the oldest is dropped (the
             overload policy, ``docs/streaming.md``).
+        max_lag_s: the estimator overload policy: a frame that has waited longer than this since
+            it arrived, with newer frames queued behind it, is shed unestimated (counted ``shed``
+            per subject, in the final ``bye`` stats and ``/stats``), so a starved server catches up
+            with the newest frames instead of answering seconds late. ``None``: never shed.
     """
 
     message_bytes: int = MAX_MESSAGE_BYTES
@@ -265,11 +269,14 @@ class Limits:
     subscribers: int = 32
     subjects: int = 16
     subscriber_queue: int = 256
+    max_lag_s: float | None = 0.5
 
     def __post_init__(self) -> None:
         for name in ("message_bytes", "subscriptions", "subscribers", "subjects", "subscriber_queue"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"Limits.{name}: expected a positive integer, got {v!r}")
+        if self.max_lag_s is not None and not self.max_lag_s > 0:
+            raise ConfigError(f"Limits.max_lag_s: expected a positive number of seconds or None, got {self.max_lag_s!r}")
         if not self.rate > 0:
             raise ConfigError(f"Limits.rate: expected a positive number of messages per second, got {self.rate!r}")

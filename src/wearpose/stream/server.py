@@ -23,8 +23,9 @@ What the server does with imperfect input (all counted in ``stats``):
   ``error`` naming the problem, counted (``refused_total``); other subjects go on.
 - **UDP** (optional ``udp_port``): the same messages as datagrams; a lost datagram is a lost
   frame (counted like any gap), replies go back to the sender's address.
-- **Estimator slower than the sensor rate**: frames queue (never dropped); ``queue_max`` and the
-  ``server_ms`` of every pose show it.
+- **Estimator slower than the sensor rate**: frames queue; one that has waited longer than
+  ``Limits.max_lag_s`` (0.5 s) with newer frames behind it is shed unestimated (counted ``shed``;
+  the overload policy): a starved server answers the newest frames, not ever later ones.
 
 Each subject has its own estimator thread fed by a queue, off the event loop, so network I/O
 keeps flowing while a frame is being estimated; a subject's frames are estimated in order, and
@@ -261,6 +262,7 @@ class _Subject:
         ("received", "estimated", "published", "malformed", "masked_sensor_samples", "decimated", "estimator_errors",
          "abandoned_at_shutdown", "refused_foreign",  # frames / bye / hello for it from another connection
          "after_end",  # frames that arrived while the subject was ending (not estimated)
+         "shed",  # overload policy: waited > Limits.max_lag_s with newer frames queued, not estimated
          "queue_max"), 0))
     stages: StageLog = field(default_factory=StageLog)
     compute_cpu_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_SAMPLES))
@@ -961,6 +963,10 @@ class StreamServer:
                 if s.abandon:
                     continue
                 pkt, t_arr, t_rel = item
+                lag = self.limits.max_lag_s
+                if lag is not None and not s.inbox.empty() and time.perf_counter() - t_arr > lag:
+                    s.counts["shed"] += 1  # overload: newer frames wait behind this stale one
+                    continue
                 try:
                     frame = SensorFrame(pkt.timestamp, hello.sensors, pkt.valid,
                                         frame_channels(pkt.data, pkt.valid, hello.channels))
