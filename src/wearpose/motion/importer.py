@@ -12,11 +12,14 @@ Pipeline of :func:`import_motion` (each step's outcome goes into :class:`ImportR
    1/0.45 inch); a unit declared by the file (ASF ``:units``) or by a built-in corpus map is kept
    when it gives a plausible adult-to-child leg (0.35-1.4 m), otherwise the candidate whose leg
    is nearest 0.8 m wins. ``units=`` overrides.
-4. **up axis** (:func:`detect_up`): from the frames where the body is most extended (head to the
-   mid-ankle point at least 90% of its longest over the clip: standing frames), the mean
-   ankles -> head direction; the nearest signed world axis (``y``, ``z``, ``-z``, ...) is up and
-   the whole clip is turned about the origin so that it becomes +Y (Z up -> Y up is
-   :data:`wearpose.geometry.Z_UP_TO_Y_UP`). Facing is kept as captured. ``up=`` overrides.
+4. **up axis** (:func:`detect_up`): over the whole clip, two kinds of evidence: the floor (along
+   the true up the body's lowest point per frame stays on the floor; along a horizontal axis it
+   moves as the body travels, turns or lies down) and the standing frames (the mean ankles ->
+   head direction where the body is most extended). The floor decides when it is decisive,
+   else the standing frames; the signed world axis (``y``, ``z``, ``-z``, ...) is up and the
+   whole clip is turned about the origin so that it becomes +Y (Z up -> Y up is
+   :data:`wearpose.geometry.Z_UP_TO_Y_UP`). Facing is kept as captured. When the evidence
+   disagrees or is weak the report warns. ``up=`` overrides.
 5. **rest pose**: retargeting (:func:`wearpose.motion.retarget_bvh`) rebuilds per joint the
    rotation that takes the source's zero pose to SMPL's T-pose (bone directions, left-right
    vectors, knee/elbow hinge axes), so an A-pose or any bind pose keeps SMPL pose parameters
@@ -212,16 +215,86 @@ def detect_units(leg_file_units: float, declared: tuple[str, float] | None = Non
 
 
 # ---------------------------------------------------------------------------- up axis
-def detect_up(motion: BvhMotion, smap: SkeletonMap, max_frames: int = 300) -> dict[str, Any]:
-    """Up axis of the file's world from its standing frames (rule in the module doc).
+#: Frames of the clip the up-axis evidence is computed on (evenly spread over the whole clip).
+UP_MAX_FRAMES = 600
+#: Floor evidence along a direction counts only when the body's extent along it changes by at
+#: least this many leg lengths over the clip (lying down, sitting up, getting up): a clip that
+#: keeps one posture tells nothing about the floor (a straight walk keeps its sideways extremes
+#: as still as its feet).
+UP_FLOOR_MIN_EXTENT_CHANGE = 0.3
+#: ... and when the lowest point along it moves less than this share of that change and less
+#: than :data:`UP_FLOOR_MAX_SUPPORT` leg lengths (a floor holds the lowest point to a few cm).
+UP_FLOOR_RATIO = 0.15
+UP_FLOOR_MAX_SUPPORT = 0.08
+#: Standing evidence whose mean direction agrees less than this (cosine) is weak: a warning.
+UP_STANDING_AGREEMENT = 0.9
+
+
+def floor_evidence(P: torch.Tensor, leg: float) -> dict[str, dict[str, float]]:
+    """Per signed world axis ``a`` (``"x"``, ``"-x"``, ...), from joint positions ``P`` ``(T, J, 3)``
+    (file units) and the leg length (same units):
+
+    - ``support``: spread of the body's lowest point along ``a`` over the clip (median minus
+      5th percentile of ``min_j a . P[t, j]``: jumps lift only the upper half), leg lengths;
+    - ``extent_change``: how much the body's extent along ``a`` (highest minus lowest point)
+      changes (95th minus 5th percentile), leg lengths;
+    - ``ratio``: support / extent_change: small when the body changes posture along ``a`` while
+      its lowest point stays put -- a floor;
+    - ``on_support``: mean share of joints within 0.15 leg lengths of the lowest point (a body
+      lying on a floor rests many joints on it; the far end of a lying body, only its feet).
+    """
+    out: dict[str, dict[str, float]] = {}
+    qs = torch.tensor([0.05, 0.5, 0.95], dtype=P.dtype)
+    for k in range(3):
+        for sign in (1.0, -1.0):
+            h = sign * P[..., k]
+            low, high = h.amin(dim=1), h.amax(dim=1)
+            ql, qe = torch.quantile(low, qs), torch.quantile(high - low, qs)
+            support = float(ql[1] - ql[0]) / max(leg, 1e-12)
+            change = float(qe[2] - qe[0]) / max(leg, 1e-12)
+            near = float(((h - low[:, None]) < 0.15 * leg).double().mean())
+            out[("" if sign > 0 else "-") + "xyz"[k]] = {"support": round(support, 4), "extent_change": round(change, 4),
+                                                        "ratio": round(support / max(change, 1e-12), 4),
+                                                        "on_support": round(near, 4)}
+    return out
+
+
+def _floor_axis(ev: dict[str, dict[str, float]]) -> str | None:
+    """The signed axis the floor evidence picks, or None when it does not decide (rule in
+    :func:`floor_evidence`; between two floor-like axes, the one with more joints on it)."""
+    cand = [a for a, e in ev.items() if e["extent_change"] >= UP_FLOOR_MIN_EXTENT_CHANGE and e["ratio"] < UP_FLOOR_RATIO
+            and e["support"] < UP_FLOOR_MAX_SUPPORT]
+    if not cand:
+        return None
+    best = min(ev[a]["ratio"] for a in cand)
+    # Within a factor 3 of the best ratio the evidence is alike (a sit-up keeps both the back and
+    # the feet at the far end still): the floor is the side more joints rest on.
+    return max((a for a in cand if ev[a]["ratio"] <= 3 * best), key=lambda a: (ev[a]["on_support"], -ev[a]["ratio"]))
+
+
+def detect_up(motion: BvhMotion, smap: SkeletonMap, max_frames: int = UP_MAX_FRAMES) -> dict[str, Any]:
+    """Up axis of the file's world from the whole clip (up to ``max_frames`` frames spread
+    evenly over it), from two kinds of evidence:
+
+    - **standing**: in the frames where the body is most extended (head to the mid-ankle point
+      at least 90 % of its longest), the mean ankles -> head direction. Lying down is extended
+      too, so this alone calls a clip that lies down "Z up" or "X up";
+    - **floor** (:func:`floor_evidence`): a body on a floor keeps its lowest point on it while
+      it changes posture (lies down, sits up, gets up); along a horizontal axis the lowest point
+      moves as the posture changes.
+
+    The floor decides when it has evidence (:func:`_floor_axis`), else the standing frames do.
+    When the two disagree, or the standing evidence is weak and the floor has none, the
+    result's ``warnings`` say so (pass ``--up`` if the axis is wrong).
 
     Returns:
-        ``{"axis": "y"|"-y"|"z"|..., "how", "agreement"}`` (agreement = cosine between the
-        measured up direction and the chosen axis).
+        ``{"axis": "y"|"-y"|"z"|..., "how", "agreement"`` (cosine between the standing direction
+        and the axis), ``"evidence"`` (``standing``: axis, agreement, frames; ``floor``: the axis
+        it picks or None, and per signed axis :func:`floor_evidence`), ``"warnings"``}.
     """
     T = motion.num_frames
-    step = max(1, T // max_frames)
-    sub = BvhMotion(motion.skeleton, motion.frame_time, motion.rotations[::step], motion.translations[::step], motion.path)
+    idx = torch.linspace(0, T - 1, min(T, max_frames)).round().long().unique()
+    sub = BvhMotion(motion.skeleton, motion.frame_time, motion.rotations[idx], motion.translations[idx], motion.path)
     _, P = bvh_forward_kinematics(sub)
     skel = motion.skeleton
     top_name = next(smap.joints[k] for k in ("head", "neck", "spine3", "spine2", "spine1", "pelvis") if k in smap.joints)
@@ -232,10 +305,34 @@ def detect_up(motion: BvhMotion, smap: SkeletonMap, max_frames: int = 300) -> di
     sel = ext >= 0.9 * ext.max()
     u = (v[sel] / ext[sel, None].clamp_min(1e-12)).sum(0)
     u = u / u.norm().clamp_min(1e-12)
-    k = int(u.abs().argmax())
-    axis = ("-" if float(u[k]) < 0 else "") + "xyz"[k]
-    return {"axis": axis, "how": f"detected from {int(sel.sum())} standing frames ({top_name} above the ankles)",
-            "agreement": float(u.abs().max())}
+    k_stand = int(u.abs().argmax())
+    stand_axis = ("-" if float(u[k_stand]) < 0 else "") + "xyz"[k_stand]
+    try:
+        leg = leg_length(motion, smap)
+    except RetargetError:
+        leg = float(ext.max()) / 2
+    fev = floor_evidence(P, leg)
+    floor_axis = _floor_axis(fev)
+    axis = floor_axis if floor_axis is not None else stand_axis
+    k = "xyz".index(axis[-1])
+    agreement = float((-1.0 if axis.startswith("-") else 1.0) * u[k])
+    if floor_axis is not None:
+        e = fev[floor_axis]
+        how = (f"detected from the whole clip ({len(idx)} frames): the floor (the body's extent along {axis} changes "
+               f"{e['extent_change']:.2f} leg lengths while its lowest point moves {e['support']:.2f})")
+    else:
+        how = f"detected from the whole clip ({len(idx)} frames): {int(sel.sum())} standing frames ({top_name} above the ankles)"
+    warnings = []
+    if floor_axis is not None and floor_axis != stand_axis:
+        warnings.append(f"up axis: the most extended frames point along {stand_axis} (agreement {abs(float(u[k_stand])):.2f}), "
+                        f"but the floor says {axis} (the clip lies down, sits up or gets up); {axis} was used "
+                        f"(pass --up {stand_axis} if the subject is upright along it)")
+    elif floor_axis is None and agreement < UP_STANDING_AGREEMENT:
+        warnings.append(f"up axis: weak evidence: the most extended frames agree with {axis} only {agreement:.2f} and the "
+                        "clip never changes posture on a floor; check the result (wearpose view) and pass --up if it is wrong")
+    evidence = {"standing": {"axis": stand_axis, "agreement": round(abs(float(u[k_stand])), 4), "frames": int(sel.sum())},
+                "floor": {"axis": floor_axis, "per_axis": fev}}
+    return {"axis": axis, "how": how, "agreement": agreement, "evidence": evidence, "warnings": warnings}
 
 
 def to_y_up(motion: BvhMotion, axis: str) -> BvhMotion:
@@ -429,6 +526,7 @@ def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
         up_res = {"axis": "y", "how": "declared (corpus skeleton)", "agreement": float("nan")}
     else:
         up_res = detect_up(motion, smap)
+    up_warnings = up_res.pop("warnings", [])
     motion_y = to_y_up(motion, up_res["axis"])
     m = {"source_format": fmt, "import": {}}
     m.update(dict(meta or {}))
@@ -448,6 +546,7 @@ def import_motion(path: str | Path, rest_joints: torch.Tensor | None = None,
     report.bone_error_deg = bone_error_summary(res, rest)
     if "WARNING" in str(ures["how"]):
         report.warnings.append(f"units: {ures['how'].split('WARNING: ')[-1]}; pass --units if the leg length {ures['leg_m']:.3g} m is wrong")
+    report.warnings += up_warnings
     report.warnings += report.bone_error_deg["warnings"]
     if motion.meta.get("fps_assumed"):
         report.map_notes.append(f"AMC stores no frame rate: {res.sequence.fps:g} fps assumed (pass fps/--fps)")
@@ -521,5 +620,5 @@ def import_paths(paths: Sequence[str | Path], out_dir: str | Path, rest_joints: 
 
 
 __all__ = ["import_motion", "import_paths", "collect_motion_files", "read_motion_file", "ImportReport", "Imported",
-           "detect_units", "detect_up", "leg_length", "parse_units", "rest_pose_correction", "to_y_up",
+           "detect_units", "detect_up", "floor_evidence", "leg_length", "parse_units", "rest_pose_correction", "to_y_up",
            "UNITS", "UP_AXES", "IMPORT_BONE_PAIRS", "MOTION_SUFFIXES", "BONE_WARN_DEG", "bone_error_summary"]

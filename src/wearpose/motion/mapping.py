@@ -440,6 +440,16 @@ def _check_tree(smap_joints: dict[str, str], skel: BvhSkeleton) -> list[tuple[st
     return bad
 
 
+def _missing_lines(missing: list[str], skel: Any, joints: Mapping[str, str]) -> str:
+    """Joint-map lines for SMPL joints no joint was found for, and the skeleton's joints that
+    nothing is mapped to yet (the candidates for the right-hand side)."""
+    used = set(joints.values())
+    free = [n for n in skel.names if n not in used]
+    lines = ", ".join(f"'{m}: <your joint>'" for m in missing)
+    cand = ", ".join(free[:12]) + ("..." if len(free) > 12 else "")
+    return f"{lines} (joints of yours mapped to nothing yet: {cand})" if free else lines
+
+
 def match_skeleton(skel: BvhSkeleton, offsets: np.ndarray, joint_map: str | Path | Mapping[str, Any] | None = None,
                    path: str | Path = "<skeleton>") -> SkeletonMatch:
     """Map ``skel`` onto SMPL-24 (precedence in the module doc).
@@ -495,7 +505,8 @@ def match_skeleton(skel: BvhSkeleton, offsets: np.ndarray, joint_map: str | Path
     if missing:
         raise InputFileError(path, f"no joint found for SMPL {', '.join(missing)} (skeleton root {skel.names[0]!r}, {skel.num_joints} joints)",
                              "a skeleton whose leg joints are named (thigh/upleg, shin/calf/leg, foot/ankle with a left/right mark), "
-                             "or a --joint-map YAML file 'left_hip: YourThighJoint' (see docs/motion-import.md)", field=f"joint {missing[0]}")
+                             f"or a --joint-map YAML file with the lines {_missing_lines(missing, skel, joints)} "
+                             "(see docs/motion-import.md)", field=f"joint {missing[0]}")
     for n, anc in _check_tree(joints, skel):
         if user["joints"].get(n) or user["joints"].get(anc):
             raise InputFileError(path, f"joint map: {joints[n]} (SMPL {n}) is not below {joints[anc]} (SMPL {anc})",
