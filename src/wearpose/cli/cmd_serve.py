@@ -69,16 +69,47 @@ def serve(
                                                                  "its connection)."),
     max_subscriptions: int = typer.Option(16, min=1, help="Subject ids one subscription may name (null = all "
                                                           "counts as one)."),
+    input_: Optional[List[str]] = typer.Option(None, "--input", help="Live device input (repeatable): lsl, osc or mvn; "
+                                                                     "the i-th feeds subject --input-subject + i "
+                                                                     "(docs/devices.md)."),
+    input_subject: int = typer.Option(0, help="Subject id of the first --input."),
+    device_host: str = typer.Option("127.0.0.1", help="Interface the OSC and MVN inputs listen on."),
+    device_rate: Optional[float] = typer.Option(None, help="Device frame rate, Hz (OSC: required; MVN: default 60; "
+                                                           "LSL: default the stream's nominal rate)."),
+    lsl_stream: str = typer.Option("wearpose-sensors", help="--input lsl: name of the LSL sensor stream."),
+    lsl_loopback: bool = typer.Option(False, "--lsl-loopback", help="Keep LSL on this machine: a liblsl config with "
+                                                                   "ResolveScope machine, KnownPeers 127.0.0.1, "
+                                                                   "IPv6 off (LSLAPICFG)."),
+    osc_profile: str = typer.Option("ngimu", help="--input osc: address map, ngimu, generic or a YAML file."),
+    osc_sensor: Optional[List[str]] = typer.Option(None, "--osc-sensor", help="--input osc: NAME=PORT (ngimu: one UDP "
+                                                                              "port per device) or NAME (generic), "
+                                                                              "repeatable."),
+    osc_port: int = typer.Option(9000, help="--input osc, address profiles: the one UDP port."),
+    mvn_port: int = typer.Option(9763, help="--input mvn: UDP port of MVN's network streamer."),
+    mvn_segments: Optional[str] = typer.Option(None, help="--input mvn: tracker segments, comma-separated (e.g. "
+                                                          "pelvis,head,left_forearm); default: the first datagram's."),
+    mvn_character: int = typer.Option(0, help="--input mvn: MVN character ID."),
+    output: Optional[List[str]] = typer.Option(None, "--output", help="Pose output (repeatable): vmc (VMC over OSC) "
+                                                                      "or lsl (an LSL outlet per subject)."),
+    vmc_host: str = typer.Option("127.0.0.1", help="--output vmc: the VMC receiver's host."),
+    vmc_port: int = typer.Option(39539, help="--output vmc: the VMC receiver's UDP port."),
+    vmc_subject: int = typer.Option(0, help="--output vmc: the subject that drives the avatar."),
+    lsl_out_name: str = typer.Option("wearpose-poses", help="--output lsl: stream name (NAME-SUBJECT per subject)."),
     log_level: str = typer.Option("INFO", help="Python logging level."),
     as_json: bool = typer.Option(False, "--json", help="Print the final stats as JSON at shutdown."),
 ) -> None:
     """Run the streaming server: sensor frames in, poses out (WebSocket, JSON or binary packets).
+
+    Live devices (--input lsl|osc|mvn) feed subjects directly; --output vmc|lsl sends every pose
+    on to animation tools and lab recorders (docs/devices.md).
 
     Runs until Ctrl-C / SIGTERM, then finishes the frames it has received and closes cleanly.
     Packet formats and the security rules (Origin allow-list, access token, limits): docs/streaming.md.
     Stats: send {"type": "stats"} or GET http://HOST:PORT/stats.
 
     Example: wearpose serve --model empose12_cpu --port 8765
+
+    Example: wearpose serve --model pip_cpu --input mvn --mvn-segments pelvis,head,left_forearm,right_forearm,left_lower_leg,right_lower_leg --output vmc
     """
     from wearpose.cli.models import check_pose_weights
     from wearpose.stream import estimator_factory, run_server
@@ -103,11 +134,49 @@ def serve(
                           f"--token or WEARPOSE_TOKEN", highlight=False, soft_wrap=True)
 
     limits = Limits(message_bytes=max_message_bytes, rate=rate_limit, subscriptions=max_subscriptions)
+    inputs, outputs = _devices(input_, device_host, device_rate, lsl_stream, lsl_loopback, osc_profile, osc_sensor,
+                               osc_port, mvn_port, mvn_segments, mvn_character, output, vmc_host, vmc_port, vmc_subject,
+                               lsl_out_name)
     final = run_server(factory, host, port, on_start=started, reorder_window=reorder_window, stride=_stride(stride),
                        workers=workers, udp_port=udp_port, warmup=warmup, threads=threads, token=token,
-                       require_token=require_token, allow_origins=origins, limits=limits)
+                       require_token=require_token, allow_origins=origins, limits=limits, inputs=inputs,
+                       outputs=outputs, input_subject=input_subject)
     _emit(final, as_json, lambda r: console.print(f"stopped; subjects served: {len(r['finished'])}, "
                                                   f"malformed messages: {r['malformed_total']}"))
+
+
+def _devices(inputs: Optional[List[str]], host: str, rate: Optional[float], lsl_stream: str, lsl_loopback: bool,
+             osc_profile: str, osc_sensor: Optional[List[str]], osc_port: int, mvn_port: int, mvn_segments: Optional[str],
+             mvn_character: int, outputs: Optional[List[str]], vmc_host: str, vmc_port: int, vmc_subject: int,
+             lsl_out_name: str) -> tuple[list[Any], list[Any]]:
+    """The --input / --output objects (library: wearpose.stream.inputs / outputs)."""
+    from wearpose.errors import ConfigError
+    from wearpose.stream.inputs import make_input
+    from wearpose.stream.inputs.osc import parse_sensor_ports
+    from wearpose.stream.outputs import make_output
+
+    if lsl_loopback:
+        _lsl_loopback()
+    try:
+        sensors = parse_sensor_ports(osc_sensor) if osc_sensor else None
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    segs = [x.strip() for x in mvn_segments.split(",") if x.strip()] if mvn_segments else None
+    ins = [make_input(n, host=host, rate=rate, lsl_stream=lsl_stream, osc_profile=osc_profile, osc_sensors=sensors,
+                      osc_port=osc_port, mvn_port=mvn_port, mvn_segments=segs, mvn_character=mvn_character)
+           for n in inputs or []]
+    outs = [make_output(n, vmc_host=vmc_host, vmc_port=vmc_port, vmc_subject=vmc_subject, lsl_name=lsl_out_name)
+            for n in outputs or []]
+    return ins, outs
+
+
+def _lsl_loopback() -> None:
+    import tempfile
+
+    from wearpose.stream.inputs.lsl import write_loopback_config
+
+    path = write_loopback_config(Path(tempfile.mkdtemp(prefix="wearpose-lsl-")) / "lsl_api.cfg")
+    err_console.print(f"LSL kept on this machine: LSLAPICFG={path}", highlight=False)
 
 
 @stream_app.command("replay")

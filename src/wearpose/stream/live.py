@@ -55,7 +55,7 @@ class InputBridge:
         self.subject_info = dict(subject_info or {})
         self.peer = _LocalPeer(source.name)
         self.ready: dict[str, Any] | None = None
-        self._early: list[DeviceFrame] = []  # frames emitted before the subject was open
+        self._early: list[Any] = []  # frames (and protocol violations) before the subject was open, in order
         self.channels: tuple[str, ...] = ()
         self.counts = {"frames": 0, "converted_malformed": 0, "early": 0}
 
@@ -70,7 +70,7 @@ class InputBridge:
         early, self._early = self._early, []
         self.counts["early"] = len(early)
         for f in early:
-            self._frame(f)
+            self._malformed(f) if isinstance(f, Exception) else self._frame(f)
         log.info("input %s: subject %d, %d sensors at %g Hz (%s)", self.source.name, self.subject,
                  len(self.source.sensors), self.source.rate, ", ".join(self.source.names))
         return self.ready
@@ -96,7 +96,10 @@ class InputBridge:
         self.server.feed_local(self.peer, FramePacket(self.subject, f.seq, f.timestamp, f.valid.copy(), data))
 
     def _malformed(self, exc: Exception) -> None:
-        self.server.local_malformed(self.peer, self.subject if self.ready is not None else None, exc)
+        if self.ready is None:  # counted on the subject once it is open
+            self._early.append(exc)
+            return
+        self.server.local_malformed(self.peer, self.subject, exc)
 
     def stats(self) -> dict[str, Any]:
         return {**self.source.stats(), "subject": self.subject, **self.counts}

@@ -57,7 +57,8 @@ def device_data(recording: Any, **conventions: str) -> DeviceData:
 class EmulatorResult:
     frames_sent: int = 0
     malformed_sent: int = 0
-    dropped_sensor_samples: int = 0
+    dropped_sensor_samples: int = 0  # injected dropouts (samples the recording had valid)
+    recording_masked_samples: int = 0  # samples already masked in the recording (sent as missing too)
     send_lag_ms_max: float = 0.0
     duration_s: float = 0.0
 
@@ -88,6 +89,7 @@ async def play(n_frames: int, n_sensors: int, rate: float, send: Callable[[int, 
         else:
             await asyncio.sleep(0)
         valid = np.ones(n_sensors, bool) if base_valid is None else base_valid[k].copy()
+        res.recording_masked_samples += int((~valid).sum())
         if faults.dropout > 0 and k > 0:
             start = (rng.random(n_sensors) < faults.dropout) & (off_until <= k)
             lo, hi = faults.dropout_frames

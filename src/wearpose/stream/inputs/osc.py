@@ -166,6 +166,14 @@ def decode_bundle(data: bytes) -> tuple[float, list[tuple[str, list[Any]]]]:
     if not data.startswith(b"#bundle\x00") or len(data) < 16:
         raise PacketError("OSC datagram: not a time-tagged bundle (the profile identifies frames by bundle time tags)")
     sec, frac = struct.unpack_from(">II", data, 8)
+    i = 16
+    if i == len(data):
+        raise PacketError("OSC bundle: empty (a time tag and no message)")
+    while i < len(data):  # OSC 1.0: elements of (int32 size, content) that exactly fill the bundle
+        size = struct.unpack_from(">i", data, i)[0] if i + 4 <= len(data) else -1
+        if size <= 0 or size % 4 or i + 4 + size > len(data) or data[i + 4:i + 5] not in (b"/", b"#"):
+            raise PacketError(f"OSC bundle: element at byte {i} is not a size-prefixed message or bundle")
+        i += 4 + size
     try:
         bundle = OscBundle(data)
         msgs = [(c.address, list(c.params)) for c in bundle if isinstance(c, OscMessage)]
@@ -418,3 +426,19 @@ async def emulate_osc(recording: Any, profile: str | Path = "generic", host: str
         ", ".join(f"{n}=udp://{host}:{p}" for n, p in ports.items())
     return {"input": "osc", "profile": prof.name, "target": target, "rate_hz": d.rate, "sensors": list(names),
             **res.to_dict()}
+
+
+def parse_sensor_ports(items: Sequence[str]) -> dict[str, int] | list[str]:
+    """``--osc-sensor`` values: ``NAME=PORT`` each (a dict) or ``NAME`` each (a list); ValueError
+    naming the item otherwise."""
+    if all("=" in x for x in items):
+        out: dict[str, int] = {}
+        for x in items:
+            name, _, port = x.partition("=")
+            if not port.isdigit() or not 0 < int(port) < 65536:
+                raise ValueError(f"--osc-sensor {x!r}: expected NAME=PORT with a UDP port 1..65535")
+            out[name] = int(port)
+        return out
+    if any("=" in x for x in items):
+        raise ValueError("--osc-sensor: give every sensor as NAME=PORT (one port per device) or every one as NAME")
+    return list(items)
