@@ -69,6 +69,9 @@ def serve(
                                                                  "its connection)."),
     max_subscriptions: int = typer.Option(16, min=1, help="Subject ids one subscription may name (null = all "
                                                           "counts as one)."),
+    max_lag: float = typer.Option(0.5, min=0.0, help="Overload policy: a frame waiting longer than this (s) with "
+                                                     "newer frames queued is shed unestimated (counted); 0: never "
+                                                     "shed, every frame estimated however late."),
     input_: Optional[List[str]] = typer.Option(None, "--input", help="Live device input (repeatable): lsl, osc or mvn; "
                                                                      "the i-th feeds subject --input-subject + i "
                                                                      "(docs/devices.md)."),
@@ -133,7 +136,8 @@ def serve(
                           f"  browser pages: {server.url}/?token=...; Python client, stream replay and view-live: "
                           f"--token or WEARPOSE_TOKEN", highlight=False, soft_wrap=True)
 
-    limits = Limits(message_bytes=max_message_bytes, rate=rate_limit, subscriptions=max_subscriptions)
+    limits = Limits(message_bytes=max_message_bytes, rate=rate_limit, subscriptions=max_subscriptions,
+                    max_lag_s=max_lag or None)
     inputs, outputs = _devices(input_, device_host, device_rate, lsl_stream, lsl_loopback, osc_profile, osc_sensor,
                                osc_port, mvn_port, mvn_segments, mvn_character, output, vmc_host, vmc_port, vmc_subject,
                                lsl_out_name)
