@@ -36,8 +36,8 @@ def test_root_rotation_and_translation_are_rigid(body: BodyModel) -> None:
     pose = torch.eye(3, dtype=torch.float64).repeat(24, 1, 1)
     pose[0] = R0
     t = torch.tensor([1.0, 2.0, -3.0], dtype=torch.float64)
-    out = body(pose, trans=t)
-    rest = body()
+    out = body(pose, trans=t, return_normals=True)
+    rest = body(return_normals=True)
     pelvis = rest.joints[0]
     expect = (rest.vertices - pelvis) @ R0.T + pelvis + t
     np.testing.assert_allclose(out.vertices.numpy(), expect.numpy(), atol=1e-10)
@@ -102,7 +102,7 @@ def test_gradcheck_float64(body: BodyModel) -> None:
 def test_site_fast_path_matches_full_mesh(body: BodyModel) -> None:
     pose = axis_angle_to_matrix(torch.randn(4, 24, 3, dtype=torch.float64) * 0.5)
     betas = torch.randn(4, 10, dtype=torch.float64)
-    full = body(pose, betas)
+    full = body(pose, betas, return_normals=True)
     s = body.sites(pose, betas)
     names, vids, tids = body.site_ids()
     np.testing.assert_allclose(s.positions.numpy(), full.vertices[:, vids].numpy(), atol=1e-12)
@@ -116,6 +116,82 @@ def test_site_fast_path_matches_full_mesh(body: BodyModel) -> None:
     # arbitrary vertices work too
     s2 = body.sites(pose, betas, vertex_ids=[3, 17])
     np.testing.assert_allclose(s2.positions.numpy(), full.vertices[:, [3, 17]].numpy(), atol=1e-12)
+
+
+def _reference_normals(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """Area-weighted vertex normals the plain way (the previous implementation)."""
+    v0, v1, v2 = verts[:, faces[:, 0]], verts[:, faces[:, 1]], verts[:, faces[:, 2]]
+    fn = torch.cross(v1 - v0, v2 - v0, dim=-1)
+    n = torch.zeros_like(verts)
+    for k in range(3):
+        n = n.index_add(1, faces[:, k], fn)
+    return n / n.norm(dim=-1, keepdim=True)
+
+
+def test_chunked_component_major_skinning_equals_reference(monkeypatch: pytest.MonkeyPatch) -> None:
+    """More frames than one skinning chunk, pose correctives on: vertices equal the per-vertex
+    LBS sum, normals the plain area-weighted normals, joints the joints-only path, sites the mesh."""
+    import wearpose.body.model as model
+
+    body = BodyModel(make_tiny_asset(posedirs=True), dtype=torch.float64)
+    monkeypatch.setattr(model, "SKIN_CHUNK_VERTEX_FRAMES", 3 * body.num_vertices)  # chunks of 3 frames
+    N = 11
+    g = torch.Generator().manual_seed(1)
+    R = axis_angle_to_matrix(torch.randn(N, 24, 3, generator=g, dtype=torch.float64) * 0.5)
+    betas = torch.randn(N, 10, generator=g, dtype=torch.float64)
+    trans = torch.randn(N, 3, generator=g, dtype=torch.float64)
+    out = body(R, betas, trans, return_normals=True)
+    assert body(R, betas, trans).normals is None  # normals only when asked for
+    J_rest = body.rest_joints(betas)
+    G, P = forward_kinematics(R, J_rest)
+    feat = (R[:, 1:] - torch.eye(3, dtype=torch.float64)).reshape(N, -1)
+    v = (body.v_template + torch.einsum("vcs,ns->nvc", body.shapedirs, betas)
+         + (feat @ body.posedirs).view(N, -1, 3))
+    ref = torch.zeros_like(v)
+    for j in range(24):
+        ref += body.weights[:, j:j + 1] * ((v - J_rest[:, j:j + 1]) @ G[:, j].transpose(-1, -2) + P[:, j:j + 1])
+    ref = ref + trans[:, None]
+    np.testing.assert_allclose(out.vertices.numpy(), ref.numpy(), atol=1e-12)
+    np.testing.assert_allclose(out.normals.numpy(), _reference_normals(ref, body.faces).numpy(), atol=1e-12)
+    np.testing.assert_allclose(out.joints.numpy(), body(R, betas, trans, return_vertices=False).joints.numpy(), atol=1e-12)
+    s = body.sites(R, betas, trans)
+    _, vids, _ = body.site_ids()
+    np.testing.assert_allclose(s.positions.numpy(), ref[:, vids].numpy(), atol=1e-12)
+    np.testing.assert_allclose(s.rotations[..., 2].numpy(), out.normals[:, vids].numpy(), atol=1e-12)
+
+
+def test_level_fk_equals_joint_loop() -> None:
+    """The level-by-level FK (small batches) computes the same products as the per-joint loop;
+    a tree whose depths are not contiguous runs of ids takes the loop."""
+    from wearpose.body.kinematics import _fk_loop, _level_plan
+    from wearpose.body.skeleton import PARENTS
+
+    g = torch.Generator().manual_seed(2)
+    for B in (1, 5):
+        R = axis_angle_to_matrix(torch.randn(B, 24, 3, generator=g, dtype=torch.float64))
+        rest = torch.randn(24, 3, generator=g, dtype=torch.float64)
+        G, P = forward_kinematics(R, rest)
+        G0, P0 = _fk_loop(R, rest.expand(B, 24, 3), PARENTS)
+        assert torch.equal(G, G0) and torch.equal(P, P0)
+    assert _level_plan(PARENTS) is not None and len(_level_plan(PARENTS)) == 8
+    chain_then_branch = (-1, 0, 1, 0)  # depths 0 1 2 1: not sorted
+    assert _level_plan(chain_then_branch) is None
+    R = axis_angle_to_matrix(torch.randn(4, 3, generator=g, dtype=torch.float64))
+    G, P = forward_kinematics(R, torch.randn(4, 3, dtype=torch.float64), chain_then_branch)
+    np.testing.assert_allclose(G[2].numpy(), (R[0] @ R[1] @ R[2]).numpy(), atol=1e-12)
+
+
+def test_site_setup_follows_buffer_changes(body: BodyModel) -> None:
+    """The sites' patch set-up is cached; writing the buffers (load_state_dict) refreshes it."""
+    pose = axis_angle_to_matrix(torch.randn(2, 24, 3, dtype=torch.float64) * 0.3)
+    _, vids, _ = body.site_ids()
+    a = body.sites(pose).positions
+    state = {k: v.clone() for k, v in body.state_dict().items()}
+    state["v_template"] += 0.05
+    body.load_state_dict(state)
+    b = body.sites(pose).positions
+    assert float((b - a).abs().max()) > 0.01
+    np.testing.assert_allclose(b.numpy(), body(pose).vertices[:, vids].numpy(), atol=1e-12)
 
 
 def test_errors_are_clear(body: BodyModel) -> None:

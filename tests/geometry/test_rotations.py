@@ -79,3 +79,35 @@ def test_z_up_to_y_up() -> None:
     up_z = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
     np.testing.assert_allclose(g.change_world_points(g.Z_UP_TO_Y_UP, up_z).numpy(), [0, 1, 0])
     np.testing.assert_allclose((g.Z_UP_TO_Y_UP @ g.Y_UP_TO_Z_UP).numpy(), np.eye(3))
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_own_conversions_equal_roma(dtype: torch.dtype) -> None:
+    """axis-angle, 6D and quaternion -> matrix are ours (roma is imported lazily): the same
+    values as roma's, bit for bit, incl. the small-angle branch and the gradient at 0."""
+    import roma
+
+    gen = torch.Generator().manual_seed(0)
+    aa = torch.randn(300, 3, generator=gen, dtype=dtype) * 2
+    aa[:20] *= 1e-7
+    aa[20] = 0
+    assert torch.equal(g.axis_angle_to_matrix(aa.view(10, 30, 3)), roma.rotvec_to_rotmat(aa).view(10, 30, 3, 3))
+    d6 = torch.randn(7, 5, 6, generator=gen, dtype=dtype)
+    assert torch.equal(g.rot6d_to_matrix(d6), roma.special_gramschmidt(torch.stack([d6[..., :3], d6[..., 3:]], -1)))
+    q = torch.randn(300, 4, generator=gen, dtype=dtype)
+    qn = q / q.norm(dim=-1, keepdim=True)
+    assert torch.equal(g.quat_to_matrix(q), roma.unitquat_to_rotmat(roma.quat_wxyz_to_xyzw(qn)))
+    zero = torch.zeros(2, 3, dtype=dtype, requires_grad=True)
+    g.axis_angle_to_matrix(zero).sum().backward()
+    assert torch.isfinite(zero.grad).all()
+
+
+@pytest.mark.budget(60)  # a fresh interpreter importing torch: 3-9 s on a loaded 2-core machine
+def test_body_import_does_not_pull_in_dynamo() -> None:
+    """``import wearpose.body`` stays clear of roma (whose import pulls in torch._dynamo)."""
+    import subprocess
+    import sys
+
+    code = "import sys, wearpose.body; print(sorted(m for m in ('roma', 'torch._dynamo', 'sympy') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr

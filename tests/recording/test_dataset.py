@@ -165,3 +165,14 @@ def test_sets_of_every_body_size(mini, em_set, tmp_path):
     assert not np.allclose(betas["random"], betas["heldout"])
     with pytest.raises(ConfigError, match="shapes"):
         simulate_corpus(tmp_path / "x", "em12", None, cache_dir=cache, limit=1, workers=1, progress=False, shapes="tall")
+
+
+def test_worker_default_ignores_a_momentary_load(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The default worker count is the cores the process may use, whatever the load average says."""
+    import os
+
+    from wearpose.recording.dataset import usable_cores
+
+    monkeypatch.setattr(os, "getloadavg", lambda: (5.0, 5.0, 5.0))
+    expect = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    assert usable_cores() == max(1, expect)

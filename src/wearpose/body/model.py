@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import torch
@@ -45,19 +45,46 @@ class SiteOutput:
     global_rot: torch.Tensor  #: (..., 24, 3, 3)
 
 
+#: Vertex-frames skinned (and given normals) together: the working set of one chunk (``(12, n,
+#: V)`` skinning transforms) stays in the CPU cache; the full mesh (13,718 vertices) goes 8
+#: frames at a time, a patch of sites as many frames as make the same number of vertex-frames.
+SKIN_CHUNK_VERTEX_FRAMES = 8 * 13718
+
+
+def _normals_cmajor(Y: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """Area-weighted unit vertex normals, component-major: ``Y`` ``(3, n, V')`` -> ``(3, n, V')``.
+
+    Each row holds one coordinate of one frame over all vertices, so the face gathers and the
+    scatter back stay inside a row (a few tens of kB, in cache) and the cross product and norm
+    are element-wise on contiguous rows (the vertex-major layout was ~2x slower, mostly in
+    strided reductions over the 3 components)."""
+    f0, f1, f2 = faces[:, 0], faces[:, 1], faces[:, 2]
+    x0 = Y.index_select(2, f0)
+    a, b = Y.index_select(2, f1) - x0, Y.index_select(2, f2) - x0  # (3, n, F)
+    fn = torch.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])  # |fn| = 2 area
+    n = torch.zeros_like(Y).index_add(2, f0, fn).index_add(2, f1, fn).index_add(2, f2, fn)
+    return n / torch.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).clamp_min(1e-12)
+
+
 def _vertex_normals(verts: torch.Tensor, faces: torch.Tensor, num_vertices: int) -> torch.Tensor:
-    """Area-weighted vertex normals. verts ``(N, V', 3)``, faces ``(F, 3)`` indexing ``V'``."""
-    N = verts.shape[0]
-    v0, v1, v2 = verts[:, faces[:, 0]], verts[:, faces[:, 1]], verts[:, faces[:, 2]]
-    fn = torch.cross(v1 - v0, v2 - v0, dim=-1)  # length = 2 * area: area weighting for free
-    # Accumulate along dim 0 with the batch folded into rows: index_add on the leading dim of a
-    # contiguous tensor is ~3x faster than on dim 1 for large batches.
-    fn_rows = fn.transpose(0, 1).reshape(faces.shape[0], N * 3)
-    n = torch.zeros(num_vertices, N * 3, dtype=verts.dtype, device=verts.device)
-    for k in range(3):
-        n = n.index_add(0, faces[:, k], fn_rows)
-    n = n.view(num_vertices, N, 3).transpose(0, 1)
-    return n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    """Area-weighted vertex normals. verts ``(N, V', 3)``, faces ``(F, 3)`` indexing ``V'`` (= ``num_vertices``)."""
+    if verts.shape[1] != num_vertices:
+        raise ShapeError(f"verts: expected (N, {num_vertices}, 3), got {tuple(verts.shape)}")
+    step = max(1, SKIN_CHUNK_VERTEX_FRAMES // max(1, num_vertices))
+    out = [_normals_cmajor(verts[a:a + step].permute(2, 0, 1), faces).permute(1, 2, 0)
+           for a in range(0, verts.shape[0], step)]
+    return torch.cat(out) if len(out) > 1 else out[0].contiguous()
+
+
+@dataclass
+class _Patch:
+    """Set-up of one site list for :meth:`BodyModel.sites`, made once per (sites, device, dtype)."""
+
+    vidx: torch.Tensor  # (V',) mesh ids of the patch vertices
+    faces: torch.Tensor  # (F', 3) faces of the patch, local ids
+    site: torch.Tensor  # (K,) local ids of the site vertices
+    tangent: torch.Tensor  # (K,) local ids of the tangent vertices
+    buffers: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]  # :meth:`BodyModel._skin_buffers`
 
 
 class BodyModel(nn.Module):
@@ -110,6 +137,7 @@ class BodyModel(nn.Module):
         self.parents = PARENTS
         self._vertex_faces: list[np.ndarray] | None = None
         self._support_ids: torch.Tensor | None = None
+        self._patches: dict[tuple, Any] = {}
 
     @staticmethod
     def _resolve(source: str | Path | BodyAsset | None, num_betas: int) -> BodyAsset:
@@ -185,31 +213,56 @@ class BodyModel(nn.Module):
             return self.J_template.clone()
         return self.J_template + torch.einsum("jcs,...s->...jc", self.J_shapedirs, betas.to(self.dtype))
 
-    def _skin(self, vidx: torch.Tensor | None, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor
-              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Skin a subset of vertices (``vidx`` or all). Flat batch ``N``. Returns verts (N, V', 3),
-        joints (N, 24, 3), global rot (N, 24, 3, 3), rest joints (N, 24, 3)."""
+    def _skin_buffers(self, vidx: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """Skinning buffers of the vertices ``vidx`` (all: ``None``), component-major as :meth:`_skin`
+        uses them: template ``(3, 1, V')``, shape dirs ``(3, S, V')``, weights ``(24, V')``, pose
+        dirs ``(3, 207, V')`` (or ``None``). Cached per vertex set (:meth:`_patch`)."""
         sel = (lambda x: x) if vidx is None else (lambda x: x[vidx])  # noqa: E731
         v_t, sd, w = sel(self.v_template), sel(self.shapedirs), sel(self.weights)
-        v_shaped = v_t + torch.einsum("vcs,ns->nvc", sd, betas)  # (N, V', 3)
-        J_rest = self.J_template + torch.einsum("jcs,ns->njc", self.J_shapedirs, betas)  # (N, 24, 3)
+        pd = None
         if self.has_posedirs:
-            eye = torch.eye(3, dtype=R.dtype, device=R.device)
-            feat = (R[:, 1:] - eye).reshape(R.shape[0], -1)  # (N, 207)
-            pd = self.posedirs.view(-1, self.num_vertices, 3)
-            pd = pd if vidx is None else pd[:, vidx]
-            v_shaped = v_shaped + torch.einsum("np,pvc->nvc", feat, pd)
+            pd = sel(self.posedirs.view(-1, self.num_vertices, 3).transpose(0, 1)).permute(2, 1, 0).contiguous()
+        return v_t.T.unsqueeze(1).contiguous(), sd.permute(1, 2, 0).contiguous(), w.T.contiguous(), pd
+
+    def _skin(self, vidx: torch.Tensor | None, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor,
+              normals_faces: torch.Tensor | None = None,
+              buffers: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None] | None = None,
+              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """Skin a subset of vertices (``vidx`` or all). Flat batch ``N``. Returns verts (N, V', 3),
+        joints (N, 24, 3), global rot (N, 24, 3, 3), rest joints (N, 24, 3) and, when
+        ``normals_faces`` (faces indexing the V' vertices) is given, unit vertex normals (N, V', 3).
+
+        Works component-major, ``(3, n, V')``, a chunk of frames at a time (see
+        ``SKIN_CHUNK_VERTEX_FRAMES``): every step is one matrix product or an element-wise op
+        on contiguous rows."""
+        v_t, sd, w, pd = buffers if buffers is not None else self._patch_buffers(vidx)
+        Vp = w.shape[1]
+        J_rest = self.J_template + torch.einsum("jcs,ns->njc", self.J_shapedirs, betas)  # (N, 24, 3)
         G, J = forward_kinematics(R, J_rest, self.parents)  # (N, 24, 3, 3), (N, 24, 3)
-        # Skinning transform of joint j: x -> G_j (x - J_rest_j) + J_j.
+        # Skinning transform of joint j: x -> G_j (x - J_rest_j) + J_j, stored as G's columns then t.
         t = J - (G @ J_rest.unsqueeze(-1)).squeeze(-1)  # (N, 24, 3)
-        A = torch.cat([G.reshape(-1, NUM_JOINTS, 9), t], dim=-1)  # (N, 24, 12)
-        T = torch.einsum("vj,njk->nvk", w, A)  # (N, V', 12)
-        verts = torch.einsum("nvij,nvj->nvi", T[..., :9].reshape(*T.shape[:2], 3, 3), v_shaped) + T[..., 9:]
-        return verts + trans[:, None], J + trans[:, None], G, J_rest
+        A = torch.cat([G.transpose(-1, -2).reshape(-1, NUM_JOINTS, 9), t + trans[:, None]], dim=-1)  # (N, 24, 12)
+        feat = (R[:, 1:] - torch.eye(3, dtype=R.dtype, device=R.device)).reshape(R.shape[0], -1) if pd is not None else None
+        step = max(1, SKIN_CHUNK_VERTEX_FRAMES // max(1, Vp))
+        verts, normals = [], []
+        for a in range(0, R.shape[0], step):
+            n = min(step, R.shape[0] - a)
+            vs = v_t + betas[a:a + n] @ sd  # (3, n, V') shaped rest vertices
+            if pd is not None:
+                vs = vs + feat[a:a + n] @ pd  # + pose correctives
+            T = A[a:a + n].permute(2, 0, 1) @ w  # (12, n, V')
+            X = torch.addcmul(T[9:12], T[0:3], vs[0:1])
+            X = torch.addcmul(X, T[3:6], vs[1:2])
+            X = torch.addcmul(X, T[6:9], vs[2:3])  # (3, n, V')
+            if normals_faces is not None:
+                normals.append(_normals_cmajor(X, normals_faces).permute(1, 2, 0))
+            verts.append(X.permute(1, 2, 0))
+        cat = lambda xs: torch.cat(xs) if len(xs) > 1 else xs[0].contiguous()  # noqa: E731
+        return cat(verts), J + trans[:, None], G, J_rest, (cat(normals) if normals_faces is not None else None)
 
     def forward(self, pose: torch.Tensor | None = None, betas: torch.Tensor | None = None,
                 trans: torch.Tensor | None = None, *, return_vertices: bool = True,
-                return_normals: bool = True) -> BodyOutput:
+                return_normals: bool = False) -> BodyOutput:
         """Pose the body.
 
         Args:
@@ -218,15 +271,15 @@ class BodyModel(nn.Module):
             betas: ``(..., S)`` shape coefficients (broadcast). ``None`` = mean shape.
             trans: ``(..., 3)`` root translation, m (broadcast). ``None`` = 0.
             return_vertices: skin the full mesh (skip for joints-only use).
-            return_normals: also compute unit vertex normals.
+            return_normals: also compute unit vertex normals (area-weighted; off by default:
+                they cost about as much as the skinning).
 
         Returns:
             :class:`BodyOutput` with the broadcast batch shape ``...``.
         """
         R, b, t, batch = self._batch(pose, betas, trans)
         if return_vertices:
-            verts, J, G, J_rest = self._skin(None, R, b, t)
-            normals = _vertex_normals(verts, self.faces, self.num_vertices) if return_normals else None
+            verts, J, G, J_rest, normals = self._skin(None, R, b, t, self.faces if return_normals else None)
         else:
             J_rest = self.rest_joints(b)
             G, J = forward_kinematics(R, J_rest, self.parents)
@@ -330,24 +383,47 @@ class BodyModel(nn.Module):
         if len(vids) and (vids.max() >= self.num_vertices or vids.min() < 0):
             raise ShapeError(f"vertex ids must be in [0, {self.num_vertices}), got {vids.tolist()}")
         R, b, t, batch = self._batch(pose, betas, trans)
-        # Local patch: site vertices, tangent vertices and their one-ring faces.
-        patch_faces = np.unique(np.concatenate([self._faces_of(int(v)) for v in vids])) if len(vids) else np.zeros(0, np.int64)
-        faces = self.faces.cpu().numpy()[patch_faces]
-        used = np.unique(np.concatenate([vids, tids, faces.ravel()]))
-        remap = {int(v): i for i, v in enumerate(used)}
-        local_faces = torch.as_tensor(np.vectorize(remap.get)(faces) if len(faces) else faces, dtype=torch.long, device=self.device)
-        verts, J, G, _ = self._skin(torch.as_tensor(used, device=self.device), R, b, t)
-        normals = _vertex_normals(verts, local_faces, len(used))
-        li = torch.as_tensor([remap[int(v)] for v in vids], device=self.device, dtype=torch.long)
-        lt = torch.as_tensor([remap[int(v)] for v in tids], device=self.device, dtype=torch.long)
-        p, n = verts[:, li], normals[:, li]
-        e = verts[:, lt] - p
+        pt = self._patch(vids, tids)
+        verts, J, G, _, normals = self._skin(pt.vidx, R, b, t, pt.faces, pt.buffers)
+        p, n = verts[:, pt.site], normals[:, pt.site]
+        e = verts[:, pt.tangent] - p
         e = e - (e * n).sum(-1, keepdim=True) * n
         tan = e / e.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-        bit = torch.cross(n, tan, dim=-1)
+        bit = torch.linalg.cross(n, tan, dim=-1)
         rot = torch.stack([tan, bit, n], dim=-1)  # columns
         un = lambda x: x.reshape(*batch, *x.shape[1:])  # noqa: E731
         return SiteOutput(names=names, positions=un(p), rotations=un(rot), joints=un(J), global_rot=un(G))
+
+    def _patch(self, vids: np.ndarray, tids: np.ndarray) -> _Patch:
+        """The local patch of these sites (site and tangent vertices and the sites' one-ring
+        faces), its local ids and sliced skinning buffers: built once per site list, device and
+        dtype (a call at B = 1 used to spend most of its time here)."""
+        # Buffers replaced (.to) or written in place (load_state_dict) invalidate the slices.
+        state = tuple((b.data_ptr(), b._version) for b in self.buffers())
+        key = (tuple(int(v) for v in vids), tuple(int(v) for v in tids), str(self.device), self.dtype, state)
+        cache = self._patches
+        if len(cache) > 64:
+            cache.clear()
+        if key not in cache:
+            patch_faces = np.unique(np.concatenate([self._faces_of(int(v)) for v in vids])) if len(vids) else np.zeros(0, np.int64)
+            faces = self.faces.cpu().numpy()[patch_faces].reshape(-1, 3)
+            used = np.unique(np.concatenate([vids, tids, faces.ravel()]))
+            local = lambda x: torch.as_tensor(np.searchsorted(used, x), dtype=torch.long, device=self.device)  # noqa: E731
+            vidx = torch.as_tensor(used, dtype=torch.long, device=self.device)
+            cache[key] = _Patch(vidx, local(faces), local(vids), local(tids), self._skin_buffers(vidx))
+        return cache[key]
+
+    def _patch_buffers(self, vidx: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """:meth:`_skin_buffers` of the whole mesh (``vidx`` None), cached like a patch; a subset uncached."""
+        if vidx is not None:
+            return self._skin_buffers(vidx)
+        state = tuple((b.data_ptr(), b._version) for b in self.buffers())
+        key = ("full mesh", str(self.device), self.dtype, state)
+        if key not in self._patches:
+            if len(self._patches) > 64:
+                self._patches.clear()
+            self._patches[key] = self._skin_buffers(None)
+        return self._patches[key]
 
     def _neighbour(self, v: int) -> int:
         f = self.faces.cpu().numpy()[self._faces_of(v)[0]]

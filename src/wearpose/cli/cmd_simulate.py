@@ -23,7 +23,7 @@ def simulate(
     noise: str = typer.Option("default", help="Sensor error models: default (documented noise, dropped EM frames), ximu3 (IMU terms fitted to a real x-IMU3 log) or none."),
     offsets: str = typer.Option("random", help="EM sensor-to-skin offsets: random (a synthetic subject per clip) or none."),
     limit: Optional[int] = typer.Option(None, min=1, help="Only the first N selected clips (sorted by id)."),
-    workers: Optional[int] = typer.Option(None, min=1, help="Worker processes (default: the idle CPU cores for batches over 20 min of motion, else 1)."),
+    workers: Optional[int] = typer.Option(None, min=1, help="Worker processes (default: the usable CPU cores for batches over 20 min of motion, else 1)."),
     rate: Optional[float] = typer.Option(None, help="Every sensor at this rate, Hz (default: the kit's rates, e.g. 120 for EM)."),
     source: Optional[list[str]] = typer.Option(None, "--source", help="Only clips of this corpus source (repeatable), e.g. cmu_daz."),
     licence: Optional[list[str]] = typer.Option(None, "--licence", help="Only clips under this licence (repeatable)."),

@@ -65,7 +65,7 @@ def write_glb(seq: MotionSequence, path: str | Path, body: BodyModel) -> Path:
     """
     with torch.no_grad():
         betas = seq.betas.to(body.dtype)
-        out = body(torch.eye(3, dtype=body.dtype).expand(NUM_JOINTS, 3, 3), betas)
+        out = body(torch.eye(3, dtype=body.dtype).expand(NUM_JOINTS, 3, 3), betas, return_normals=True)
         verts = out.vertices.cpu().numpy().astype(np.float32)  # (V, 3) shaped rest mesh
         normals = out.normals.cpu().numpy().astype(np.float32)
         rest = body.rest_joints(betas).cpu().numpy().astype(np.float64)  # (24, 3)

@@ -1,14 +1,31 @@
 """Rotation representations and operations. Shapes: any leading batch ``...``.
 
 Every function is pure, differentiable where the maths allows, and dtype/device preserving.
+
+The three conversions every path needs (axis-angle, 6D and quaternion to matrix) are written
+here, the same arithmetic as roma's (equal results, tested against roma); the rest delegate to
+``roma``, imported on first use: roma 1.8 calls ``torch._dynamo.disable`` at import, which pulls
+in dynamo, sympy and fx (~2 s, ~75 MiB) into every process that imports the body model.
 """
 
 from __future__ import annotations
 
-import roma
+from types import ModuleType
+
 import torch
 
 from wearpose.errors import ShapeError
+
+#: Angles (rad) below which axis-angle -> matrix uses the first-order form ``I + [aa]_x``
+#: (roma's default threshold: Rodrigues' ``aa / |aa|`` is ill-conditioned there).
+SMALL_ANGLE = 1e-6
+
+
+def _roma() -> ModuleType:
+    """roma, imported when a function that needs it is first called (module doc)."""
+    import roma
+
+    return roma
 
 
 def _check_last(x: torch.Tensor, shape: tuple[int, ...], name: str) -> None:
@@ -21,13 +38,28 @@ def _check_last(x: torch.Tensor, shape: tuple[int, ...], name: str) -> None:
 def axis_angle_to_matrix(aa: torch.Tensor) -> torch.Tensor:
     """Axis-angle / exponential map ``(..., 3)`` (radians) -> rotation matrix ``(..., 3, 3)``."""
     _check_last(aa, (3,), "axis_angle")
-    return roma.rotvec_to_rotmat(aa)
+    theta = torch.linalg.vector_norm(aa, dim=-1)
+    # Clamped, not masked: torch.where alone would give NaN gradients at theta = 0.
+    k = aa / torch.clamp_min(theta[..., None], SMALL_ANGLE)
+    kx, ky, kz = k.unbind(-1)
+    s, c1 = torch.sin(theta), 1 - torch.cos(theta)
+    xs, ys, zs = kx * s, ky * s, kz * s
+    xy, xz, yz = kx * ky * c1, kx * kz * c1, ky * kz * c1
+    xx, yy, zz = kx ** 2 * c1, ky ** 2 * c1, kz ** 2 * c1
+    rodrigues = torch.stack([1 - yy - zz, xy - zs, xz + ys,
+                             xy + zs, 1 - xx - zz, -xs + yz,
+                             xz - ys, xs + yz, 1 - xx - yy], dim=-1)
+    x, y, z = aa.unbind(-1)
+    one = torch.ones_like(x)
+    first_order = torch.stack([one, -z, y, z, one, -x, -y, x, one], dim=-1)
+    R = torch.where((theta < SMALL_ANGLE)[..., None], first_order, rodrigues)
+    return R.reshape(*aa.shape[:-1], 3, 3)
 
 
 def matrix_to_axis_angle(R: torch.Tensor) -> torch.Tensor:
     """Rotation matrix ``(..., 3, 3)`` -> axis-angle ``(..., 3)`` with angle in ``[0, pi]``."""
     _check_last(R, (3, 3), "R")
-    return roma.rotmat_to_rotvec(R)
+    return _roma().rotmat_to_rotvec(R)
 
 
 def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
@@ -37,12 +69,18 @@ def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
     """
     _check_last(q, (4,), "quaternion")
     q = q / q.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    return roma.unitquat_to_rotmat(roma.quat_wxyz_to_xyzw(q))
+    w, x, y, z = q.unbind(-1)
+    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
+    xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
+    return torch.stack((x2 - y2 - z2 + w2, 2 * (xy - zw), 2 * (xz + yw),
+                        2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw),
+                        2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2), dim=-1).reshape(*q.shape[:-1], 3, 3)
 
 
 def matrix_to_quat(R: torch.Tensor) -> torch.Tensor:
     """Rotation matrix ``(..., 3, 3)`` -> unit quaternion ``(..., 4)`` as ``(w, x, y, z)``, w >= 0."""
     _check_last(R, (3, 3), "R")
+    roma = _roma()
     q = roma.quat_xyzw_to_wxyz(roma.rotmat_to_unitquat(R))
     return torch.where(q[..., :1] < 0, -q, q)
 
@@ -54,7 +92,14 @@ def rot6d_to_matrix(d6: torch.Tensor) -> torch.Tensor:
     valid rotation, which is why networks output it.
     """
     _check_last(d6, (6,), "rot6d")
-    return roma.special_gramschmidt(torch.stack([d6[..., :3], d6[..., 3:]], dim=-1))
+    # Columns of a (..., 3, 2) matrix, as roma reads them (the strided layout fixes the rounding
+    # of the sums: equal results to roma's special_gramschmidt).
+    M = torch.stack([d6[..., :3], d6[..., 3:]], dim=-1)
+    x, y = M[..., 0], M[..., 1]
+    x = x / torch.linalg.vector_norm(x, dim=-1, keepdim=True)
+    y = y - torch.sum(x * y, dim=-1, keepdim=True) * x
+    y = y / torch.linalg.vector_norm(y, dim=-1, keepdim=True)
+    return torch.stack((x, y, torch.linalg.cross(x, y, dim=-1)), dim=-1)
 
 
 def matrix_to_rot6d(R: torch.Tensor) -> torch.Tensor:
@@ -141,7 +186,7 @@ def matrix_to_euler(R: torch.Tensor, order: str) -> torch.Tensor:
     if len(order) != 3 or len(set(order)) != 3 or any(c not in "XYZ" for c in order):
         raise ShapeError(f"matrix_to_euler needs three distinct axes, got {order!r}")
     # roma's intrinsic convention uses upper-case axis letters.
-    return roma.rotmat_to_euler(order, R, degrees=False)
+    return _roma().rotmat_to_euler(order, R, degrees=False)
 
 
 def geodesic_angle(R1: torch.Tensor, R2: torch.Tensor) -> torch.Tensor:
@@ -151,7 +196,7 @@ def geodesic_angle(R1: torch.Tensor, R2: torch.Tensor) -> torch.Tensor:
     """
     _check_last(R1, (3, 3), "R1")
     _check_last(R2, (3, 3), "R2")
-    return roma.rotmat_geodesic_distance(R1, R2)
+    return _roma().rotmat_geodesic_distance(R1, R2)
 
 
 def slerp_matrix(R0: torch.Tensor, R1: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
@@ -171,7 +216,7 @@ def slerp_matrix(R0: torch.Tensor, R1: torch.Tensor, t: torch.Tensor) -> torch.T
 def project_to_so3(M: torch.Tensor) -> torch.Tensor:
     """Nearest rotation (Frobenius) to each ``(..., 3, 3)`` matrix, via SVD with det fix."""
     _check_last(M, (3, 3), "M")
-    return roma.special_procrustes(M)
+    return _roma().special_procrustes(M)
 
 
 def rotation_between(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:

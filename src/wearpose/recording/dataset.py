@@ -66,18 +66,18 @@ INDEX_FLUSH_S = 30.0
 AUTO_PARALLEL_MOTION_S = 1200.0
 
 
-def idle_cores() -> int:
-    """CPU cores not busy with other work: core count minus the 1-minute load average, >= 1.
+def usable_cores() -> int:
+    """CPU cores this process may run on (its affinity mask; else ``os.cpu_count()``), >= 1.
 
-    Workers on busy cores only slow each other down (measured: with another job holding one of
-    two cores, two workers took 1.6x longer than one process).
+    Not the cores minus the 1-minute load average, which is a momentary figure: a load of 1.2
+    on 2 cores sent ``simulate --kit em12 --split train`` to one worker (145 s, issue 25). A core
+    held by another job for the whole run does slow two workers (measured once: 1.6x longer than
+    one process); pass ``workers=1`` then.
     """
-    n = os.cpu_count() or 1
     try:
-        load = os.getloadavg()[0]
+        return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):  # not on every platform
-        load = 0.0
-    return max(1, min(n, int(round(n - load))))
+        return max(1, os.cpu_count() or 1)
 
 
 def clip_seed(base_seed: int, clip_id: str) -> int:
@@ -216,8 +216,8 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         offsets: ``"random"`` (a synthetic subject's sensor offsets per clip) or ``"none"``.
         rate: every sensor at this rate, Hz (default: the kit's rates).
         limit: only the first ``limit`` selected clips (sorted by id).
-        workers: processes; ``1`` runs in this process. Default: the idle cores
-            (:func:`idle_cores`) when the clips to simulate hold more than
+        workers: processes; ``1`` runs in this process. Default: the usable cores
+            (:func:`usable_cores`) when the clips to simulate hold more than
             :data:`AUTO_PARALLEL_MOTION_S` of motion, else 1 (a pool's start-up costs more than
             it saves on small batches).
         source_pose: store the EM source's world pose in each recording's meta.
@@ -346,7 +346,7 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
         n_workers = max(1, int(workers) if workers is not None else int(ray.cluster_resources().get("CPU", 1)))
     elif workers is None:
         todo_s = sum(float(store.entry(j["id"]).get("seconds", 0.0)) for j in todo)
-        n_workers = idle_cores() if todo_s > AUTO_PARALLEL_MOTION_S else 1
+        n_workers = usable_cores() if todo_s > AUTO_PARALLEL_MOTION_S else 1
     else:
         n_workers = max(1, int(workers))
     n_workers = min(n_workers, max(1, len(todo)))
@@ -536,4 +536,4 @@ def load_index(out_dir: str | Path) -> dict[str, Any]:
     return idx
 
 
-__all__ = ["simulate_corpus", "clip_seed", "is_noncommercial", "load_index", "idle_cores"]
+__all__ = ["simulate_corpus", "clip_seed", "is_noncommercial", "load_index", "usable_cores"]

@@ -1,0 +1,115 @@
+"""Timing helpers shared by the benchmarks: a machine reference, latency statistics, the machine's
+state, and an older checkout of the library imported beside this one.
+
+Machines of one kind differ by 3x in speed (issue 25), so every timing result records
+:func:`reference_timing` (a fixed float32 matrix-product loop on one thread) and the load
+average, and code versions are compared as ratios measured in one run (:func:`import_baseline`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from types import ModuleType
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import torch
+
+#: The reference loop: ``REF_ITERS`` products of two ``REF_SIZE`` x ``REF_SIZE`` float32 matrices.
+REF_SIZE = 256
+REF_ITERS = 200
+
+
+def reference_timing(repeats: int = 5) -> dict[str, float]:
+    """Time the fixed float32 matmul loop on the current torch threads (best and median of
+    ``repeats``), in ms, and the GFLOP/s of the best run. Figures from different machines are
+    comparable after dividing by ``best_ms``."""
+    g = torch.Generator().manual_seed(0)
+    a = torch.randn(REF_SIZE, REF_SIZE, generator=g)
+    b = torch.randn(REF_SIZE, REF_SIZE, generator=g)
+    out = torch.empty(REF_SIZE, REF_SIZE)
+    times = []
+    for _ in range(repeats + 1):
+        t0 = time.perf_counter()
+        for _ in range(REF_ITERS):
+            torch.mm(a, b, out=out)
+        times.append(time.perf_counter() - t0)
+    times = times[1:]  # the first run warms caches and the allocator
+    best = min(times)
+    return {"loop": f"{REF_ITERS} x float32 ({REF_SIZE}x{REF_SIZE}) @ ({REF_SIZE}x{REF_SIZE})",
+            "threads": torch.get_num_threads(), "best_ms": 1000 * best, "median_ms": 1000 * float(np.median(times)),
+            "gflops": 2 * REF_SIZE ** 3 * REF_ITERS / best / 1e9}
+
+
+def latency_stats(seconds: Sequence[float]) -> dict[str, float]:
+    """Median / p99 / max (ms) and count of per-call times in seconds."""
+    ms = np.asarray(seconds, dtype=np.float64) * 1000
+    if ms.size == 0:
+        return {"median_ms": float("nan"), "p99_ms": float("nan"), "max_ms": float("nan"), "calls": 0}
+    return {"median_ms": float(np.median(ms)), "p99_ms": float(np.percentile(ms, 99)), "max_ms": float(ms.max()),
+            "calls": int(ms.size)}
+
+
+def machine_info() -> dict[str, Any]:
+    """Platform, CPU count, torch version and threads, 1/5/15-minute load average now."""
+    try:
+        load = list(os.getloadavg())
+    except (AttributeError, OSError):
+        load = []
+    return {"platform": platform.platform(), "cpus": os.cpu_count(), "torch": torch.__version__,
+            "torch_threads": torch.get_num_threads(), "load_average": load}
+
+
+def time_calls(fns: dict[str, Callable[[], Any]], repeats: int, warmup: int = 1) -> dict[str, list[float]]:
+    """Call every function ``repeats`` times, interleaved (a load spike hits all alike); seconds per call."""
+    for fn in fns.values():
+        for _ in range(warmup):
+            fn()
+    out: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(repeats):
+        for k, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            out[k].append(time.perf_counter() - t0)
+    return out
+
+
+def import_baseline(src: str | Path, module: str, package: str = "wearpose") -> ModuleType:
+    """Import ``module`` from another checkout's ``src`` folder beside the loaded ``package``.
+
+    The other version's modules are loaded under their own names while this version's are set
+    aside, then both sets are restored: the returned module (and everything it imported at
+    import time) is the old code; this process keeps using the new one. Imports the old code
+    does later, inside functions, resolve to the new package.
+
+    Args:
+        src: the other checkout's source folder (e.g. a ``git worktree`` of an older commit + ``/src``).
+        module: dotted name inside ``package``, e.g. ``"wearpose.body"``.
+    """
+    src = str(Path(src).resolve())
+    if not (Path(src) / package).is_dir():
+        raise FileNotFoundError(f"{src}: no {package}/ package folder here (give the checkout's src/ folder)")
+    mine = {k: v for k, v in sys.modules.items() if k == package or k.startswith(package + ".")}
+    for k in mine:
+        del sys.modules[k]
+    sys.path.insert(0, src)
+    try:
+        mod = importlib.import_module(module)
+        theirs = {k: v for k, v in sys.modules.items() if k == package or k.startswith(package + ".")}
+    finally:
+        sys.path.remove(src)
+        for k in [k for k in sys.modules if k == package or k.startswith(package + ".")]:
+            del sys.modules[k]
+        sys.modules.update(mine)
+    if not str(getattr(mod, "__file__", "")).startswith(src):
+        raise ImportError(f"{module} came from {getattr(mod, '__file__', '?')}, not from {src}")
+    mod.__dict__.setdefault("_baseline_modules", theirs)
+    return mod
+
+
+__all__ = ["reference_timing", "latency_stats", "machine_info", "time_calls", "import_baseline"]
