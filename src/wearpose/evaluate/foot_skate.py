@@ -31,13 +31,20 @@ from wearpose.motion.retarget import TRAVEL_MODES, Retargeted, foot_joint_pairs,
 from wearpose.motion.sequence import MotionSequence
 
 
-def lower_foot_contact_misses(pose: torch.Tensor, trans: torch.Tensor, rest_joints: torch.Tensor, fps: float) -> float:
-    """Fraction of frames whose lower SMPL foot joint PIP's contact rule labels "not in contact".
+def lower_foot_contact_misses(pose: torch.Tensor, trans: torch.Tensor, rest_joints: torch.Tensor, fps: float
+                              ) -> dict[str, float]:
+    """How often PIP's contact rule calls the lower SMPL foot joint "not in contact".
 
     Args:
         pose: ``(T, 24, 3, 3)``; trans: ``(T, 3)`` m; rest_joints: ``(24, 3)`` m; fps: Hz. The
             motion is resampled to PIP's rate first, as its training data are.
+
+    Returns:
+        ``{"miss": fraction of frames whose lower foot is labelled not in contact, "speed": ...
+        failing the speed test alone, "height": ... failing the height test alone}``.
     """
+    from dataclasses import replace  # noqa: PLC0415
+
     from wearpose.estimators.pip.config import PipConfig  # noqa: PLC0415 - only for this check
     from wearpose.estimators.pip.data import root_frame_targets  # noqa: PLC0415
     from wearpose.physics.reference import FOOT_JOINTS  # noqa: PLC0415
@@ -48,9 +55,13 @@ def lower_foot_contact_misses(pose: torch.Tensor, trans: torch.Tensor, rest_join
         seq = resample(seq, cfg.rate)
     _, J = forward_kinematics(seq.pose.double(), rest_joints.double())
     J = (J + seq.trans.double()[:, None]).float()
-    contact = root_frame_targets(seq.pose.float(), J, cfg.rate, cfg)["contact"]  # (T, 2)
-    lower = J[:, list(FOOT_JOINTS), 1].argmin(-1)
-    return float((contact.gather(1, lower[:, None]) < 0.5).float().mean())
+    lower = J[:, list(FOOT_JOINTS), 1].argmin(-1)[:, None]
+    out = {}
+    for key, c in (("miss", cfg), ("speed", replace(cfg, contact_height=float("inf"))),
+                   ("height", replace(cfg, contact_speed=float("inf")))):
+        contact = root_frame_targets(seq.pose.float(), J, c.rate, c)["contact"]  # (T, 2)
+        out[key] = float((contact.gather(1, lower) < 0.5).float().mean())
+    return out
 
 
 def clip_foot_skate(res: Retargeted, rest_joints: torch.Tensor, skip_first: bool = False,
@@ -66,7 +77,8 @@ def clip_foot_skate(res: Retargeted, rest_joints: torch.Tensor, skip_first: bool
 
     Returns:
         ``{"fps", "frames", "source": {"median_ms", "stances"}, "<mode>": {"median_ms",
-        "stances", "stance_travel_cm", "contact_miss"}}`` (NaN medians when no stance is found).
+        "stances", "stance_travel_cm", "contact_miss", "contact_miss_speed",
+        "contact_miss_height"}}`` (NaN medians when no stance is found).
     """
     seq = res.sequence
     pairs = foot_joint_pairs(res.smap, res.bvh_names)
@@ -81,7 +93,8 @@ def clip_foot_skate(res: Retargeted, rest_joints: torch.Tensor, skip_first: bool
         row: dict[str, Any] = {"median_ms": st.median, "stances": st.stances,
                                "stance_travel_cm": float(st.stance_travel.median()) * 100 if st.stances else float("nan")}
         if contacts:
-            row["contact_miss"] = lower_foot_contact_misses(seq.pose[k:], tr[k:], rest_joints, seq.fps)
+            cm = lower_foot_contact_misses(seq.pose[k:], tr[k:], rest_joints, seq.fps)
+            row.update(contact_miss=cm["miss"], contact_miss_speed=cm["speed"], contact_miss_height=cm["height"])
         out[mode] = row
     return out
 
