@@ -1,5 +1,7 @@
-"""Motion augmentation for training data: the left/right mirror image of a clip and a clip
-played faster or slower.
+"""Motion augmentation for training data, one place for every method: the left/right mirror
+image of a clip, a clip played faster or slower, turned to another heading, the upper body of
+one clip on the lower body of another, and sensors strapped on a little off their sites;
+:class:`AugmentSettings` records which (a weight's recipe holds its :meth:`~AugmentSettings.to_dict`).
 
 Both return new, valid :class:`~wearpose.motion.MotionSequence` objects that the sensor
 simulator turns into consistent virtual sensor data (the sensors are simulated *after*
@@ -10,6 +12,7 @@ from __future__ import annotations
 
 import copy
 import math
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import torch
@@ -65,3 +68,178 @@ def _tagged(meta: dict[str, Any], tag: str) -> dict[str, Any]:
     out = copy.deepcopy(meta)
     out["augment"] = [*out.get("augment", []), tag]
     return out
+
+
+# ---------------------------------------------------------------------------------------- more kinds
+def rotate_heading(seq: MotionSequence, angle: float, root_rest: torch.Tensor | None = None) -> MotionSequence:
+    """``seq`` turned by ``angle`` rad about the world +Y axis through the origin (the whole clip:
+    root orientation and path). ``root_rest`` ``(3,)`` as in :func:`mirror` (SMPL's ``trans`` is the
+    pelvis minus its zero-pose position, so the exact turn of the path needs it; without it the
+    pelvis path is off by a constant horizontal offset of at most ``2 |root_rest_xz|``).
+
+    Returns:
+        A new sequence, ``meta["augment"]`` extended by ``"heading=<deg>"``.
+    """
+    from wearpose.geometry import rotation_y
+
+    Ry = rotation_y(torch.tensor(float(angle), dtype=seq.pose.dtype))
+    pose = seq.pose.clone()
+    pose[:, 0] = Ry @ pose[:, 0]
+    r = torch.zeros(3, dtype=seq.trans.dtype) if root_rest is None else torch.as_tensor(root_rest).to(seq.trans)
+    trans = (seq.trans + r) @ Ry.T.to(seq.trans) - r
+    return MotionSequence(pose, seq.betas.clone(), trans, seq.fps, _tagged(seq.meta, f"heading={math.degrees(angle):.4g}"))
+
+
+#: SMPL joints of the lower body (root orientation, legs): what :func:`mix_parts` takes from ``lower``.
+LOWER_BODY: tuple[int, ...] = (0, 1, 2, 4, 5, 7, 8, 10, 11)
+
+
+def mix_parts(upper: MotionSequence, lower: MotionSequence) -> MotionSequence:
+    """The upper body (spine, neck, head, arms) of ``upper`` on the lower body (root orientation,
+    legs, root path, betas) of ``lower``, over the shorter clip's frames. Both at one ``fps``.
+
+    Raises:
+        ShapeError: different frame rates.
+    """
+    if abs(upper.fps - lower.fps) > 1e-9:
+        raise ShapeError(f"mix_parts: clips at {upper.fps} and {lower.fps} fps; resample one first")
+    T = min(upper.num_frames, lower.num_frames)
+    pose = upper.pose[:T].clone()
+    pose[:, list(LOWER_BODY)] = lower.pose[:T, list(LOWER_BODY)].to(pose)
+    meta = _tagged(lower.meta, f"upper={upper.meta.get('clip', '?')}")
+    return MotionSequence(pose, lower.betas.clone(), lower.trans[:T].clone(), lower.fps, meta)
+
+
+def jitter_sites(body: Any, radius: float, generator: torch.Generator, names: Any = None) -> Any:
+    """A copy of ``body`` whose sensor sites (all, or ``names``) each moved to a random vertex of
+    the same body part (dominant skinning joint) within ``radius`` metres of it at rest: a sensor
+    strapped on a little off its nominal place. The copy shares every array with ``body``; the
+    tangent vertex of a moved site is the moved one's nearest neighbour on the mesh.
+
+    Args:
+        body: a :class:`~wearpose.body.BodyModel`; radius: metres (0 = unchanged); generator: seeds
+            the draw.
+    """
+    import copy as _copy
+
+    import numpy as np
+
+    out = _copy.copy(body)
+    if radius <= 0:
+        return out
+    names = tuple(body.site_names if names is None else names)
+    _, vids, _ = body.site_ids(names)
+    v = body.v_template.detach().double()
+    part = body.weights.argmax(1)
+    new_v = np.asarray(body._site_vertices).copy()
+    new_t = np.asarray(body._site_tangent).copy()
+    faces = body.faces.cpu().numpy()
+    for name, vid in zip(names, vids):
+        d = (v - v[int(vid)]).norm(dim=-1)
+        cand = torch.nonzero((d <= radius) & (part == part[int(vid)])).flatten()
+        pick = int(cand[int(torch.randint(len(cand), (), generator=generator))])
+        nb = np.unique(faces[(faces == pick).any(axis=1)])
+        nb = nb[nb != pick]
+        k = body._site_index[name]
+        new_v[k] = pick
+        new_t[k] = int(nb[np.argmin(((v[nb] - v[pick]) ** 2).sum(-1).numpy())]) if len(nb) else pick
+    out._site_vertices, out._site_tangent = new_v, new_t
+    return out
+
+
+@dataclass(frozen=True)
+class AugmentSettings:
+    """Motion and placement augmentation of a method's *training* clips, in one recordable form
+    (:meth:`to_dict` / :meth:`from_dict`: plain JSON/YAML values, what a weight's recipe holds).
+
+    Attributes:
+        mirror: add the left/right mirror image of every clip (tag ``mirror``).
+        speed_copies: add that many copies of every clip played at a speed drawn log-uniformly
+            from ``speed_range`` (tags ``speed<k>``), each mirrored with probability 1/2 when
+            ``mirror``.
+        speed_range: (low, high) speed factors.
+        heading_copies: add that many copies turned by a uniform random heading (tags
+            ``heading<k>``).
+        mix_copies: add that many copies whose upper body comes from another clip of the split
+            (tags ``mix<k>``; the partner is drawn by the caller's generator).
+        site_jitter_m: radius (m) of the random displacement of every sensor site, drawn per clip
+            (0 = sensors at their nominal sites).
+    """
+
+    mirror: bool = False
+    speed_copies: int = 0
+    speed_range: tuple[float, float] = (0.8, 1.25)
+    heading_copies: int = 0
+    mix_copies: int = 0
+    site_jitter_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        from wearpose.errors import ConfigError
+
+        lo, hi = (float(x) for x in self.speed_range)
+        if not (0.0 < lo <= hi):
+            raise ConfigError(f"AugmentSettings.speed_range: expected (low, high) with 0 < low <= high, got {self.speed_range!r}")
+        for name in ("speed_copies", "heading_copies", "mix_copies"):
+            if int(getattr(self, name)) < 0:
+                raise ConfigError(f"AugmentSettings.{name}: expected >= 0, got {getattr(self, name)!r}")
+        if not (0.0 <= float(self.site_jitter_m) <= 0.1):
+            raise ConfigError(f"AugmentSettings.site_jitter_m: expected 0-0.1 m, got {self.site_jitter_m!r}")
+        object.__setattr__(self, "speed_range", (lo, hi))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain values (lists for tuples), JSON/YAML-ready."""
+        d = asdict(self)
+        d["speed_range"] = list(self.speed_range)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> AugmentSettings:
+        """The inverse of :meth:`to_dict`; an unknown key is refused, naming the known ones."""
+        from wearpose.errors import ConfigError
+
+        unknown = sorted(set(d) - {f.name for f in fields(cls)})
+        if unknown:
+            raise ConfigError(f"augmentation settings: unknown key(s) {unknown}; known: {[f.name for f in fields(cls)]}")
+        kw = dict(d)
+        if "speed_range" in kw:
+            kw["speed_range"] = tuple(kw["speed_range"])
+        return cls(**kw)
+
+    def tags(self) -> list[str]:
+        """Tags of the augmented copies of one clip, in order."""
+        return ((["mirror"] if self.mirror else []) + [f"speed{k}" for k in range(self.speed_copies)]
+                + [f"heading{k}" for k in range(self.heading_copies)] + [f"mix{k}" for k in range(self.mix_copies)])
+
+
+def augmented_ids(ids: list[str], settings: AugmentSettings) -> list[str]:
+    """Ids of the augmented copies of clips ``ids``: ``<id>#<tag>`` for each :meth:`AugmentSettings.tags`."""
+    tags = settings.tags()
+    return [f"{cid}#{t}" for cid in ids for t in tags]
+
+
+def augment_clip(aid: str, seq: MotionSequence, settings: AugmentSettings, generator: torch.Generator,
+                 root_rest: torch.Tensor | None = None, partner: MotionSequence | None = None) -> MotionSequence:
+    """The motion of augmented copy ``aid`` (``<id>#<tag>``, :func:`augmented_ids`) of clip ``seq``.
+
+    ``mirror``: :func:`mirror`. ``speed<k>``: two uniform draws ``u, flip`` (float64) from
+    ``generator``; speed ``exp(log lo + u (log hi - log lo))`` (:func:`play_speed`), then mirrored
+    when ``settings.mirror`` and ``flip < 0.5``. ``heading<k>``: one draw, heading ``2 pi u - pi``.
+    ``mix<k>``: :func:`mix_parts` with ``partner``'s upper body. The caller seeds ``generator`` per
+    copy (its own namespace), so each method keeps its own draws.
+    """
+    tag = aid.rsplit("#", 1)[1]
+    if tag == "mirror":
+        return mirror(seq, root_rest)
+    if tag.startswith("speed"):
+        u, flip = torch.rand(2, generator=generator, dtype=torch.float64).tolist()
+        lo, hi = (math.log(v) for v in settings.speed_range)
+        m = play_speed(seq, math.exp(lo + u * (hi - lo)))
+        return mirror(m, root_rest) if settings.mirror and flip < 0.5 else m
+    if tag.startswith("heading"):
+        u = float(torch.rand((), generator=generator, dtype=torch.float64))
+        return rotate_heading(seq, 2 * math.pi * u - math.pi, root_rest)
+    if tag.startswith("mix"):
+        if partner is None:
+            raise ShapeError(f"augment_clip {aid!r}: a mix copy needs the partner clip")
+        return mix_parts(partner, seq)
+    raise ShapeError(f"augment_clip: unknown augmentation tag {tag!r} in {aid!r}; expected one of {settings.tags()}")

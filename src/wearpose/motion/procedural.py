@@ -18,7 +18,8 @@ nothing jumps), and placed physically on the floor:
 
 Variation, all drawn from one ``torch.Generator``: timing (hold and transition durations,
 repetitions), depth, arm posture, side, heading (a yaw of the whole clip), body shape (``betas``
-drawn from N(0, 1) clipped to +-2; ``body_shape=False`` keeps the mean body).
+the asset's adult shape space, :func:`wearpose.body.shapes.sample_betas`; ``body_shape=False``
+keeps the mean body).
 
 PIP's synthetic sitting (:mod:`wearpose.estimators.pip.sitting`) is a special case of family
 ``sit``: the same seated postures (hip flexion 75-100 deg, shanks vertical, trunk lean while
@@ -45,6 +46,7 @@ from typing import Any
 
 import torch
 
+from wearpose.body.shapes import sample_betas
 from wearpose.body.skeleton import JOINT_INDEX, NUM_JOINTS
 from wearpose.errors import ConfigError
 from wearpose.geometry import rotation_between, rotation_x, rotation_y, rotation_z
@@ -708,11 +710,6 @@ _BUILDERS = {"squat": _squat, "kneel": _kneel, "pickup": _pickup, "sit": _sit, "
              "reach": _reach}
 
 
-def draw_betas(g: torch.Generator, spread: float = 1.0, clip: float = 2.0) -> torch.Tensor:
-    """``(10,)`` shape coefficients ~ N(0, spread^2) clipped to +-``clip``."""
-    return (torch.randn(NUM_BETAS, generator=g, dtype=torch.float64) * spread).clamp(-clip, clip)
-
-
 def procedural_motion(family: str, g: torch.Generator, body: Any, fps: float = 60.0, *,
                       body_shape: bool = True) -> MotionSequence:
     """One clip of ``family`` (:data:`FAMILIES`, module doc) drawn from ``g`` on ``body``.
@@ -721,7 +718,7 @@ def procedural_motion(family: str, g: torch.Generator, body: Any, fps: float = 6
         A :class:`MotionSequence` at ``fps`` (``meta`` as :func:`place` documents).
     """
     _check(family)
-    betas = draw_betas(g) if body_shape else torch.zeros(NUM_BETAS, dtype=torch.float64)
+    betas = sample_betas(g, NUM_BETAS, dtype=torch.float64) if body_shape else torch.zeros(NUM_BETAS, dtype=torch.float64)
     heading = _u(g, -180.0, 180.0)
     skin = _Skin(body, betas)
     stand = _stance(g)

@@ -25,7 +25,6 @@ ids and all simulation settings, so epochs never re-simulate.
 
 from __future__ import annotations
 
-import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -283,28 +282,34 @@ def build_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, lim
     return concat_data(data, _build_sitting(split, n_sit, cfg, body, root))
 
 
+def augment_settings(cfg: PipConfig) -> Any:
+    """PIP's augmentation as :class:`wearpose.motion.augment.AugmentSettings` (mirror, speed)."""
+    from wearpose.motion.augment import AugmentSettings
+
+    return AugmentSettings(mirror=cfg.aug_mirror, speed_copies=cfg.aug_speed_copies,
+                           speed_range=tuple(cfg.aug_speed_range))
+
+
 def augmented_ids(ids: list[str], cfg: PipConfig) -> list[str]:
-    """Ids of the augmented copies of corpus clips ``ids`` (``<id>#mirror``, ``<id>#speed<k>``)."""
-    tags = (["mirror"] if cfg.aug_mirror else []) + [f"speed{k}" for k in range(cfg.aug_speed_copies)]
-    return [f"{cid}#{t}" for cid in ids for t in tags]
+    """Ids of the augmented copies of corpus clips ``ids`` (``<id>#mirror``, ``<id>#speed<k>``;
+    :func:`wearpose.motion.augment.augmented_ids`)."""
+    from wearpose.motion.augment import augmented_ids as ids_of
+
+    return ids_of(ids, augment_settings(cfg))
 
 
 def augmented_motion(aid: str, store: Any, cfg: PipConfig, body: Any) -> Any:
     """The motion of augmented clip ``aid`` (:func:`augmented_ids`): the corpus clip mirrored,
-    or played at a speed drawn log-uniformly from ``cfg.aug_speed_range`` (seeded by ``aid``)
-    and, when ``cfg.aug_mirror``, mirrored with probability 1/2."""
-    from wearpose.motion import mirror, play_speed
+    or played at a speed drawn log-uniformly from ``cfg.aug_speed_range`` (seeded by ``aid`` in
+    PIP's ``pip-speed`` namespace) and, when ``cfg.aug_mirror``, mirrored with probability 1/2
+    (:func:`wearpose.motion.augment.augment_clip`)."""
+    from wearpose.motion.augment import augment_clip
 
-    cid, tag = aid.rsplit("#", 1)
+    cid = aid.rsplit("#", 1)[0]
     m = store.load(cid)
     root_rest = body.rest_joints(m.betas.to(body.dtype))[0]
-    if tag == "mirror":
-        return mirror(m, root_rest)
     g = torch.Generator().manual_seed(clip_seed(aid, cfg.seed, "pip-speed"))
-    u, flip = torch.rand(2, generator=g, dtype=torch.float64).tolist()
-    lo, hi = (math.log(v) for v in cfg.aug_speed_range)
-    m = play_speed(m, math.exp(lo + u * (hi - lo)))
-    return mirror(m, root_rest) if cfg.aug_mirror and flip < 0.5 else m
+    return augment_clip(aid, m, augment_settings(cfg), g, root_rest)
 
 
 def _build_augmented(split: str, ids: list[str], cfg: PipConfig, body: Any, store: Any, root: Path,

@@ -1,0 +1,87 @@
+"""One place for augmentation (wearpose.motion.augment): heading, part mixing, site jitter and the
+recordable settings."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+import torch
+
+from tests.sensors.sensor_testutils import smooth_motion
+from wearpose.body import BodyModel
+from wearpose.body.skeleton import JOINT_INDEX
+from wearpose.errors import ConfigError, ShapeError
+from wearpose.motion.augment import (
+    LOWER_BODY, AugmentSettings, augment_clip, augmented_ids, jitter_sites, mix_parts, rotate_heading,
+)
+
+
+@pytest.fixture(scope="module")
+def body() -> BodyModel:
+    return BodyModel()
+
+
+def test_heading_turns_every_joint_about_the_vertical(body: BodyModel) -> None:
+    seq = smooth_motion(T=30, seed=1).to(torch.float64)
+    r = body.rest_joints(seq.betas.to(body.dtype))[0].double()
+    out = rotate_heading(seq, math.radians(70.0), r)
+    J0 = body(seq.pose, seq.betas, seq.trans, return_vertices=False).joints.double()
+    J1 = body(out.pose, out.betas, out.trans, return_vertices=False).joints.double()
+    from wearpose.geometry import rotation_y
+
+    Ry = rotation_y(torch.tensor(math.radians(70.0), dtype=torch.float64))
+    assert torch.allclose(J1, J0 @ Ry.T, atol=1e-5)
+    assert out.meta["augment"] == ["heading=70"]
+
+
+def test_mix_parts_takes_legs_and_path_from_lower(body: BodyModel) -> None:
+    a, b = smooth_motion(T=40, seed=2), smooth_motion(T=30, seed=3)
+    out = mix_parts(a, b)
+    assert out.num_frames == 30
+    assert torch.equal(out.pose[:, list(LOWER_BODY)], b.pose[:30, list(LOWER_BODY)])
+    upper = [j for j in range(24) if j not in LOWER_BODY]
+    assert torch.equal(out.pose[:, upper], a.pose[:30, upper]) and torch.equal(out.trans, b.trans)
+    with pytest.raises(ShapeError, match="resample one first"):
+        mix_parts(a, b.slice(0, None, 2))
+
+
+def test_site_jitter_moves_sites_within_radius_on_the_same_part(body: BodyModel) -> None:
+    names = ("left_forearm", "head", "pelvis")
+    g = torch.Generator().manual_seed(0)
+    jb = jitter_sites(body, 0.03, g, names)
+    before, after = body.sites(names=names), jb.sites(names=names)
+    d = (before.positions - after.positions).norm(dim=-1)
+    assert float(d.max()) <= 0.03 + 1e-6 and float(d.max()) > 0.0
+    assert torch.equal(body.sites(names=names).positions, before.positions)  # the original is unchanged
+    part = body.weights.argmax(1)
+    assert all(int(part[int(v)]) == int(part[int(w)]) for v, w in zip(body.site_ids(names)[1], jb.site_ids(names)[1]))
+    again = jitter_sites(body, 0.03, torch.Generator().manual_seed(0), names)
+    assert (again.site_ids(names)[1] == jb.site_ids(names)[1]).all()
+
+
+def test_settings_round_trip_json_and_refuse_bad_values() -> None:
+    s = AugmentSettings(mirror=True, speed_copies=2, speed_range=(0.7, 1.3), heading_copies=1, mix_copies=1,
+                        site_jitter_m=0.02)
+    assert AugmentSettings.from_dict(json.loads(json.dumps(s.to_dict()))) == s
+    assert augmented_ids(["a"], s) == ["a#mirror", "a#speed0", "a#speed1", "a#heading0", "a#mix0"]
+    for bad in ({"speed_range": (1.2, 0.9)}, {"speed_copies": -1}, {"site_jitter_m": 0.5}):
+        with pytest.raises(ConfigError):
+            AugmentSettings(**bad)
+    with pytest.raises(ConfigError, match="unknown key"):
+        AugmentSettings.from_dict({"mirorr": True})
+
+
+def test_augment_clip_by_tag(body: BodyModel) -> None:
+    seq, other = smooth_motion(T=30, seed=4), smooth_motion(T=30, seed=5)
+    s = AugmentSettings(heading_copies=1, mix_copies=1)
+    h = augment_clip("c#heading0", seq, s, torch.Generator().manual_seed(1))
+    assert h.meta["augment"][0].startswith("heading=")
+    assert torch.equal(h.pose[:, JOINT_INDEX["left_knee"]], seq.pose[:, JOINT_INDEX["left_knee"]])
+    m = augment_clip("c#mix0", seq, s, torch.Generator(), partner=other)
+    assert torch.equal(m.trans, seq.trans)
+    with pytest.raises(ShapeError, match="needs the partner"):
+        augment_clip("c#mix0", seq, s, torch.Generator())
+    with pytest.raises(ShapeError, match="unknown augmentation tag"):
+        augment_clip("c#twirl", seq, s, torch.Generator())
