@@ -35,6 +35,9 @@ def test_short_and_tall_wearers_keep_their_feet_on_the_floor_and_still(corpus_st
     body = BodyModel()
     clip = CorpusStore(corpus_store).load(CLIP)
     assert float(clip.betas.abs().max()) == 0.0
+    # The corpus clip itself (beta = 0, converter motion-4: travel from the planted feet).
+    _, J0 = forward_kinematics(clip.pose.double(), body.rest_joints().double())
+    assert stance_foot_speed((J0 + clip.trans.double()[:, None])[:, FEET], clip.fps).median <= 0.03
     travel = {}
     for b0 in (-2.0, 2.0):
         betas = torch.zeros(10)
