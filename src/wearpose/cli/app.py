@@ -93,6 +93,15 @@ def info(
     _emit(result, as_json, render)
 
 
+def _corpus_line(c: dict[str, Any] | None) -> str:
+    """One line for a store's corpus record (:meth:`wearpose.motion.CorpusStore.provenance`)."""
+    if not c:
+        return "not recorded (prepared by an older wearpose)"
+    if c.get("kind") == "manifest":
+        return f"{c['name']} ({c['path']}), manifest sha1 {c['manifest_sha1'][:12]}"
+    return f"your folders {', '.join(c.get('paths', []))}; split {c.get('split')}" + (f", source {c['source']}" if c.get("source") else "")
+
+
 @data_app.command("prepare")
 def data_prepare(
     folders: Optional[list[Path]] = typer.Argument(None, help="Corpus folder (with manifest.csv) or your own folders of BVH, ASF/AMC or AMASS files (any skeleton, see docs/motion-import.md); default $WEARPOSE_DATA or ../shared/data-v2 (corpus v2)."),
@@ -100,20 +109,36 @@ def data_prepare(
     fps: Optional[float] = typer.Option(None, help="Resample every clip to this rate (default: keep each clip's rate)."),
     workers: Optional[int] = typer.Option(None, min=1, help="Worker processes (default: up to 2)."),
     limit: Optional[int] = typer.Option(None, min=1, help="Convert only the first N clips (quick check)."),
+    per_split: Optional[int] = typer.Option(None, "--per-split", min=1, help="Convert only the first N clip ids of each split of each source: a small store with every split (quick start, tests)."),
+    clip: Optional[list[str]] = typer.Option(None, "--clip", help="Convert only this clip id (repeatable; with --per-split: these as well)."),
     joint_map: Optional[Path] = typer.Option(None, "--joint-map", help="YAML joint map for the BVH/AMC of your own folders (see wearpose motion import)."),
+    split: Optional[str] = typer.Option(None, help="Your own folders only: train, val or test puts every clip in that split (e.g. an external test set); hash (default) splits 80/10/10 by a hash of the subject folder."),
+    source: Optional[str] = typer.Option(None, help="Your own folders only: the source name of every clip (default: the first folder level below each folder)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Convert the motion corpus (or your own folders of motion files) into the cached, indexed store
-    (train/val/test by subject; your folders: subject = parent folder, split by a hash of it).
+    (train/val/test by subject; your folders: subject = parent folder, split by a hash of it or
+    --split). The store records which corpus (and manifest version) or folders it holds.
 
     Example: wearpose data prepare --fps 60    |    wearpose data prepare ~/mocap --cache ~/mocap_store
+
+    Example: wearpose data prepare ~/lab_takes --split test --source lab --cache ~/lab_store
     """
     from wearpose.motion import cache_dir, data_dir, prepare_corpus
 
+    from wearpose.motion.store import SOURCE_NAME_RE, USER_SPLITS
+
+    if split is not None and split not in USER_SPLITS:
+        raise typer.BadParameter(f"{split!r}; expected one of {', '.join(USER_SPLITS)}", param_hint="--split")
+    if source is not None and not SOURCE_NAME_RE.match(source):
+        raise typer.BadParameter(f"{source!r}; expected 1-64 characters of [A-Za-z0-9_.-] (it becomes a folder and the "
+                                 "first part of clip ids)", param_hint="--source")
     src = [data_dir(f) for f in folders] if folders else data_dir()
     res = prepare_corpus(src, cache_dir(cache), fps=fps, progress=not as_json, workers=workers, limit=limit,
-                         joint_map=joint_map)
-    shown = {k: (round(v, 1) if k == "seconds" else v) for k, v in res.items() if k != "failures"}
+                         joint_map=joint_map, per_split=per_split, clips=tuple(clip or ()), split=split, source=source)
+    shown = {k: (round(v, 1) if k == "seconds" else v) for k, v in res.items() if k not in ("failures", "store")}
+    shown["store"] = res["store"]["path"]
+    shown["corpus"] = _corpus_line(res["store"]["corpus"])
     _emit(res, as_json, lambda r: console.print(_kv_table("prepared", shown))
           or [err_console.print(f"[red]failed[/] {escape(f'{k}: {v}')}") for k, v in r.get("failures", {}).items()])
     if res.get("failed") and not res.get("converted") and not res.get("skipped"):
@@ -132,7 +157,10 @@ def data_info(
     from wearpose.motion import CorpusStore, cache_dir
 
     summary = CorpusStore(cache_dir(cache)).summary()
-    _emit(summary, as_json, lambda r: console.print(_kv_table("corpus", r)))
+    shown = {k: v for k, v in summary.items() if k != "store"}
+    shown.update(store=summary["store"]["path"], converter=summary["store"]["converter"],
+                 corpus=_corpus_line(summary["store"]["corpus"]))
+    _emit(summary, as_json, lambda r: console.print(_kv_table("corpus", shown)))
 
 
 @app.command()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import re
 import json
 import multiprocessing
 import os
@@ -125,18 +126,48 @@ def _first_per_split(rows: list[dict[str, Any]], n: int, named: Collection[str])
     return [r for r in rows if _clip_id(r) in keep]
 
 
-def _scan_folders(folders: Sequence[Path]) -> list[dict[str, Any]]:
+#: ``split=`` values of :func:`prepare_corpus` for users' folders.
+USER_SPLITS = ("train", "val", "test", "hash")
+SOURCE_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+
+
+def _scan_folders(folders: Sequence[Path], split: str = "hash", source: str | None = None) -> list[dict[str, Any]]:
+    """Rows for users' folders: subject = parent folder, source = ``source`` or the first folder
+    level below the root (else the root's name), split = ``split`` or a hash of the subject."""
     out = []
     for root in folders:
         files = sorted(p for p in root.rglob("*") if p.is_file() and p.name.endswith(_SUFFIXES))
         for p in files:
             subject = p.parent.name if p.parent != root else root.name
             rel = p.relative_to(root)
-            source = rel.parts[0] if len(rel.parts) > 2 else root.name
-            out.append({"file": p, "source": source, "subject": subject, "clip": _clip_name(p),
-                        "split": _hash_split(subject), "licence": "unknown", "description": "", "skip_first": False,
-                        "user_files": True})
+            src = source or (rel.parts[0] if len(rel.parts) > 2 else root.name)
+            out.append({"file": p, "source": src, "subject": subject, "clip": _clip_name(p),
+                        "split": _hash_split(subject) if split == "hash" else split, "licence": "unknown", "description": "",
+                        "skip_first": False, "user_files": True})
     return out
+
+
+def _check_user_options(split: str | None, source: str | None, manifest: Path | None) -> None:
+    if manifest is not None and (split is not None or source is not None):
+        raise ConfigError(f"split/source apply to your own folders; {manifest} gives every clip's split and source "
+                          "(leave out --split and --source, or point at folders without a manifest.csv)")
+    if split is not None and split not in USER_SPLITS:
+        raise ConfigError(f"split {split!r}; expected one of {', '.join(USER_SPLITS)} (hash: 80/10/10 by a hash of the "
+                          "subject folder)")
+    if source is not None and not SOURCE_NAME_RE.match(source):
+        raise ConfigError(f"source {source!r}; expected 1-64 characters of [A-Za-z0-9_.-] starting with a letter or digit "
+                          "(it becomes a folder and the first part of clip ids)")
+
+
+def _corpus_provenance(data: Path | None, folders: Sequence[Path], split: str | None, source: str | None) -> dict[str, Any]:
+    """Which corpus a store was prepared from: a manifest corpus's folder, name and the SHA-1 of
+    its manifest (its version: a changed manifest is another corpus); users' folders and the
+    split/source given for them."""
+    if data is not None and (data / "manifest.csv").is_file():
+        sha = hashlib.sha1((data / "manifest.csv").read_bytes()).hexdigest()
+        return {"kind": "manifest", "path": str(data.resolve()), "name": data.name, "manifest_sha1": sha}
+    return {"kind": "folders", "paths": [str(Path(f).resolve()) for f in folders], "split": split or "hash",
+            "source": source}
 
 
 def _stamp(path: Path, fps: float | None, rest_key: str) -> str:
@@ -217,7 +248,7 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
                    fps: float | None = None, progress: bool = True, workers: int | None = None,
                    rest_joints: torch.Tensor | None = None, limit: int | None = None,
                    joint_map: str | Path | None = None, per_split: int | None = None,
-                   clips: Collection[str] = ()) -> dict[str, Any]:
+                   clips: Collection[str] = (), split: str | None = None, source: str | None = None) -> dict[str, Any]:
     """Convert every corpus clip to a MotionSequence file in ``cache_dir`` and write the index.
 
     Args:
@@ -242,22 +273,35 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
             the corpus is an error.
         joint_map: YAML joint map for the BVH/AMC of manifest-less folders (see
             :func:`wearpose.motion.mapping.load_joint_map`).
+        split: manifest-less folders only: ``"train"``, ``"val"`` or ``"test"`` puts every clip
+            in that split (an external test set), ``"hash"`` (default) splits 80/10/10 by a hash
+            of the subject folder.
+        source: manifest-less folders only: the source name of every clip (default: the first
+            folder level below each given folder, else its name).
 
     Returns:
-        ``{"converted", "skipped", "failed", "seconds", "failures": {clip_id: error}, "index": path}``.
+        ``{"converted", "skipped", "failed", "seconds", "failures": {clip_id: error}, "index": path,
+        "store": {"path", "converter", "corpus"}}`` (also in the index: which corpus, and which
+        version of it, the store holds; :meth:`CorpusStore.provenance`).
         Conversion is idempotent: entries whose source file, settings and output are unchanged are
         skipped. A failing file is recorded (in the index too) and the rest carries on.
     """
     t0 = time.perf_counter()
     if data_dir is None or isinstance(data_dir, (str, Path)):
-        data = default_data_dir(data_dir)
-        jobs_src = _read_manifest(data) if (data / "manifest.csv").is_file() else _scan_folders([data])
+        data: Path | None = default_data_dir(data_dir)
+        folders = [data]
+        manifest = data / "manifest.csv" if (data / "manifest.csv").is_file() else None
+        _check_user_options(split, source, manifest)
+        jobs_src = _read_manifest(data) if manifest is not None else _scan_folders([data], split or "hash", source)
     else:
+        data = None
         folders = [Path(d) for d in data_dir]
         for d in folders:
             if not d.is_dir():
                 raise ConfigError(f"data folder {d} does not exist")
-        jobs_src = _scan_folders(folders)
+        _check_user_options(split, source, None)
+        jobs_src = _scan_folders(folders, split or "hash", source)
+    provenance = _corpus_provenance(data, folders, split, source)
     if joint_map is not None and not Path(joint_map).is_file():
         raise ConfigError(f"joint map {joint_map} does not exist")
     if per_split is not None or clips:
@@ -302,6 +346,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
             stamp += f"|{_asf_stamp(Path(r['file']))}|fps:{r.get('manifest_fps')}"  # the skeleton is an input too
         if joint_map is not None and r.get("user_files"):
             stamp += f"|map:{_stamp(Path(joint_map), None, '')}"
+        if r.get("user_files"):
+            stamp += f"|split:{r['split']}"  # the split is written into the clip's meta
         entry["stamp"] = stamp
         prev = old.get(cid)
         if prev and prev.get("stamp") == stamp and (cache / rel_out).is_file():
@@ -343,11 +389,12 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
                     bar.advance(task)
 
     index = {"format": "wearpose.motion.index", "version": INDEX_VERSION, "converter": CONVERTER_VERSION,
-             "fps": fps, "rest_joints_source": rest_source, "rest_joints": rest_list,
+             "fps": fps, "rest_joints_source": rest_source, "rest_joints": rest_list, "corpus": provenance,
              "clips": dict(sorted(clips.items())), "failures": dict(sorted(failures.items()))}
     _write_json(index_path, index)
     return {"converted": len(todo) - sum(1 for j in todo if j["id"] in failures), "skipped": skipped,
-            "failed": len(failures), "failures": failures, "seconds": time.perf_counter() - t0, "index": str(index_path)}
+            "failed": len(failures), "failures": failures, "seconds": time.perf_counter() - t0, "index": str(index_path),
+            "store": {"path": str(cache.resolve()), "converter": CONVERTER_VERSION, "corpus": provenance}}
 
 
 class CorpusStore:
@@ -398,6 +445,15 @@ class CorpusStore:
         """The clip's :class:`MotionSequence`."""
         return MotionSequence.load(self.root / self.entry(clip_id)["file"], dtype=dtype)
 
+    def provenance(self) -> dict[str, Any]:
+        """Which store and which corpus version results come from: ``{"path"`` (the store),
+        ``"converter"`` (its conversion version), ``"corpus"`` (:func:`prepare_corpus`'s record:
+        a manifest corpus's path, name and manifest SHA-1, or users' folders with their split and
+        source; ``None`` for stores prepared before it was recorded)``}``. Evaluation results
+        carry it."""
+        return {"path": str(self.root.resolve()), "converter": self.index.get("converter"),
+                "corpus": self.index.get("corpus")}
+
     def summary(self) -> dict[str, Any]:
         """Counts and minutes: ``{"clips", "subjects", "minutes", "minutes_per_split",
         "minutes_per_source", "minutes_per_licence", "clips_per_split", "frame_rates", "failures",
@@ -425,4 +481,4 @@ class CorpusStore:
                 "minutes_per_source": r(per_source), "minutes_per_licence": r(per_lic),
                 "clips_per_split": {k: int(v) for k, v in sorted(n_split.items())},
                 "frame_rates": {k: int(v) for k, v in sorted(rates.items())}, "failures": len(self.failures),
-                "floor_suspect": suspect}
+                "floor_suspect": suspect, "store": self.provenance()}

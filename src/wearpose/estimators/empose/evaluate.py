@@ -108,6 +108,13 @@ def _stats(xs: list[torch.Tensor], k: float) -> tuple[float, float]:
     return (float(x.mean()), float(x.std())) if x.numel() else (math.nan, math.nan)
 
 
+def _provenance(store: Any) -> dict[str, Any] | None:
+    """Which store and corpus version the clips came from (:meth:`wearpose.motion.CorpusStore.provenance`;
+    None for a stand-in store without it)."""
+    fn = getattr(store, "provenance", None)
+    return fn() if callable(fn) else None
+
+
 def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: int | None = None, *,
                     noise: str = "default", seed: int = 0, store: Any = None, progress: Any = None,
                     offsets: str = "random", spread: float = UNSEEN_SPREAD, clips: Sequence[str] | None = None
@@ -190,7 +197,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
     return {"split": split, "clips": len(ids), "frames": frames, "noise": noise, "seed": seed, "kit": first.kit_name,
             "rate_hz": first.fps, "body_asset": first.body_asset_id, "joints": "15 major (DIP/EM-POSE)",
             "offsets": offsets, "spread": spread if offsets == "unseen" else None, "subjects": subjects,
-            "models": models}
+            "store": _provenance(store), "models": models}
 
 
 def table2_markdown(result: Mapping[str, Any], digits: int = 1) -> str:
@@ -403,6 +410,7 @@ def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit:
                         "parameters": sum(p.numel() for p in est.model.parameters()), "seconds": secs[name],
                         "dropped_input": "zeros" if name in zeros else "missing"}
     return {"split": split, "clips": len(ids), "noise": noise, "seed": seed, "kit": first.kit_name, "rate_hz": first.fps,
+            "store": _provenance(store),
             "body_asset": first.body_asset_id, "joints": "15 major (DIP/EM-POSE)",
             "frame_counts": {k: int(v.sum()) for k, v in sets.items()},
             "drops": {"span_frames": tuple(span), "gap_frames": DROP_GAP, "sensors_per_span": DROP_COUNTS},
