@@ -362,6 +362,35 @@ def test_online_step_equals_windowed_and_declares_latency(trained) -> None:
     est.mc_samples = est.config.mc_samples
 
 
+def test_streamed_step_equals_its_batched_form_and_window_at_the_start(trained) -> None:
+    """online='stream': step by step equals estimate_streamed (every frame, sigma = aleatoric x
+    scale); its first output frame equals the window mode's (same past, same future)."""
+    est, _, store = trained
+    est.set_window(6, 3)
+    s = synthesize(store.load("synthetic/test_00"), 60.0, None, channels=True)
+    rec = make_recording(s["R_world"], 60.0, s["sim"])
+    est.mc_samples = 0
+    win = est.estimate_windowed(rec, frames=[0])
+    est.set_online("stream")
+    batched = est.estimate_streamed(rec)
+    outs = [est.step(f) for f in iter_frames(rec, est.sensor_names)]
+    assert not outs[2].valid and outs[3].valid and outs[3].extras["online"] == "stream"
+    T = len(outs)
+    for t in range(0, T - 3):
+        o = outs[t + 3]
+        assert math.isclose(o.timestamp, t / 60.0, abs_tol=1e-6)
+        assert torch.allclose(o.local_rot, batched.local_rot[t], atol=1e-5), t
+        assert torch.allclose(o.extras["sigma"], batched.extras["sigma"][t], atol=1e-5), t
+    assert torch.allclose(outs[3].local_rot, win.local_rot[0], atol=1e-5)
+    assert torch.allclose(outs[3].extras["sigma"], win.extras["sigma"][0], atol=1e-5)
+    assert float((batched.extras["sigma_epistemic"]).abs().max()) == 0.0
+    est.set_online("window")
+    est.set_window(*est.config.window)
+    est.mc_samples = est.config.mc_samples
+    with pytest.raises(ShapeError):
+        est.set_online("chunked")
+
+
 def test_frame_rate_flexibility_and_input_errors(trained) -> None:
     est, _, store = trained
     m = store.load("synthetic/test_00")

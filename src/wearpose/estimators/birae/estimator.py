@@ -24,6 +24,11 @@ Modes:
   that frame's time), so latency = ``future / fps`` + compute (:attr:`latency_s`). The first
   ``future`` steps return ``valid=False`` placeholders. :meth:`estimate_windowed` runs the
   same windows over a recording in batches (for evaluation).
+- online, streamed (``online="stream"``, :mod:`.streaming`): the same future window, the
+  forward directions carried from frame to frame instead of re-run over the past (64 LSTM steps
+  per frame instead of 644 at [130, 30]) and one deterministic pass: sigma is the aleatoric head
+  times the calibration scale (``mc_samples`` does not apply). A different computation from the
+  window mode (its first output frame is the same); :meth:`estimate_streamed` is its batched form.
 
 Frame rate (Sec. V-E): the recurrent model accepts any input rate; :meth:`estimate` runs at the
 recording's rate without resampling (the angular-rate input of ``3param_rate`` is in rad/s, so it
@@ -48,6 +53,7 @@ from wearpose.estimators.birae.model import BiRAE
 from wearpose.estimators.birae.representations import (
     SENSORS, angular_rate, features, relative_orientations, target_to_pose,
 )
+from wearpose.estimators.birae.streaming import StreamState, stream_predict, stream_step
 from wearpose.estimators.birae.uncertainty import combine, mc_predict
 from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.inputs import InputSpec, prepare
@@ -63,6 +69,8 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
         config: :class:`BiraeConfig` (default: ``cpu`` preset, 6-param input).
         device: torch device.
         window: online (past, future) frames at the trained rate (default ``config.window``).
+        online: ``"window"`` (re-run the window each frame, MC-dropout) or ``"stream"``
+            (incremental, aleatoric sigma; module doc).
     """
 
     name = "birae"
@@ -70,7 +78,7 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
     lookahead = 30  # default future window at 60 Hz; the instance attribute follows the config
 
     def __init__(self, config: BiraeConfig | None = None, device: str | torch.device = "cpu",
-                 window: tuple[int, int] | None = None) -> None:
+                 window: tuple[int, int] | None = None, online: str = "window") -> None:
         self.config = config or BiraeConfig.preset("cpu")
         self.device = torch.device(device)
         self.kit_name = self.config.kit
@@ -86,6 +94,7 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
         self.mc_samples = self.config.mc_samples
         self.seed = 0
         self.set_window(*(window or self.config.window))
+        self.set_online(online)
         self.reset()
 
     # ------------------------------------------------------------------ settings
@@ -95,6 +104,13 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
             raise ShapeError(f"BiRAE window: expected (past, future) >= 0 frames, got ({past}, {future})")
         self.window = (int(past), int(future))
         self.lookahead = int(future)
+
+    def set_online(self, mode: str) -> None:
+        """``"window"`` or ``"stream"`` (module doc); resets the online state."""
+        if mode not in ("window", "stream"):
+            raise ShapeError(f"BiRAE online mode: expected 'window' or 'stream', got {mode!r}")
+        self.online = mode
+        self.reset()
 
     @property
     def latency_s(self) -> float:
@@ -252,6 +268,28 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
             valid &= keep
         return self._track({"mu": mu, "sigma": sg, "sigma_a": sa, "sigma_e": se}, valid, fps, f"window{past},{fut}")
 
+    @torch.no_grad()
+    def estimate_streamed(self, recording: Any, frames: Any = None, batch: int = 256) -> PoseTrack:
+        """What :meth:`step` outputs with ``online="stream"``, computed in batches (evaluation).
+        ``frames``: optional subset of frame indices (others invalid, identity pose, zero sigma).
+        Frames within ``future`` of the end use the future that exists."""
+        R, ok, fps, _ = self._inputs(recording)
+        _, fut = self._scaled_window(self.window, fps)
+        x = self._features(R, fps)
+        T = x.shape[0]
+        idx = torch.arange(T) if frames is None else torch.as_tensor(frames, dtype=torch.long)
+        self.model.eval()
+        mu_k, lv_k = stream_predict(self.model, x.to(self.device), fut, idx, batch)
+        mu, sa = torch.zeros(T, 45), torch.zeros(T, 45)
+        mu[idx], sa[idx] = mu_k.cpu(), torch.exp(0.5 * lv_k).cpu()
+        valid = ok.clone()
+        if frames is not None:
+            keep = torch.zeros(T, dtype=torch.bool)
+            keep[idx] = True
+            valid &= keep
+        return self._track({"mu": mu, "sigma": sa, "sigma_a": sa, "sigma_e": torch.zeros_like(sa)}, valid, fps,
+                           f"stream{fut}")
+
     def _predict_packed(self, xb: torch.Tensor, lengths: torch.Tensor, M: int) -> dict[str, torch.Tensor]:
         if M <= 0:
             out = self.model(xb.to(self.device), lengths)
@@ -278,6 +316,7 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
         self._buf: deque[tuple[float, torch.Tensor, bool]] = deque()
         self._last_R: torch.Tensor | None = None
         self._prev_rel: torch.Tensor | None = None
+        self._stream: StreamState | None = None
 
     @torch.no_grad()
     def step(self, frame: SensorFrame, fps: float | None = None) -> PoseFrame:
@@ -305,18 +344,29 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
         self._prev_rel = Rr
         past, fut = self._scaled_window(self.window, fps)
         self._buf.append((frame.timestamp, features(Rr, self.config.rep, rate, self.config.rate_scale), bool(v.all())))
-        while len(self._buf) > past + fut + 1:
+        keep = (fut + 1) if self.online == "stream" else (past + fut + 1)
+        while len(self._buf) > keep:
             self._buf.popleft()
         n = len(self._buf)
         k = n - 1 - fut  # position of the output frame in the buffer
+        streamed = None
+        if self.online == "stream":
+            if self._stream is None or self._stream.future != fut:
+                self._stream = StreamState(fut)
+            self.model.eval()
+            streamed = stream_step(self.model, self._buf[-1][1].to(self.device), self._stream)
         if k < 0:
             return PoseFrame(torch.eye(3).expand(NUM_JOINTS, 3, 3).clone(), torch.zeros(10), None, False,
                              frame.timestamp - fut / fps, extras={"frame": "root", "warming_up": True})
-        x = torch.stack([b[1] for b in self._buf])[None]
-        pred = self.predict(x)
-        mu = pred["mu"][0, k].reshape(15, 3)
-        sig = pred["sigma"][0, k].reshape(15, 3) * self.sigma_scale
+        if streamed is not None:
+            mu = streamed[0].cpu().reshape(15, 3)
+            sig = torch.exp(0.5 * streamed[1].cpu()).reshape(15, 3) * self.sigma_scale
+        else:
+            x = torch.stack([b[1] for b in self._buf])[None]
+            pred = self.predict(x)
+            mu = pred["mu"][0, k].reshape(15, 3)
+            sig = pred["sigma"][0, k].reshape(15, 3) * self.sigma_scale
         unc = torch.zeros(NUM_JOINTS)
         unc[list(MAJOR_JOINTS)] = sig.pow(2).mean(-1).sqrt()
         return PoseFrame(target_to_pose(mu), torch.zeros(10), None, self._buf[k][2], self._buf[k][0], unc,
-                         extras={"frame": "root", "expmap": mu, "sigma": sig, "latency_frames": fut})
+                         extras={"frame": "root", "expmap": mu, "sigma": sig, "latency_frames": fut, "online": self.online})

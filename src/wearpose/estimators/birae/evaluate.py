@@ -71,8 +71,10 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
     """MPJAE per group (degrees, pooled over frames) of ``est`` on prepared recordings.
 
     Args:
-        mode: ``"offline"`` (:meth:`BiraeEstimator.estimate`) or ``"online"``
-            (:meth:`BiraeEstimator.estimate_windowed` with ``window``); both count every
+        mode: ``"offline"`` (:meth:`BiraeEstimator.estimate`), ``"online"``
+            (:meth:`BiraeEstimator.estimate_windowed` with ``window``) or ``"stream"``
+            (:meth:`BiraeEstimator.estimate_streamed`: the incremental online mode, its future
+            window from ``window`` or the estimator's, no MC samples); all count every
             ``frame_stride``-th frame only.
         mc_samples: MC-dropout passes (``0``: one deterministic pass, aleatoric sigma only).
         keep_uncertainty: also return pooled residuals and sigmas ``(N, 15, 3)`` (calibrated with
@@ -93,6 +95,15 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
             keep = track.valid.clone()
             if frame_stride > 1:
                 keep[torch.arange(T) % frame_stride != 0] = False
+        elif mode == "stream":
+            idx = torch.arange(0, T, frame_stride)
+            old_window = est.window
+            est.set_window(*(window or est.window))
+            try:
+                track = est.estimate_streamed(rec, frames=idx)
+            finally:
+                est.set_window(*old_window)
+            keep = track.valid
         else:
             idx = torch.arange(0, T, frame_stride)
             track = est.estimate_windowed(rec, window=window, mc_samples=mc_samples, frames=idx)
@@ -109,9 +120,9 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
         if progress is not None:
             progress(i + 1, len(recs))
     out: dict[str, Any] = {"clips": len(recs), "frames": frames, "mode": mode,
-                           "window": list(window or est.window) if mode == "online" else None,
+                           "window": list(window or est.window) if mode in ("online", "stream") else None,
                            "frame_stride": frame_stride,
-                           "mc_samples": est.mc_samples if mc_samples is None else mc_samples}
+                           "mc_samples": 0 if mode == "stream" else (est.mc_samples if mc_samples is None else mc_samples)}
     for g in GROUP_ORDER:
         e = torch.cat(acc[g]) if acc[g] else torch.zeros(0)
         out[f"mpjae_{g}_deg"] = math.degrees(float(e.mean())) if e.numel() else math.nan
