@@ -27,7 +27,10 @@ def _run(name: str, faults: Faults | None, speed: float = 2.0):
     return rec, factory, asyncio.run(serve_and_emulate(name, rec, factory, faults=faults, speed=speed))
 
 
-@pytest.mark.budget(60)  # measured 15-25 s per input on the loaded 2-core machine (model load + 2 s of data)
+# Measured at load average 11-13 on the 2 cores: osc / mvn 17 s each (PIP load, 2 s of data at 2x,
+# the in-process reference); lsl, which runs first, 86 s: it also pays the imports (~20 s at that
+# load) and the EM simulation of the cached recording (~20 s), shared by the later cases.
+@pytest.mark.budget(120)
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_every_frame_estimated_as_in_process(name: str) -> None:
     rec, factory, (sink, final, emu) = _run(name, None)
@@ -42,7 +45,7 @@ def test_every_frame_estimated_as_in_process(name: str) -> None:
     assert err < 1e-4, f"{name}: served poses differ from the in-process step by {err:.3g}"
 
 
-@pytest.mark.budget(60)
+@pytest.mark.budget(60)  # measured 7-8 s each (the recordings and models are cached by then)
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_malformed_counted_dropouts_masked(name: str) -> None:
     faults = Faults(malformed=0.05, dropout=0.01, dropout_frames=(1, 10), seed=3)
