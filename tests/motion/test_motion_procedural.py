@@ -120,3 +120,23 @@ def test_unknown_family_or_namespace_is_refused(body: BodyModel) -> None:
         procedural_clip("dance", 0, body)
     with pytest.raises(ConfigError, match="unknown seed namespace 'test'"):
         procedural_seed("squat", 0, 0, "test")
+
+
+@pytest.mark.budget(30)
+def test_cli_writes_reproducible_clips(tmp_path) -> None:
+    import json
+
+    from typer.testing import CliRunner
+
+    from wearpose.cli import app
+
+    r = CliRunner().invoke(app, ["motion", "procedural", "reach", "--seed", "2", "--count", "2", "--namespace", "eval",
+                                 "--out", str(tmp_path / "clips"), "--json"])
+    assert r.exit_code == 0, r.output
+    rows = json.loads(r.stdout)["clips"]
+    assert [x["clip"] for x in rows] == ["procedural/reach/eval/0000", "procedural/reach/eval/0001"]
+    a = MotionSequence.load(rows[1]["file"])
+    b = procedural_clip("reach", 1, BodyModel(), seed=2, namespace="eval")
+    assert torch.allclose(a.pose, b.pose, atol=1e-5) and a.num_frames == rows[1]["frames"]
+    bad = CliRunner().invoke(app, ["motion", "procedural", "reach", "--namespace", "test", "--out", str(tmp_path / "x.npz")])
+    assert bad.exit_code != 0 and "unknown seed namespace 'test'" in bad.output + str(bad.exception)
