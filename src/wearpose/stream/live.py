@@ -71,13 +71,41 @@ class InputBridge:
         self.counts["early"] = len(early)
         for f in early:
             self._malformed(f) if isinstance(f, Exception) else self._frame(f)
+        pose_subject = getattr(self.source, "pose_subject", None)
+        if pose_subject is not None:  # MVN: its own pose as another subject (MvnInput.pose_subject)
+            await self.add_mvn_pose_subject(pose_subject)
         log.info("input %s: subject %d, %d sensors at %g Hz (%s)", self.source.name, self.subject,
                  len(self.source.sensors), self.source.rate, ", ".join(self.source.names))
         return self.ready
 
+    async def add_mvn_pose_subject(self, subject: int) -> dict[str, Any]:
+        """MVN only: publish MVN's own pose (type-02 datagrams) as subject ``subject`` beside the
+        estimate (viewer, outputs), e.g. as ground truth for a sparse estimate."""
+        from wearpose.stream.inputs.mvn import SEGMENTS, MvnPoseEstimator, pose_frame, segment_info
+
+        sensors = tuple(segment_info(s, self.source.rate) for s in SEGMENTS)
+        channels = canonical_channels(sensors)
+        peer = _LocalPeer("mvn-pose")
+        hello = Hello(subject, tuple(s.name for s in sensors), channels, self.source.rate, "binary", {})
+        ready = await self.server.open_local_subject(peer, hello, factory=MvnPoseEstimator)
+
+        def on_pose(seq: int, t: float, pos: Any, R: Any) -> None:
+            try:
+                data = canonical_frame(sensors, pose_frame(seq, t, pos, R), channels)
+            except PacketError as exc:
+                self.server.local_malformed(peer, subject, exc)
+                return
+            self.server.feed_local(peer, FramePacket(subject, seq, t, pose_frame(seq, t, pos, R).valid, data))
+
+        self.source.on_pose = on_pose  # type: ignore[attr-defined]
+        self._pose_subject = subject
+        return ready
+
     async def stop(self) -> dict[str, Any]:
         """Close the input (its buffered frames are handed on) and end the subject."""
         await self.source.close()
+        if getattr(self, "_pose_subject", None) is not None:
+            await self.server.end_local_subject(self._pose_subject)
         if self.ready is None:
             return {}
         return await self.server.end_local_subject(self.subject)

@@ -432,6 +432,7 @@ class StreamServer:
         #: Live device inputs feeding subjects (:class:`wearpose.stream.live.InputBridge`), for ``stats``.
         self.inputs: list[Any] = []
         self.output_errors = 0
+        self._factories: dict[int, Callable[[], Estimator]] = {}  # per-subject estimators of local sources
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> StreamServer:
@@ -753,13 +754,18 @@ class StreamServer:
             raise exc
 
     # ------------------------------------------------------------------ local (in-process) subjects
-    async def open_local_subject(self, peer: Any, hello: Hello) -> dict[str, Any]:
+    async def open_local_subject(self, peer: Any, hello: Hello,
+                                 factory: Callable[[], Estimator] | None = None) -> dict[str, Any]:
         """Open subject ``hello.subject`` for an in-process source (a live device input): the
         same path as a connection's ``hello`` (estimator, stride, warm-up), owned by ``peer`` (an
         object with ``async send(msg)``, which receives the ``ready`` / ``error`` reply and the
-        subject's poses). Returns the ``ready`` reply; StreamError with the server's ``error``."""
+        subject's poses). ``factory``: this subject's estimator instead of the server's (e.g. a
+        pass-through of a device's own pose). Returns the ``ready`` reply; StreamError with the
+        server's ``error``."""
         from wearpose.stream.client import StreamError
 
+        if factory is not None:
+            self._factories[hello.subject] = factory
         await self._on_hello(peer, hello)
         s = self.subjects.get(hello.subject)
         if s is None or s.owner is not peer or s.estimator is None:
@@ -855,7 +861,7 @@ class StreamServer:
     def _make_estimator(self, hello: Hello) -> tuple[Estimator, int]:
         """A fresh, warmed-up estimator for ``hello`` and the subject's stride; raises (the hello is refused)
         when the estimator needs a sensor the hello lacks or the rate does not fit (:meth:`_stride_for`)."""
-        est = self.factory()
+        est = self._factories.get(hello.subject, self.factory)()
         missing = [n for n in est.sensor_names if n not in hello.sensors]
         if missing:
             raise PacketError(f"hello.sensors lacks {missing} needed by estimator {est.name!r} "

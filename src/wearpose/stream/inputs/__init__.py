@@ -20,7 +20,7 @@ __all__ = ["DeviceFrame", "LiveInput", "canonical_channels", "canonical_frame", 
 def make_input(name: str, *, host: str = "127.0.0.1", rate: float | None = None, lsl_stream: str = "wearpose-sensors",
                osc_profile: str = "ngimu", osc_sensors: dict[str, int] | list[str] | None = None, osc_port: int = 9000,
                mvn_port: int = 9763, mvn_segments: list[str] | None = None, mvn_character: int = 0,
-               mvn_position_unit: str = "m") -> LiveInput:
+               mvn_position_unit: str = "m", mvn_pose_subject: int | None = None) -> LiveInput:
     """The live input ``name`` (``lsl``, ``osc``, ``mvn``) with its options (``wearpose serve``'s)."""
     from wearpose.errors import ConfigError
 
@@ -44,7 +44,8 @@ def make_input(name: str, *, host: str = "127.0.0.1", rate: float | None = None,
         from wearpose.stream.inputs.mvn import MvnInput
 
         try:
-            return MvnInput(host, mvn_port, mvn_segments, rate or 60.0, mvn_character, mvn_position_unit)
+            return MvnInput(host, mvn_port, mvn_segments, rate or 60.0, mvn_character, mvn_position_unit,
+                            pose_subject=mvn_pose_subject)
         except ValueError as exc:
             raise ConfigError(f"--input mvn: {exc}") from None
     raise ConfigError(f"--input {name!r}: expected one of {', '.join(INPUTS)}")

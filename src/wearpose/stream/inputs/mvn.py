@@ -168,13 +168,18 @@ class MvnInput(LiveInput):
         position_unit: unit of type-02 positions: ``"m"`` (what MVN sends; §2.5.6 of revision N
             says cm, its user manual metres) or ``"cm"``.
         first_timeout: seconds :meth:`open` waits for the first tracker datagram.
+        pose_subject: also publish MVN's own pose (type-02 datagrams, :class:`MvnPoseEstimator`)
+            as this subject, e.g. ground truth beside a sparse estimate (``--mvn-pose-subject``).
     """
 
     name = "mvn"
 
     def __init__(self, host: str = "127.0.0.1", port: int = DEFAULT_PORT, segments: Sequence[str] | None = None,
-                 rate: float = 60.0, character: int = 0, position_unit: str = "m", first_timeout: float = 30.0) -> None:
+                 rate: float = 60.0, character: int = 0, position_unit: str = "m", first_timeout: float = 30.0,
+                 pose_subject: int | None = None) -> None:
         super().__init__()
+        #: Publish MVN's own pose (type 02) as this subject beside the estimate (None: do not).
+        self.pose_subject = pose_subject
         self.host, self.port, self.rate, self.character = host, port, float(rate), character
         if position_unit not in ("m", "cm"):
             raise ValueError(f"position_unit {position_unit!r}: expected 'm' or 'cm'")
@@ -349,3 +354,55 @@ async def emulate_mvn(recording: Any, host: str = "127.0.0.1", port: int = DEFAU
         out.close()
     return {"input": "mvn", "target": f"udp://{host}:{port}", "rate_hz": d.rate, "sensors": list(d.names),
             "pose_datagrams": gt is not None, **res.to_dict()}
+
+
+# ------------------------------------------------------------------------- MVN's own pose as a subject
+def segment_info(segment: str, rate: float, position_unit: str = "m") -> SensorInfo:
+    """A type-02 body segment as a declared sensor (kind ``vio``: position + orientation in MVN's
+    Z-up world), so the pose goes through the same conversion as every device frame."""
+    return SensorInfo(f"mvn_{segment}", "vio", None, rate, world_up="z_up", position_unit=position_unit)
+
+
+class MvnPoseEstimator:
+    """Pass-through "estimator" of MVN's own pose (type 02): the 23 segment orientations, once in
+    wearpose's Y-up world (the declared conversion), become SMPL global joint rotations by the
+    segment-axes change (:data:`wearpose.geometry.MVN_TO_WEARPOSE`; identity at MVN's T-pose =
+    SMPL's T-pose) and then local rotations (:data:`SMPL_FROM_MVN`: L5 unused, SMPL's hands take
+    the MVN hands); root translation = the pelvis segment origin minus the body model's rest
+    pelvis. The world heading differs from the sensors' by MVN's and wearpose's axis choices (a
+    fixed yaw); local rotations do not depend on it."""
+
+    name = "mvn-pose"
+    kit_name = "mvn"
+    body_asset_id = "default"
+    fps = 0.0  # any rate
+    causal = True
+    lookahead = 0
+
+    def __init__(self) -> None:
+        from wearpose.body import BodyModel
+
+        self.sensor_names = tuple(f"mvn_{s}" for s in SEGMENTS)
+        self._pelvis_rest = BodyModel().rest_joints()[0].double()
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, frame: Any) -> Any:
+        from wearpose.body import global_to_local
+        from wearpose.estimators.base import PoseFrame
+        from wearpose.geometry import MVN_TO_WEARPOSE
+
+        idx = [frame.names.index(n) for n in self.sensor_names]
+        R = torch.as_tensor(np.asarray(frame.channels["orientation"][idx], np.float64))  # segment -> Y-up world
+        G = R[list(SMPL_FROM_MVN)] @ MVN_TO_WEARPOSE.T  # SMPL joint axes -> segment axes -> world
+        valid = bool(np.all(frame.valid[idx]))
+        local = global_to_local(G[None])[0].float() if valid else torch.eye(3).repeat(24, 1, 1)
+        p = torch.as_tensor(np.asarray(frame.channels["position"][idx[0]], np.float64))
+        trans = (p - self._pelvis_rest).float() if valid else None
+        return PoseFrame(local, torch.zeros(10), trans, valid, frame.timestamp, extras={"source": "mvn type 02"})
+
+
+def pose_frame(seq: int, t: float, positions: np.ndarray, R: np.ndarray) -> DeviceFrame:
+    """A type-02 pose as a device frame of the 23 :func:`segment_info` sensors."""
+    return DeviceFrame(seq, t, np.ones(len(SEGMENTS), bool), {"position": positions, "orientation": R})
