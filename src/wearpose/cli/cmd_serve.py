@@ -92,6 +92,8 @@ def serve(
     mvn_segments: Optional[str] = typer.Option(None, help="--input mvn: tracker segments, comma-separated (e.g. "
                                                           "pelvis,head,left_forearm); default: the first datagram's."),
     mvn_character: int = typer.Option(0, help="--input mvn: MVN character ID."),
+    mvn_pose_subject: Optional[int] = typer.Option(None, help="--input mvn: also publish MVN's own pose (type-02 "
+                                                              "datagrams) as this subject, beside the estimate."),
     output: Optional[List[str]] = typer.Option(None, "--output", help="Pose output (repeatable): vmc (VMC over OSC) "
                                                                       "or lsl (an LSL outlet per subject)."),
     vmc_host: str = typer.Option("127.0.0.1", help="--output vmc: the VMC receiver's host."),
@@ -140,7 +142,7 @@ def serve(
                     max_lag_s=max_lag or None)
     inputs, outputs = _devices(input_, device_host, device_rate, lsl_stream, lsl_loopback, osc_profile, osc_sensor,
                                osc_port, mvn_port, mvn_segments, mvn_character, output, vmc_host, vmc_port, vmc_subject,
-                               lsl_out_name)
+                               lsl_out_name, mvn_pose_subject)
     final = run_server(factory, host, port, on_start=started, reorder_window=reorder_window, stride=_stride(stride),
                        workers=workers, udp_port=udp_port, warmup=warmup, threads=threads, token=token,
                        require_token=require_token, allow_origins=origins, limits=limits, inputs=inputs,
@@ -152,7 +154,7 @@ def serve(
 def _devices(inputs: Optional[List[str]], host: str, rate: Optional[float], lsl_stream: str, lsl_loopback: bool,
              osc_profile: str, osc_sensor: Optional[List[str]], osc_port: int, mvn_port: int, mvn_segments: Optional[str],
              mvn_character: int, outputs: Optional[List[str]], vmc_host: str, vmc_port: int, vmc_subject: int,
-             lsl_out_name: str) -> tuple[list[Any], list[Any]]:
+             lsl_out_name: str, mvn_pose_subject: Optional[int] = None) -> tuple[list[Any], list[Any]]:
     """The --input / --output objects (library: wearpose.stream.inputs / outputs)."""
     from wearpose.errors import ConfigError
     from wearpose.stream.inputs import make_input
@@ -167,7 +169,8 @@ def _devices(inputs: Optional[List[str]], host: str, rate: Optional[float], lsl_
         raise ConfigError(str(exc)) from None
     segs = [x.strip() for x in mvn_segments.split(",") if x.strip()] if mvn_segments else None
     ins = [make_input(n, host=host, rate=rate, lsl_stream=lsl_stream, osc_profile=osc_profile, osc_sensors=sensors,
-                      osc_port=osc_port, mvn_port=mvn_port, mvn_segments=segs, mvn_character=mvn_character)
+                      osc_port=osc_port, mvn_port=mvn_port, mvn_segments=segs, mvn_character=mvn_character,
+                      mvn_pose_subject=mvn_pose_subject)
            for n in inputs or []]
     outs = [make_output(n, vmc_host=vmc_host, vmc_port=vmc_port, vmc_subject=vmc_subject, lsl_name=lsl_out_name)
             for n in outputs or []]
