@@ -221,7 +221,7 @@ UP_MAX_FRAMES = 600
 #: least this many leg lengths over the clip (lying down, sitting up, getting up): a clip that
 #: keeps one posture tells nothing about the floor (a straight walk keeps its sideways extremes
 #: as still as its feet).
-UP_FLOOR_MIN_EXTENT_CHANGE = 0.3
+UP_FLOOR_MIN_EXTENT_CHANGE = 0.5
 #: ... and when the lowest point along it moves less than this share of that change and less
 #: than :data:`UP_FLOOR_MAX_SUPPORT` leg lengths (a floor holds the lowest point to a few cm).
 UP_FLOOR_RATIO = 0.15
@@ -279,9 +279,9 @@ def detect_up(motion: BvhMotion, smap: SkeletonMap, max_frames: int = UP_MAX_FRA
     - **standing**: in the frames where the body is most extended (head to the mid-ankle point
       at least 90 % of its longest), the mean ankles -> head direction. Lying down is extended
       too, so this alone calls a clip that lies down "Z up" or "X up";
-    - **floor** (:func:`floor_evidence`): a body on a floor keeps its lowest point on it while
-      it changes posture (lies down, sits up, gets up); along a horizontal axis the lowest point
-      moves as the posture changes.
+    - **floor** (:func:`floor_evidence`, on the mapped joints): a body on a floor keeps its
+      lowest point on it while it changes posture (lies down, sits up, gets up); along a
+      horizontal axis the lowest point moves as the posture changes.
 
     The floor decides when it has evidence (:func:`_floor_axis`), else the standing frames do.
     When the two disagree, or the standing evidence is weak and the floor has none, the
@@ -311,7 +311,10 @@ def detect_up(motion: BvhMotion, smap: SkeletonMap, max_frames: int = UP_MAX_FRA
         leg = leg_length(motion, smap)
     except RetargetError:
         leg = float(ext.max()) / 2
-    fev = floor_evidence(P, leg)
+    # Mapped joints only: a rig's static helper joints (Bandai's joint_Root stays at the origin
+    # while the body walks away) would pose as a still "lowest point".
+    body = sorted({skel.index(n) for n in smap.joints.values()})
+    fev = floor_evidence(P[:, body], leg)
     floor_axis = _floor_axis(fev)
     axis = floor_axis if floor_axis is not None else stand_axis
     k = "xyz".index(axis[-1])
