@@ -1,5 +1,5 @@
 """``wearpose stream emulate INPUT RECORDING``: a loopback device emulator for each live input
-of ``wearpose serve --input`` (thin: :func:`wearpose.stream.inputs.emulate`)."""
+of ``wearpose serve --input`` (thin: :func:`wearpose.stream.inputs.emulate_input`)."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def stream_emulate(
     """
     from wearpose.errors import ConfigError
     from wearpose.recording import load_recording
-    from wearpose.stream.inputs import INPUTS, emulate
+    from wearpose.stream.inputs import INPUTS, emulate_input
     from wearpose.stream.inputs.osc import parse_sensor_ports
     from wearpose.stream.replay import Faults
 
@@ -62,7 +62,7 @@ def stream_emulate(
     err_console.print(f"emulating {input_name} from {recording.name} ({rec.duration:.1f} s, {len(rec.names)} sensors)",
                       highlight=False)
     try:
-        res = asyncio.run(emulate(input_name, rec, host=host, port=port, lsl_stream=lsl_stream, osc_profile=osc_profile,
+        res = asyncio.run(emulate_input(input_name, rec, host=host, port=port, lsl_stream=lsl_stream, osc_profile=osc_profile,
                                   osc_ports=ports, faults=faults, speed=speed, duration=duration))
     except ValueError as exc:  # e.g. a sensor name that is no MVN segment
         raise ConfigError(f"{recording}: {exc}") from None

@@ -1160,10 +1160,10 @@ def run_server(estimator_factory: Callable[[], Estimator], host: str = "127.0.0.
         server.outputs.extend(outputs)
         bridges = [InputBridge(server, src, input_subject + i) for i, src in enumerate(inputs)]
         try:
-            for b in bridges:
-                await b.start()
-            if on_start is not None:
+            if on_start is not None:  # the server is up: a device may connect to it while the inputs open
                 on_start(server)
+            for b in bridges:  # an LSL input waits here for its stream to appear
+                await b.start()
             await stop.wait()
         finally:
             for b in bridges:

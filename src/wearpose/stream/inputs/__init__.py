@@ -51,7 +51,7 @@ def make_input(name: str, *, host: str = "127.0.0.1", rate: float | None = None,
     raise ConfigError(f"--input {name!r}: expected one of {', '.join(INPUTS)}")
 
 
-async def emulate(name: str, recording: object, *, host: str = "127.0.0.1", port: int | None = None,
+async def emulate_input(name: str, recording: object, *, host: str = "127.0.0.1", port: int | None = None,
                   lsl_stream: str = "wearpose-sensors", osc_profile: str = "ngimu",
                   osc_ports: dict[str, int] | None = None, **kw: object) -> dict:
     """Play ``recording`` as input ``name``'s device on ``host`` (loopback emulators; ``kw``:
@@ -73,4 +73,4 @@ async def emulate(name: str, recording: object, *, host: str = "127.0.0.1", port
     raise ConfigError(f"emulate {name!r}: expected one of {', '.join(INPUTS)}")
 
 
-__all__ += ["make_input", "emulate"]
+__all__ += ["make_input", "emulate_input"]

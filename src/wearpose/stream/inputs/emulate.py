@@ -117,9 +117,13 @@ class UdpSender:
 
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.connect((host, port))
+        self.refused = 0
 
     def send(self, data: bytes) -> None:
-        self.sock.send(data)
+        try:
+            self.sock.send(data)
+        except ConnectionRefusedError:  # nothing listening (yet): a device keeps sending regardless
+            self.refused += 1
 
     def close(self) -> None:
         self.sock.close()

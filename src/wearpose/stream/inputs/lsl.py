@@ -188,12 +188,12 @@ class LslInput(LiveInput):
     Args:
         stream: the stream's ``name`` to resolve (``--lsl-stream``).
         rate: frame rate, Hz (default: the stream's nominal rate).
-        timeout: seconds to resolve the stream.
+        timeout: seconds to wait for the stream to appear (default 2 minutes).
     """
 
     name = "lsl"
 
-    def __init__(self, stream: str = "wearpose-sensors", rate: float | None = None, timeout: float = 10.0) -> None:
+    def __init__(self, stream: str = "wearpose-sensors", rate: float | None = None, timeout: float = 120.0) -> None:
         super().__init__()
         self.stream, self._rate, self.timeout = stream, rate, timeout
         self._inlet: Any = None
