@@ -47,7 +47,7 @@ def test_manifest_corpus_records_its_version_and_refuses_split(tmp_path: Path) -
     write_gz(data / "bandai" / "s1" / "walk.bvh.gz", bandai_like_bvh(0))
     (data / "manifest.csv").write_text("path,source,subject,clip,description,frames,fps,seconds,split,licence,frame0_is_tpose\n"
                                        "data/bandai/s1/walk.bvh.gz,bandai,s1,walk,walk,20,30,0.667,train,CC-BY-NC-4.0,0\n")
-    with pytest.raises(ConfigError, match="split/source apply to your own folders"):
+    with pytest.raises(ConfigError, match="split/source/asf/up apply to your own folders"):
         prepare_corpus(data, tmp_path / "c", progress=False, workers=1, rest_joints=REST, split="test")
     prepare_corpus(data, tmp_path / "c", progress=False, workers=1, rest_joints=REST)
     c = CorpusStore(tmp_path / "c").provenance()["corpus"]
@@ -66,3 +66,16 @@ def test_cli_prepare_split_and_source(mine: Path, tmp_path: Path) -> None:
     assert bad.exit_code == 2 and "'my lab'" in bad.output
     info = CliRunner().invoke(app, ["data", "info", "--cache", str(tmp_path / "s")])
     assert info.exit_code == 0 and "your folders" in info.output and "split test" in info.output
+
+
+def test_up_and_asf_options_reach_the_import(mine: Path, tmp_path: Path) -> None:
+    """--up is every clip's up axis (the report says 'given'); both are refused for a manifest
+    corpus and checked before anything runs."""
+    cache = tmp_path / "s"
+    prepare_corpus([mine], cache, progress=False, workers=1, rest_joints=REST, up="y")
+    seq = CorpusStore(cache).load("lab_takes/p01/walk")
+    assert seq.meta["import"]["up"]["how"] == "given"
+    with pytest.raises(ConfigError, match="up axis 'w'"):
+        prepare_corpus([mine], cache, progress=False, workers=1, rest_joints=REST, up="w")
+    with pytest.raises(ConfigError, match="ASF file .*nope.asf does not exist"):
+        prepare_corpus([mine], cache, progress=False, workers=1, rest_joints=REST, asf=tmp_path / "nope.asf")

@@ -114,6 +114,8 @@ def data_prepare(
     joint_map: Optional[Path] = typer.Option(None, "--joint-map", help="YAML joint map for the BVH/AMC of your own folders (see wearpose motion import)."),
     split: Optional[str] = typer.Option(None, help="Your own folders only: train, val or test puts every clip in that split (e.g. an external test set); hash (default) splits 80/10/10 by a hash of the subject folder."),
     source: Optional[str] = typer.Option(None, help="Your own folders only: the source name of every clip (default: the first folder level below each folder)."),
+    asf: Optional[Path] = typer.Option(None, "--asf", help="Your own folders only: the ASF skeleton of every AMC file (folders holding several actors' ASF files)."),
+    up: Optional[str] = typer.Option(None, help="Your own folders only: the up axis of every file: y, z, -y, -z, x, -x (default: detected per clip)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Convert the motion corpus (or your own folders of motion files) into the cached, indexed store
@@ -135,7 +137,8 @@ def data_prepare(
                                  "first part of clip ids)", param_hint="--source")
     src = [data_dir(f) for f in folders] if folders else data_dir()
     res = prepare_corpus(src, cache_dir(cache), fps=fps, progress=not as_json, workers=workers, limit=limit,
-                         joint_map=joint_map, per_split=per_split, clips=tuple(clip or ()), split=split, source=source)
+                         joint_map=joint_map, per_split=per_split, clips=tuple(clip or ()), split=split, source=source,
+                         asf=asf, up=up)
     shown = {k: (round(v, 1) if k == "seconds" else v) for k, v in res.items() if k not in ("failures", "store")}
     shown["store"] = res["store"]["path"]
     shown["corpus"] = _corpus_line(res["store"]["corpus"])

@@ -147,10 +147,17 @@ def _scan_folders(folders: Sequence[Path], split: str = "hash", source: str | No
     return out
 
 
-def _check_user_options(split: str | None, source: str | None, manifest: Path | None) -> None:
-    if manifest is not None and (split is not None or source is not None):
-        raise ConfigError(f"split/source apply to your own folders; {manifest} gives every clip's split and source "
-                          "(leave out --split and --source, or point at folders without a manifest.csv)")
+def _check_user_options(split: str | None, source: str | None, manifest: Path | None, asf: Any = None,
+                        up: str | None = None) -> None:
+    if manifest is not None and (split is not None or source is not None or asf is not None or up is not None):
+        raise ConfigError(f"split/source/asf/up apply to your own folders; {manifest} gives every clip's split and source "
+                          "(leave out --split, --source, --asf and --up, or point at folders without a manifest.csv)")
+    if asf is not None and not Path(asf).is_file():
+        raise ConfigError(f"ASF file {asf} does not exist")
+    from wearpose.motion.importer import UP_AXES  # noqa: PLC0415 - the import's own list
+
+    if up is not None and up.lower() not in UP_AXES:
+        raise ConfigError(f"up axis {up!r}; expected one of {', '.join(UP_AXES)}")
     if split is not None and split not in USER_SPLITS:
         raise ConfigError(f"split {split!r}; expected one of {', '.join(USER_SPLITS)} (hash: 80/10/10 by a hash of the "
                           "subject folder)")
@@ -203,7 +210,8 @@ def _convert_one(job: dict[str, Any]) -> dict[str, Any]:
             # Folders without a manifest: any skeleton, units and up axis (wearpose.motion.importer).
             from wearpose.motion.importer import import_motion  # noqa: PLC0415 - heavier, only for user folders
 
-            seq = import_motion(src, rest, joint_map=job.get("joint_map"), meta=meta).sequence
+            seq = import_motion(src, rest, joint_map=job.get("joint_map"), meta=meta, asf=job.get("asf"),
+                                up=job.get("up")).sequence
         elif src.name.lower().endswith((".amc", ".amc.gz")):
             seq = _import_corpus_amc(src, rest, job.get("manifest_fps"), meta)
         else:
@@ -248,7 +256,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
                    fps: float | None = None, progress: bool = True, workers: int | None = None,
                    rest_joints: torch.Tensor | None = None, limit: int | None = None,
                    joint_map: str | Path | None = None, per_split: int | None = None,
-                   clips: Collection[str] = (), split: str | None = None, source: str | None = None) -> dict[str, Any]:
+                   clips: Collection[str] = (), split: str | None = None, source: str | None = None,
+                   asf: str | Path | None = None, up: str | None = None) -> dict[str, Any]:
     """Convert every corpus clip to a MotionSequence file in ``cache_dir`` and write the index.
 
     Args:
@@ -278,6 +287,9 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
             of the subject folder.
         source: manifest-less folders only: the source name of every clip (default: the first
             folder level below each given folder, else its name).
+        asf, up: manifest-less folders only: the ASF skeleton of every AMC file (folders holding
+            several actors' ASF files) and the up axis of every file (default: detected), as
+            :func:`wearpose.motion.import_motion` takes them.
 
     Returns:
         ``{"converted", "skipped", "failed", "seconds", "failures": {clip_id: error}, "index": path,
@@ -291,7 +303,7 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
         data: Path | None = default_data_dir(data_dir)
         folders = [data]
         manifest = data / "manifest.csv" if (data / "manifest.csv").is_file() else None
-        _check_user_options(split, source, manifest)
+        _check_user_options(split, source, manifest, asf, up)
         jobs_src = _read_manifest(data) if manifest is not None else _scan_folders([data], split or "hash", source)
     else:
         data = None
@@ -299,7 +311,7 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
         for d in folders:
             if not d.is_dir():
                 raise ConfigError(f"data folder {d} does not exist")
-        _check_user_options(split, source, None)
+        _check_user_options(split, source, None, asf, up)
         jobs_src = _scan_folders(folders, split or "hash", source)
     provenance = _corpus_provenance(data, folders, split, source)
     if joint_map is not None and not Path(joint_map).is_file():
@@ -347,7 +359,9 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
         if joint_map is not None and r.get("user_files"):
             stamp += f"|map:{_stamp(Path(joint_map), None, '')}"
         if r.get("user_files"):
-            stamp += f"|split:{r['split']}"  # the split is written into the clip's meta
+            stamp += f"|split:{r['split']}|up:{up}"  # the split is written into the clip's meta
+            if asf is not None and str(r["file"]).lower().endswith((".amc", ".amc.gz")):
+                stamp += f"|asf:{_stamp(Path(asf), None, '')}"
         entry["stamp"] = stamp
         prev = old.get(cid)
         if prev and prev.get("stamp") == stamp and (cache / rel_out).is_file():
@@ -356,7 +370,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
         clips[cid] = entry
         todo.append({**r, "file": str(r["file"]), "id": cid, "out": str(cache / rel_out), "fps": fps,
                      "rest_joints": rest_list, "rest_source": rest_source,
-                     "joint_map": str(joint_map) if joint_map is not None else None})
+                     "joint_map": str(joint_map) if joint_map is not None else None,
+                     "asf": str(asf) if asf is not None else None, "up": up})
     skipped = len(clips) - len(todo)
 
     def finish(res: dict[str, Any]) -> None:
