@@ -163,19 +163,6 @@ def test_serve_defaults_to_stride_auto(monkeypatch) -> None:
     assert res.exit_code == 0 and seen["stride"] == 1
 
 
-def test_weights_setting_from_cards_equals_the_checkpoints() -> None:
-    # estimate/serve word rate and kit errors from the weight card (no second 14 MB load): the
-    # cards must say what the checkpoints say, for every shipped pose estimator
-    from wearpose.cli.models import pose_weights, weights_setting
-    from wearpose.estimators.checkpoint import load_checkpoint
-    from wearpose.weights import weight_path
-
-    for name in pose_weights():
-        ck = load_checkpoint(weight_path(name))
-        fps = ck.config.get("rate") if isinstance(ck.config, dict) else None
-        assert weights_setting(name) == {"kit": ck.kit, "sensors": list(ck.sensors), "fps": fps, "method": ck.method}, name
-
-
 # --------------------------------------------------------------------------- declared conventions
 #: Every non-canonical convention of the recording format (docs/formats.md) at once.
 DECLARED = dict(position_unit="mm", gyro_unit="deg/s", acc_unit="g", acc_frame="sensor", acc_gravity="included",
@@ -214,13 +201,11 @@ def test_declared_units_and_frames_give_the_same_estimate(model: str, tmp_path: 
     ignored the declaration, 2.88 and 1714 apart)."""
     import numpy as np
 
-    from wearpose.cli.models import weights_setting
+    from wearpose.estimators.run import open_model
 
-    from wearpose.estimators import get_estimator
-
-    s = weights_setting(model)
-    get_estimator(s["method"])  # a method may register its own kit (IMUPoser's) when imported
-    rec = _kit_recording(s["kit"], float(s["fps"] or 60.0))
+    s = open_model(model)
+    s.estimator_class  # a method may register its own kit (IMUPoser's) when imported
+    rec = _kit_recording(s.kit, float(s.fps or 60.0))
     outs = []
     for tag, r in (("canonical", rec), ("declared", rec.declared_as(**DECLARED))):
         path = tmp_path / f"{tag}.npz"
@@ -261,14 +246,14 @@ def test_exported_bvh_stands_on_the_floor(kit: str, walk, tmp_path: Path) -> Non
     import torch
 
     from wearpose.body import BodyModel
-    from wearpose.cli.models import weights_setting
+    from wearpose.estimators.run import open_model
     from wearpose.motion import resample
     from wearpose.recording import CALIBRATION_WINDOW_KEY, prepend_tpose
     from wearpose.sensors import simulate
 
     name = kit.split("-")[0]
     model = DEMO_MODELS[name]
-    fps = float(weights_setting(model)["fps"] or 60.0)
+    fps = float(open_model(model).fps or 60.0)
     m, window = prepend_tpose(resample(walk, fps) if abs(walk.fps - fps) > 1e-6 else walk, 1.0)
     body = BodyModel()
     with warnings.catch_warnings():

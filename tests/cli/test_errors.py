@@ -147,9 +147,33 @@ def test_recording_of_another_kit_names_file_kit_and_remedy(tmp_path: Path, caps
 def test_recording_at_another_rate_names_the_rate_to_simulate(tmp_path: Path, capsys, monkeypatch, no_viewer) -> None:
     fast = tmp_path / "em12_120.npz"
     save_recording(_simulated("em12", T=60, fps=60.0), fast)  # the kit's own EM rate, 120 Hz
-    code, err = run_main(["view-recording", str(fast), "--model", "empose12_cpu", "--port", "0"], capsys, monkeypatch)
+    # --no-resample: as `wearpose estimate --no-resample`, another rate is refused with the rate to simulate
+    code, err = run_main(["view-recording", str(fast), "--model", "empose12_cpu", "--port", "0", "--no-resample"],
+                         capsys, monkeypatch)
     assert code == 1 and "em12_120.npz: does not fit empose12_cpu" in err and "runs at 120 Hz; EM-POSE was trained at 30 Hz" in flat(err)
     assert "wearpose simulate --kit em12 --rate 30" in err
+
+
+def test_view_recording_decimates_as_estimate_does(tmp_path: Path, capsys, monkeypatch) -> None:
+    """Issue 22: view-recording refused the 120 Hz recordings that estimate accepts; both now take
+    the same path (wearpose.estimators.run), so the viewer gets the 30 Hz estimate and says so."""
+    import wearpose.viewer.live as live
+    from wearpose.estimators.run import open_model
+
+    fast = tmp_path / "em12_120.npz"
+    save_recording(_simulated("em12", T=60, fps=60.0), fast)  # the kit's own EM rate, 120 Hz
+    seen = {}
+
+    class Viewer:
+        def __init__(self, rec, track, **kw):
+            seen.update(rate=rec.sensor(rec.names[0]).info.rate, fps=track.fps, frames=track.num_frames)
+            raise KeyboardInterrupt  # stop where the viewer would start serving
+
+    monkeypatch.setattr(live, "RecordingViewer", Viewer)
+    with pytest.raises(KeyboardInterrupt):
+        live.run_recording_viewer(fast, model=open_model("empose12_cpu"), port=0)
+    assert seen["rate"] == 30.0 and seen["fps"] == 30.0 and seen["frames"] > 0
+    assert "decimated by 4 to empose12_cpu's 30 Hz" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("cmd", [["serve", "--port", "0"], ["view-recording", "x.npz"], ["evaluate"]])

@@ -8,7 +8,7 @@ import torch
 from tests.sensors.sensor_testutils import smooth_motion
 from wearpose.calibration import calibration_pose
 from wearpose.errors import ConfigError, ShapeError
-from wearpose.recording import CALIBRATION_WINDOW_KEY, calibration_window, prepend_tpose, use_calibration_window
+from wearpose.recording import CALIBRATION_WINDOW_KEY, calibration_window, prepend_tpose
 
 
 class _Rec:
@@ -43,15 +43,3 @@ def test_calibration_window_reads_the_mark_and_refuses_a_malformed_one() -> None
     for bad in ({"start_s": 1.0, "stop_s": 0.5}, {"pose": "ipose", "start_s": 0, "stop_s": 1}, {"start": 0}, [0, 1]):
         with pytest.raises(ShapeError, match="calibration_window"):
             calibration_window(_Rec({CALIBRATION_WINDOW_KEY: bad}))
-
-
-def test_use_calibration_window_only_touches_estimators_that_calibrate() -> None:
-    class Est:
-        calibration_window = (0.0, 1.0)
-
-    rec = _Rec({CALIBRATION_WINDOW_KEY: {"pose": "tpose", "start_s": 0.1, "stop_s": 0.4}})
-    est = Est()
-    assert use_calibration_window(est, rec) == (0.1, 0.4) and est.calibration_window == (0.1, 0.4)
-    other = object()  # an EM estimator: nothing to calibrate from a pose
-    assert use_calibration_window(other, rec) is None
-    assert use_calibration_window(Est(), _Rec({})) is None

@@ -1,7 +1,8 @@
 """``wearpose estimate``: a recording (your sensors, or a simulated one) -> an estimated motion file.
 
-Thin: :func:`wearpose.recording.load_recording` -> the estimator of the weights
-(:func:`wearpose.stream.estimator_factory`) -> ``estimate`` -> :meth:`PoseTrack.to_motion` ->
+Thin: :func:`wearpose.recording.load_recording` -> :func:`wearpose.estimators.run.open_model`
+(the checkpoint read once) -> :func:`~wearpose.estimators.run.estimate_recording` (rate, T-pose
+window, estimate, placed in the world) -> :meth:`PoseTrack.to_motion` ->
 :func:`wearpose.export.export_motion`.
 """
 
@@ -15,10 +16,6 @@ import typer
 from rich.markup import escape
 
 from wearpose.cli.app import _emit, _kv_table, app, console, err_console
-
-#: The weight-free estimator's name for --model.
-SEGMENTS = "segments"
-
 
 @app.command()
 def estimate(
@@ -50,55 +47,43 @@ def estimate(
     """
     import torch
 
-    from wearpose.cli.models import check_pose_weights, fit_rate, recording_mismatch
+    from wearpose.cli.models import check_pose_weights, recording_mismatch
     from wearpose.calibration import CalibrationError
     from wearpose.errors import InputFileError, ShapeError
-    from wearpose.estimators import get_estimator
-    from wearpose.estimators.run import place_in_world
+    from wearpose.estimators.run import estimate_recording, open_model
     from wearpose.export import export_motion
-    from wearpose.recording import load_recording, use_calibration_window
-    from wearpose.stream import estimator_factory
+    from wearpose.recording import load_recording
 
     if out.suffix not in (".bvh", ".npz", ".glb"):
         raise typer.BadParameter(f"{out}: expected a .bvh, .npz or .glb file name", param_hint="--out")
     torch.set_num_threads(threads)
-    if model == SEGMENTS:  # no weights, any rate: nothing to fit
-        rec, note = load_recording(recording), None
-    else:
-        check_pose_weights(model)
-        rec, note = fit_rate(recording, load_recording(recording), model, resample)
-    if note:
-        err_console.print(f"[yellow]warning:[/] {escape(note)}", soft_wrap=True)
-    est = get_estimator(SEGMENTS)() if model == SEGMENTS else estimator_factory(model)()
-    use_calibration_window(est, rec)  # a recording that marks its T-pose (simulate --tpose) calibrates from it
+    check_pose_weights(model)
+    source = open_model(model)  # the checkpoint is read here, once
+    rec = load_recording(recording)
     try:
         # A spinner on stderr: an hour of IMU data through PIP's physics takes minutes.
         with err_console.status(f"estimating {rec.duration:.0f} s of {recording.name} with {model}"):
-            track = est.estimate(rec)
+            run = estimate_recording(source, rec, recording, resample=resample)
     except ShapeError as exc:  # the estimator's check of the recording: missing sensors, another rate
-        raise recording_mismatch(recording, model, str(exc)) from None
+        raise recording_mismatch(recording, source, str(exc)) from None
     except CalibrationError as exc:  # IMU methods calibrate an uncalibrated recording from a T-pose
         raise InputFileError(recording, f"{model} could not calibrate it ({exc})",
                              "a recording that starts with about 1 s of T-pose (or marks its T-pose in "
                              "meta['calibration_window'], as `wearpose simulate --kit imu6` does), one calibrated with `wearpose "
                              "calibrate REC --method tpose --window START STOP`, or one whose meta says "
                              "orientation_frame='segment' (orientations already of the body segments)") from None
-    body = getattr(est, "body", None)
-    if body is None:  # rotation-only estimators (BiRAE) keep no body model: export on the default asset
-        from wearpose.body import BodyModel
-
-        body = BodyModel()
-    estimated_frame, estimated_trans = track.extras.get("frame", "world"), track.trans is not None
-    track = place_in_world(est, track, rec, body)  # upright, feet on the floor (as a user expects a file)
-    path = export_motion(track.to_motion(), out, body)
+    if run.note:
+        err_console.print(f"[yellow]warning:[/] {escape(run.note)}", soft_wrap=True)
+    track = run.track  # upright, feet on the floor (as a user expects a file)
+    path = export_motion(track.to_motion(), out, run.body)
     valid = float(track.valid.float().mean()) * 100 if track.num_frames else 0.0
-    resampled = rec.meta.get("resampled") if note else None
     res: dict[str, Any] = {"recording": str(recording), "model": model, "frames": track.num_frames,
                            "fps": track.fps, "valid_pct": round(valid, 2),
-                           "frame": track.extras.get("frame", "world"), "estimated_frame": estimated_frame,
-                           "translation": estimated_trans,
+                           "frame": track.extras.get("frame", "world"),
+                           "estimated_frame": run.estimated.extras.get("frame", "world"),
+                           "translation": run.estimated.trans is not None,
                            "placement": track.extras.get("placement", "as estimated"),
                            "floor": track.extras.get("floor"), "written": str(path)}
-    if resampled:
-        res["resampled"] = resampled
+    if run.note:
+        res["resampled"] = run.recording.meta.get("resampled")
     _emit(res, as_json, lambda r: console.print(_kv_table(f"estimate of {recording.name} by {model}", r)))

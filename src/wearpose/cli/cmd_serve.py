@@ -207,7 +207,7 @@ def stream_replay(
 
     Stops at once (exit code 1, with what arrived) when the server ends the subject or goes away.
 
-    Example: wearpose stream replay out/demo/recording.npz --speed 1 --dropout 0.001 --malformed 0.01
+    Example: wearpose stream replay out/demo-em12/recording.npz --speed 1 --dropout 0.001 --malformed 0.01
     """
     from rich.progress import Progress
 
@@ -294,22 +294,31 @@ def view_recording(
     allow_origin: Optional[List[str]] = typer.Option(None, "--allow-origin",
                                                      help="Also let pages from this origin open the viewer "
                                                           "(repeatable; default: this machine's pages only)."),
+    resample: Optional[bool] = typer.Option(None, "--resample/--no-resample",
+                                            help="As for `wearpose estimate`: decimate the recording to the weights' "
+                                                 "trained rate by an integer factor (default: when the rates differ "
+                                                 "by one)."),
 ) -> None:
     """Browser viewer of a recording (ground truth and/or an estimate) with a timeline.
 
-    Open http://HOST:PORT in a browser. Runs until Ctrl-C.
+    Open http://HOST:PORT in a browser. Runs until Ctrl-C. The estimate is made exactly as
+    `wearpose estimate` makes it (rate fitted, upright, feet on the floor).
 
-    Example: wearpose view-recording out/demo/recording.npz --model empose12_cpu
+    Example: wearpose view-recording out/demo-em12/recording.npz --model empose12_cpu
     """
     from wearpose.cli.models import check_pose_weights, recording_mismatch
     from wearpose.errors import ShapeError
+    from wearpose.estimators.run import open_model
     from wearpose.viewer.live import run_recording_viewer
 
+    source = None
     if model is not None:
         check_pose_weights(model)
+        source = open_model(model)  # the checkpoint is read here, once
     try:
-        run_recording_viewer(recording, model=model, host=host, port=port, body=body, allow_origins=allow_origin or ())
+        run_recording_viewer(recording, model=source, host=host, port=port, body=body,
+                             allow_origins=allow_origin or (), resample=resample)
     except ShapeError as exc:  # the estimator's check of the recording: missing sensors, another rate
-        if model is None:
+        if source is None:
             raise
-        raise recording_mismatch(recording, model, str(exc)) from None
+        raise recording_mismatch(recording, source, str(exc)) from None

@@ -24,6 +24,7 @@ import torch
 
 from wearpose.body.skeleton import NUM_JOINTS
 from wearpose.errors import ShapeError
+from wearpose.estimators.checkpoint import load_checkpoint
 
 
 @dataclass
@@ -136,6 +137,8 @@ class Estimator(abc.ABC):
     """
 
     name: ClassVar[str] = "?"
+    #: False for estimators without weights (``--model segments``): built with no arguments.
+    has_weights: ClassVar[bool] = True
     causal: ClassVar[bool] = True
     lookahead: ClassVar[int] = 0
 
@@ -162,11 +165,21 @@ class Estimator(abc.ABC):
         """Write a checkpoint (:mod:`wearpose.estimators.checkpoint`)."""
 
     @classmethod
-    @abc.abstractmethod
     def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
              map_location: str | torch.device = "cpu") -> Estimator:
         """Read a checkpoint; ``kit`` / ``body`` (if given) must match the checkpoint's, else
-        :class:`~wearpose.estimators.checkpoint.CheckpointMismatchError`."""
+        :class:`~wearpose.estimators.checkpoint.CheckpointMismatchError`. The file is read once
+        and handed to :meth:`from_checkpoint`."""
+        return cls.from_checkpoint(load_checkpoint(path, map_location), kit=kit, body=body, device=map_location,
+                                   path=path)
+
+    @classmethod
+    def from_checkpoint(cls, ckpt: Any, *, kit: str | None = None, body: Any = None,
+                        device: str | torch.device = "cpu", path: str | Path = "<checkpoint>") -> Estimator:
+        """The estimator of an already-read :class:`~wearpose.estimators.checkpoint.Checkpoint`
+        (``path`` only names it in errors): what :func:`wearpose.estimators.run.open_model` calls,
+        so one estimate reads its checkpoint once. Every method with weights implements it."""
+        raise NotImplementedError(f"{cls.__name__} has no weights to load (a checkpoint of method {ckpt.method!r})")
 
     @abc.abstractmethod
     def estimate(self, recording: Any) -> PoseTrack:

@@ -1,5 +1,14 @@
-"""An estimate in wearpose's world: upright, facing +Z, feet on the floor (Y up, floor y = 0).
+"""Weights or a checkpoint -> a pose for a recording, and that pose in wearpose's world.
 
+The one path every command takes (``wearpose estimate``, ``serve``, ``view-recording``, the
+demos): :func:`open_model` resolves a ``--model`` (shipped weights, a checkpoint file, or a
+weight-free estimator such as ``segments``) reading its checkpoint once; :func:`fit_rate`
+brings a recording to the rate the weights were trained at; :func:`use_calibration_window`
+points an estimator's own T-pose calibration at the window a recording marks;
+:func:`estimate_recording` runs all of it; :func:`place_in_world` puts the estimate where a user
+expects a body to stand.
+
+**In the world**: upright, facing +Z, feet on the floor (Y up, floor y = 0).
 Estimators return poses in the frame their sensors give: EM-POSE relative to the EM source
 (``extras["frame"] == "em_source"``), PIP and BiRAE in the calibrated IMU world with a root
 translation that starts at the origin (or none), MI-Poser in the headset's calibrated world.
@@ -9,19 +18,175 @@ stand before it is exported or drawn; ``extras["placement"]`` says how it was pl
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import Any
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 import torch
 
 from wearpose.body import BodyModel
-from wearpose.estimators.base import PoseTrack
+from wearpose.errors import ConfigError, InputFileError
+from wearpose.estimators.base import Estimator, PoseTrack
+from wearpose.estimators.checkpoint import Checkpoint, load_checkpoint
+from wearpose.estimators.registry import get_estimator
 from wearpose.geometry import quat_to_matrix
-from wearpose.recording import Recording
+from wearpose.recording import Recording, RecordingError, calibration_window, decimate
 
 #: Seconds from the start over which a track with its own translation is set on the floor.
 FLOOR_WINDOW_S = 1.0
+
+
+@dataclass(frozen=True)
+class ModelSource:
+    """A resolved ``--model``: what it is, and how to make its estimator.
+
+    Attributes:
+        name: as the user gave it (weights name, checkpoint path, or estimator name).
+        method: registry name of its estimator class (``wearpose.estimators.get_estimator``).
+        checkpoint: the checkpoint, read once (None for weight-free estimators).
+        path: the checkpoint file (None for weight-free estimators).
+        kit, sensors, fps: the kit, its sensors (input order) and the rate (Hz) the weights were
+            trained at; ``fps`` None when any rate is accepted.
+        card: the shipped weights' card (``{}`` for a checkpoint file).
+    """
+
+    name: str
+    method: str
+    checkpoint: Checkpoint | None = None
+    path: Path | None = None
+    kit: str | None = None
+    sensors: tuple[str, ...] = ()
+    fps: float | None = None
+    card: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def estimator_class(self) -> type[Estimator]:
+        return get_estimator(self.method)
+
+    def make(self) -> Estimator:
+        """A fresh estimator (one per stream or recording) from the checkpoint already read."""
+        cls = self.estimator_class
+        if self.checkpoint is None:
+            return cls()
+        return cls.from_checkpoint(self.checkpoint, path=self.path or "<checkpoint>")
+
+    @property
+    def factory(self) -> Callable[[], Estimator]:
+        """``() -> Estimator`` (what the stream server calls once per subject)."""
+        return self.make
+
+
+def open_model(model: str | Path, method: str | None = None) -> ModelSource:
+    """Resolve ``model``: shipped weights (``wearpose.weights``, e.g. ``empose12_cpu``), a
+    checkpoint file, or the name of a weight-free estimator (``segments``). A checkpoint is read
+    here and only here; ``method`` overrides the registry name the checkpoint records.
+
+    Raises:
+        ConfigError: ``model`` is none of these (names the shipped weights and weight-free estimators).
+        InputFileError: the checkpoint file cannot be read (from :func:`load_checkpoint`).
+    """
+    from wearpose.estimators.registry import list_estimators
+    from wearpose.weights import card, list_weights, weight_path
+
+    name = str(model)
+    if name in list_weights():
+        path, c = weight_path(name), card(name)
+    elif Path(name).suffix == ".pt" or Path(name).is_file():
+        path, c = Path(name), {}
+    else:
+        free = [n for n in list_estimators() if not getattr(get_estimator(n), "has_weights", True)]
+        if name in free:
+            return ModelSource(name=name, method=method or name)
+        raise ConfigError(f"--model {name!r}: neither shipped weights ({', '.join(list_weights()) or 'none'}), a "
+                          f"checkpoint file, nor a weight-free estimator ({', '.join(free)})")
+    ck = load_checkpoint(path)
+    fps = ck.config.get("rate") if isinstance(ck.config, dict) else None  # Hz the network was trained at
+    return ModelSource(name=name, method=method or ck.method, checkpoint=ck, path=path, kit=ck.kit,
+                       sensors=tuple(ck.sensors), fps=float(fps) if fps else None, card=c)
+
+
+def fit_rate(source: ModelSource, path: str | Path, rec: Recording,
+             resample: bool | None) -> tuple[Recording, str | None]:
+    """Bring ``rec`` to the rate ``source`` was trained at by integer-factor decimation
+    (:func:`wearpose.recording.decimate`: every k-th sample as recorded, never interpolated).
+
+    ``resample``: ``None`` (auto) decimates when the weights' sensors in the recording share one
+    rate that is an integer multiple of the trained rate, and returns a one-line note saying so;
+    a ratio that does not decimate is left to the estimator, which refuses it with the fitting
+    kit and rate. ``True`` does the same but makes a non-integer ratio an error naming both
+    rates. ``False`` never changes the recording. Kits whose sensors run at different rates by
+    design (MI-Poser: 60 Hz headset, 120 Hz EM) are left alone in auto mode.
+
+    Returns:
+        ``(recording, note)``; ``note`` is None when nothing changed.
+    """
+    path, target = Path(path), source.fps
+    if resample is False or not target:
+        return rec, None
+    names = [n for n in source.sensors if n in rec.names] or list(rec.names)
+    rates = sorted({float(rec.sensor(n).info.rate) for n in names})
+    if all(abs(r - target) <= 1e-3 * target for r in rates):
+        return rec, None
+    if len(rates) > 1 and resample is None:
+        return rec, None
+    try:
+        out = decimate(rec.select(names), float(target))
+    except RecordingError as exc:
+        if resample:
+            raise InputFileError(path, f"--resample: {exc}", f"sensors at an integer multiple of {target:g} Hz") from None
+        return rec, None
+    k = {d["factor"] for d in out.meta.get("resampled", {}).values()}
+    note = (f"{path.name}: {', '.join(f'{r:g}' for r in rates)} Hz decimated by {'/'.join(map(str, sorted(k)))} to "
+            f"{source.name}'s {target:g} Hz (every k-th sample as recorded, dropped frames stay dropped; "
+            "--no-resample refuses)")
+    return out, note
+
+
+def use_calibration_window(estimator: Any, recording: Recording) -> tuple[float, float] | None:
+    """Point an estimator's built-in T-pose calibration at the window ``recording`` marks.
+
+    Estimators that calibrate uncalibrated recordings themselves expose a
+    ``calibration_window`` attribute (PIP: ``(0, 1)`` s by default); when the recording's meta
+    marks its T-pose (:func:`wearpose.recording.calibration_window`), that window is used instead
+    of the default. Returns the window applied, or None (no mark, or an estimator without
+    built-in calibration).
+    """
+    window = calibration_window(recording)
+    if window is None or getattr(estimator, "calibration_window", None) is None:
+        return None
+    estimator.calibration_window = window
+    return window
+
+
+@dataclass
+class RunResult:
+    """What :func:`estimate_recording` made: the estimate as estimated and placed in the world."""
+
+    estimator: Estimator
+    recording: Recording  # as estimated (after rate fitting)
+    estimated: PoseTrack  # in the frame the estimator gives
+    track: PoseTrack  # in the world, feet on the floor (:func:`place_in_world`)
+    body: BodyModel
+    note: str | None  # the rate-fitting note, or None
+
+
+def estimate_recording(source: ModelSource, rec: Recording, path: str | Path = "<recording>", *,
+                       resample: bool | None = None, estimator: Estimator | None = None) -> RunResult:
+    """``source``'s estimate of ``rec``, in the world: rate fitted (:func:`fit_rate`), the
+    recording's marked T-pose used for calibration (:func:`use_calibration_window`), estimated
+    offline, placed (:func:`place_in_world`). ``estimator`` reuses one made by ``source.make()``.
+
+    Raises what the estimator raises for a recording that does not fit it (ShapeError naming the
+    missing sensors or the rate, CalibrationError when it cannot calibrate).
+    """
+    rec, note = fit_rate(source, path, rec, resample)
+    est = estimator if estimator is not None else source.make()
+    use_calibration_window(est, rec)
+    estimated = est.estimate(rec)
+    # rotation-only estimators (BiRAE) keep no body model: place and export on the default asset
+    body = getattr(est, "body", None) or BodyModel()
+    return RunResult(est, rec, estimated, place_in_world(est, estimated, rec, body), body, note)
 
 
 def place_in_world(est: Any, track: PoseTrack, recording: Recording, body: BodyModel | None = None) -> PoseTrack:

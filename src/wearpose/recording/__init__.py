@@ -12,8 +12,9 @@ Public API:
   (Movella DOT CSV exports), :func:`from_csv` (any CSV with a YAML column map, :func:`load_column_map`)
 - :func:`recording_from_simulation` (also ``Recording.from_simulation``): a
   :func:`wearpose.sensors.simulate` result as a recording
-- :func:`prepend_tpose` / :func:`calibration_window` / :func:`use_calibration_window`: a
-  calibration T-pose before a (simulated) motion, marked in ``meta["calibration_window"]``
+- :func:`prepend_tpose` / :func:`calibration_window`: a calibration T-pose before a (simulated)
+  motion, marked in ``meta["calibration_window"]`` (estimators use the mark through
+  :func:`wearpose.estimators.run.use_calibration_window`)
 - :func:`decimate` / :func:`decimation_factor`: integer-factor decimation (e.g. 120 -> 30 Hz),
   validity mask kept per kept sample, non-integer ratios refused
 - :class:`RecordingError` for operations a recording cannot do (file problems are
@@ -35,7 +36,7 @@ from wearpose.recording.checks import ConventionIssue, check_recording, check_st
 from wearpose.recording.fileformat import FORMAT_NAME, FORMAT_VERSION, load_recording, recording_arrays, save_recording
 from wearpose.recording.simulated import recording_from_simulation
 from wearpose.recording.resample import decimate, decimation_factor
-from wearpose.recording.tpose import CALIBRATION_WINDOW_KEY, calibration_window, prepend_tpose, use_calibration_window
+from wearpose.recording.tpose import CALIBRATION_WINDOW_KEY, calibration_window, prepend_tpose
 from wearpose.recording.converters import (
     DIP_IMU_SENSORS,
     DIP_IMU_SIX,
@@ -60,7 +61,7 @@ __all__ = [
     "FORMAT_NAME", "FORMAT_VERSION", "load_recording", "save_recording", "recording_arrays",
     "recording_from_simulation",
     "decimate", "decimation_factor",
-    "CALIBRATION_WINDOW_KEY", "prepend_tpose", "calibration_window", "use_calibration_window",
+    "CALIBRATION_WINDOW_KEY", "prepend_tpose", "calibration_window",
     "from_dip_imu", "from_totalcapture", "from_empose", "from_ximu3", "amass_ground_truth",
     "from_mvnx", "from_movella_dot", "from_csv", "load_column_map",
     "DIP_IMU_SENSORS", "DIP_IMU_SIX", "EMPOSE_SENSORS", "EMPOSE_SITES", "EMPOSE_SIX", "TOTALCAPTURE_SITES",

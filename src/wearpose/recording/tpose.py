@@ -103,18 +103,3 @@ def calibration_window(recording: Any) -> tuple[float, float] | None:
         raise ShapeError(f"meta[{CALIBRATION_WINDOW_KEY!r}] = {w!r} is malformed ({exc}); expected "
                          "{'pose': 'tpose', 'start_s': a, 'stop_s': b} with 0 <= a < b seconds") from None
     return a, b
-
-
-def use_calibration_window(estimator: Any, recording: Any) -> tuple[float, float] | None:
-    """Point an estimator's built-in T-pose calibration at the window ``recording`` marks.
-
-    Estimators that calibrate uncalibrated recordings themselves expose a
-    ``calibration_window`` attribute (PIP: ``(0, 1)`` s by default); when the recording's meta
-    marks its T-pose, that window is used instead of the default. Returns the window applied, or
-    None (no mark, or an estimator without built-in calibration).
-    """
-    window = calibration_window(recording)
-    if window is None or getattr(estimator, "calibration_window", None) is None:
-        return None
-    estimator.calibration_window = window
-    return window

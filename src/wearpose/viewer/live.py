@@ -37,13 +37,16 @@ import time
 import warnings
 from collections import deque
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 import torch
 
 from wearpose.body import PARENTS, BodyModel, forward_kinematics
 from wearpose.geometry import matrix_to_quat
+
+if TYPE_CHECKING:
+    from wearpose.estimators.run import ModelSource
 
 VALID = np.array([40, 190, 80], np.uint8)
 DROPPED = np.array([230, 40, 40], np.uint8)
@@ -566,41 +569,23 @@ def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subj
     return why
 
 
-def _em_track_in_world(est: Any, track: Any, rec: Any) -> Any:
-    """An EM-source-relative estimate placed in the world with the recording's EM source pose
-    (``meta["em_source"]``, stored by simulation) when there is one; else unchanged."""
-    from wearpose.geometry import quat_to_matrix
-
-    src = ((rec.meta or {}).get("em_source") or {}).get("rates", {}).get(f"{float(track.fps):g}")
-    if track.extras.get("frame") != "em_source" or src is None or not hasattr(est, "to_world"):
-        return track
-    R = quat_to_matrix(torch.as_tensor(np.asarray(src["orientation_wxyz"], np.float32)))
-    p = torch.as_tensor(np.asarray(src["position_m"], np.float32))
-    if R.shape[0] != track.num_frames:
-        return track
-    out = est.to_world(track, R, p)
-    out.extras["placement"] = "world, via the recorded EM source pose"
-    return out
-
-
-def run_recording_viewer(path: str | Path, *, model: str | None = None, host: str = "127.0.0.1", port: int = 8080,
-                         body: str | None = None, allow_origins: Sequence[str] = ()) -> None:
-    """Blocking: the offline viewer of a recording file (and an estimate by ``model``) until Ctrl-C."""
+def run_recording_viewer(path: str | Path, *, model: ModelSource | None = None, host: str = "127.0.0.1",
+                         port: int = 8080, body: str | None = None, allow_origins: Sequence[str] = (),
+                         resample: bool | None = None) -> None:
+    """Blocking: the offline viewer of a recording file (and ``model``'s estimate, made as
+    ``wearpose estimate`` makes it: :func:`wearpose.estimators.run.estimate_recording`) until Ctrl-C."""
     from wearpose.recording import load_recording
 
     rec = load_recording(path)
     track, names = None, None
     bm = BodyModel(body)
     if model is not None:
-        from wearpose.stream import estimator_factory
+        from wearpose.estimators.run import estimate_recording
 
-        from wearpose.recording import use_calibration_window
-
-        est = estimator_factory(model)()
-        use_calibration_window(est, rec)  # the T-pose the recording marks (simulate --tpose)
-        track, names = est.estimate(rec), est.sensor_names
-        bm = getattr(est, "body", bm)
-        track = _em_track_in_world(est, track, rec)
+        run = estimate_recording(model, rec, path, resample=resample)
+        if run.note:
+            print(f"warning: {run.note}", flush=True)
+        rec, track, names, bm = run.recording, run.track, run.estimator.sensor_names, run.body
     _warn_if_exposed(host, port)
     v = RecordingViewer(rec, track, sensor_names=names, body=bm, host=host, port=port, title=f"wearpose: {Path(path).name}",
                         allow_origins=allow_origins)

@@ -28,7 +28,7 @@ from torch import nn
 
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
-from wearpose.estimators.checkpoint import NetworkCheckpointing, load_checkpoint
+from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.baselines import OfflineOnlyError
 from wearpose.estimators.empose.data import clip_seed
 from wearpose.estimators.inputs import InputSpec, prepare
@@ -169,11 +169,17 @@ class ImuPoserEstimator(NetworkCheckpointing, Estimator):
     @classmethod
     def load(cls, path: str | Path, *, kit: str | None = None, body: Any = None,
              map_location: str | torch.device = "cpu") -> ImuPoserEstimator:
-        ck = load_checkpoint(path, map_location)
-        body = cls.check_checkpoint(ck, kit=kit, body=body, path=path)
-        est = cls(MiposerConfig.from_dict(ck.config), body=body, device=map_location)
-        ck.check(sensors=est.sensor_names, path=path)
-        return est.restore(ck)
+        return cls.from_checkpoint(load_checkpoint(path, map_location), kit=kit, body=body, device=map_location,
+                                   path=path)
+
+    @classmethod
+    def from_checkpoint(cls, ckpt: Checkpoint, *, kit: str | None = None, body: Any = None,
+                        device: str | torch.device = "cpu", path: str | Path = "<checkpoint>") -> ImuPoserEstimator:
+        """The estimator of a read checkpoint (:meth:`Estimator.from_checkpoint`)."""
+        body = cls.check_checkpoint(ckpt, kit=kit, body=body, path=path)
+        est = cls(MiposerConfig.from_dict(ckpt.config), body=body, device=device)
+        ckpt.check(sensors=est.sensor_names, path=path)
+        return est.restore(ckpt)
 
     def fit(self, *args: Any, **kwargs: Any) -> Any:
         from wearpose.estimators.miposer.train import train_miposer

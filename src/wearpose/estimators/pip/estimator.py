@@ -43,7 +43,7 @@ import torch
 
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
-from wearpose.estimators.checkpoint import NetworkCheckpointing, load_checkpoint
+from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.inputs import InputSpec, canonical_input, hold_last_valid
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.data import EDGE_FRAMES, LEAF_JOINTS, imu_features
@@ -129,9 +129,16 @@ class PipEstimator(NetworkCheckpointing, Estimator):
              map_location: str | torch.device = "cpu", **options: Any) -> PipEstimator:
         """Read a checkpoint; ``options`` are the constructor's (``physics``, ``dual_pd``,
         ``learned_init``, ``betas``, ``calibration_window``)."""
-        ck = load_checkpoint(path, map_location)
-        body = cls.check_checkpoint(ck, kit=kit, body=body, path=path)
-        return cls(PipConfig.from_dict(ck.config), body=body, device=map_location, **options).restore(ck)
+        return cls.from_checkpoint(load_checkpoint(path, map_location), kit=kit, body=body, device=map_location,
+                                   path=path, **options)
+
+    @classmethod
+    def from_checkpoint(cls, ckpt: Checkpoint, *, kit: str | None = None, body: Any = None,
+                        device: str | torch.device = "cpu", path: str | Path = "<checkpoint>",
+                        **options: Any) -> PipEstimator:
+        """The estimator of a read checkpoint (:meth:`Estimator.from_checkpoint`); ``options`` as :meth:`load`."""
+        body = cls.check_checkpoint(ckpt, kit=kit, body=body, path=path)
+        return cls(PipConfig.from_dict(ckpt.config), body=body, device=device, **options).restore(ckpt)
 
     def fit(self, *args: Any, **kwargs: Any) -> Any:
         """Train (see :func:`wearpose.estimators.pip.train.train_pip`)."""

@@ -50,6 +50,7 @@ class SegmentsEstimator(Estimator):
     """
 
     name = "segments"
+    has_weights = False
     causal = False
 
     def __init__(self, calibration_window: tuple[float, float] | None = None) -> None:

@@ -94,7 +94,8 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
     from wearpose.evaluate import compute_all
     from wearpose.geometry import heading, rotation_y
     from wearpose.motion import load_motion, resample
-    from wearpose.recording import CALIBRATION_WINDOW_KEY, Recording, prepend_tpose, use_calibration_window
+    from wearpose.estimators.run import use_calibration_window
+    from wearpose.recording import CALIBRATION_WINDOW_KEY, Recording, prepend_tpose
     from wearpose.sensors import simulate
     from wearpose.viewer import write_html
 

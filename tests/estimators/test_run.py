@@ -1,0 +1,99 @@
+"""wearpose.estimators.run: one path from a --model to a pose (checkpoint read once, rate fitted,
+the recording's T-pose mark used, the estimate placed in the world)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from wearpose.errors import ConfigError, InputFileError
+from wearpose.estimators.run import ModelSource, open_model, use_calibration_window
+
+
+class _Rec:
+    def __init__(self, meta):
+        self.meta = meta
+
+
+def test_use_calibration_window_only_touches_estimators_that_calibrate() -> None:
+    from wearpose.recording import CALIBRATION_WINDOW_KEY
+
+    class Est:
+        calibration_window = (0.0, 1.0)
+
+    rec = _Rec({CALIBRATION_WINDOW_KEY: {"pose": "tpose", "start_s": 0.1, "stop_s": 0.4}})
+    est = Est()
+    assert use_calibration_window(est, rec) == (0.1, 0.4) and est.calibration_window == (0.1, 0.4)
+    other = object()  # an EM estimator: nothing to calibrate from a pose
+    assert use_calibration_window(other, rec) is None
+    assert use_calibration_window(Est(), _Rec({})) is None
+
+
+def test_open_model_reads_the_card_and_checkpoint_alike() -> None:
+    """Shipped weights and the same file given as a path resolve to the same setting; the card
+    says what the checkpoint says (kit, sensors, method, trained rate), for every pose weight."""
+    from wearpose.cli.models import pose_weights
+    from wearpose.weights import card, weight_path
+
+    for name in pose_weights():
+        a, b = open_model(name), open_model(weight_path(name))
+        assert (a.method, a.kit, a.sensors, a.fps) == (b.method, b.kit, b.sensors, b.fps), name
+        c = card(name)
+        assert (c["method"], c["kit"], tuple(c["sensors"])) == (a.method, a.kit, a.sensors), name
+        assert c.get("config", {}).get("rate") == a.fps, name
+
+
+def test_open_model_names_what_it_accepts(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"neither shipped weights .*empose12_cpu.*weight-free estimator \(.*segments"):
+        open_model("no_such_model")
+    with pytest.raises(InputFileError, match="no such checkpoint file"):
+        open_model(tmp_path / "missing.pt")
+    seg = open_model("segments")
+    assert seg.checkpoint is None and seg.fps is None and seg.make().name == "segments"
+
+
+def test_make_builds_fresh_estimators_from_one_read(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The checkpoint is read by open_model and never again, however many estimators are made
+    (the server makes one per subject)."""
+    calls: list[str] = []
+    real = torch.load
+
+    def counting(f, *a, **k):
+        calls.append(str(f))
+        return real(f, *a, **k)
+
+    monkeypatch.setattr(torch, "load", counting)
+    src = open_model("empose12_cpu")
+    e1, e2 = src.make(), src.factory()
+    assert len(calls) == 1 and e1 is not e2
+    assert e1.sensor_names == e2.sensor_names == src.sensors
+    assert isinstance(src, ModelSource)
+
+
+@pytest.mark.parametrize("as_path", [False, True])
+def test_wearpose_estimate_reads_its_checkpoint_once(as_path: bool, tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    from typer.testing import CliRunner
+
+    from tests.cli.test_cmd_estimate import _kit_recording
+    from wearpose.cli.app import app
+    from wearpose.recording import save_recording
+    from wearpose.weights import weight_path
+
+    rec = _kit_recording("em12", 30.0)
+    save_recording(rec, tmp_path / "rec.npz")
+    model = str(weight_path("empose12_cpu")) if as_path else "empose12_cpu"
+    calls: list[str] = []
+    real = torch.load
+
+    def counting(f, *a, **k):
+        calls.append(str(f))
+        return real(f, *a, **k)
+
+    monkeypatch.setattr(torch, "load", counting)
+    res = CliRunner().invoke(app, ["estimate", str(tmp_path / "rec.npz"), "--model", model,
+                                   "--out", str(tmp_path / "pose.npz"), "--json"])
+    assert res.exit_code == 0, res.output
+    assert [c for c in calls if c.endswith(".pt")] == [str(weight_path("empose12_cpu"))], calls
