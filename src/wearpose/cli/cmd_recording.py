@@ -159,7 +159,8 @@ def _summary(rec: Any) -> dict[str, Any]:
             "valid_pct": round(100.0 * float(valid.mean()), 2) if valid.size else 0.0,
             "ground_truth": rec.ground_truth is not None,
             **({"devices": rec.meta["import"]["devices"]} if "devices" in (rec.meta or {}).get("import", {}) else {}),
-            "import_notes": [f"{k.replace('_', ' ')}: {v}" for k, v in (rec.meta or {}).get("import", {}).items()
+            "import_notes": [f"{k.replace('_', ' ')}: {'; '.join(v) if isinstance(v, list) else v}"
+                             for k, v in (rec.meta or {}).get("import", {}).items()
                              if k in ("clock", "ground_truth", "rewritten") and v]}
 
 
