@@ -42,9 +42,40 @@ def test_model_arguments_resolve_to_checkpoints(tmp_path: Path) -> None:
             resolve_model(bad)
 
 
-def test_other_methods_are_sent_to_their_own_protocol() -> None:
-    res = runner.invoke(app, ["evaluate", "pip_cpu", "--clips", "1"])
-    assert res.exit_code != 0 and "pip_eval.py" in res.output
+def test_methods_with_other_protocols_are_not_mixed_with_empose() -> None:
+    res = runner.invoke(app, ["evaluate", "empose12_cpu", "pip_cpu", "--clips", "1"])
+    assert res.exit_code == 2 and "different protocols" in res.output
+
+
+def test_an_empty_split_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 23: evaluate on a split with no clips printed NaN and exited 0."""
+    store = FakeStore(tmp_path, {"val": 1})
+    monkeypatch.setattr("wearpose.motion.CorpusStore", lambda *a, **k: store)
+    res = runner.invoke(app, ["evaluate", "empose12_cpu", "--split", "test", "--json"])
+    assert res.exit_code == 2 and "has no clips" in res.output, res.output
+
+
+#: The shipped pose models of issue 21's acceptance -> (the metric their paper leads with, a
+#: plausible range on one simulated test clip). Ranges are wide: this checks the path, not the model.
+SHIPPED = {"empose12_cpu": ("mpjpe_mm", 5, 80), "empose6_cpu": ("mpjpe_mm", 5, 120),
+           "empose12_twostage_cpu": ("mpjpe_mm", 5, 120), "pip_cpu": ("sip_error_deg", 2, 60),
+           "birae6_cpu": ("mpjae_all_deg", 2, 60), "birae3_cpu": ("mpjae_all_deg", 2, 60),
+           "miposer_cpu": ("calibrated_mpjpe_upper_cm", 0.5, 20), "imuposer_cpu": ("mpjpe_upper_cm", 0.5, 30)}
+
+
+@pytest.mark.corpus
+@pytest.mark.budget(30)  # PIP's physics and MI-Poser's calibration on one clip
+@pytest.mark.parametrize("model", list(SHIPPED))
+def test_every_shipped_pose_model_evaluates(model: str, corpus_store: Path) -> None:
+    res = runner.invoke(app, ["evaluate", model, "--clips", "1", "--json", "--cache", str(corpus_store)])
+    assert res.exit_code == 0, res.output
+    r = json.loads(res.stdout[res.stdout.index("{"):])
+    m = r["models"][model]
+    key, lo, hi = SHIPPED[model]
+    value = m[key] if key in m else m["metrics"][key]
+    assert lo < value < hi, (model, key, value)
+    clips = r["clips"] if "clips" in r else m["clips"]
+    assert clips == 1
 
 
 def test_evaluate_end_to_end_on_synthetic_clips(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

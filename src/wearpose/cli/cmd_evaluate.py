@@ -7,8 +7,9 @@ the table and optionally writes markdown + JSON with
 :func:`~wearpose.estimators.empose.evaluate.write_table`.
 
 Methods: the EM-POSE family (``empose``, ``empose-resnet``, ``empose-birnn``,
-``empose-twostage``). The IMU methods have their own protocols (PIP, BIRAE and MiPoser
-evaluate on other kits, rates and metrics); for them the command names the benchmark script.
+``empose-twostage``) compared on shared simulations; PIP, BiRAE, MI-Poser and IMUPoser each
+under their paper's protocol (:mod:`wearpose.evaluate.protocols`); the L-BFGS optimiser's
+protocol is ``benchmarks/empose_lbfgs.py``.
 """
 
 from __future__ import annotations
@@ -23,10 +24,8 @@ from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
 
-#: Methods without an EM-POSE-style protocol -> the script that evaluates them.
-OTHER_PROTOCOLS = {"pip": "benchmarks/pip_eval.py", "birae": "benchmarks/birae_eval.py",
-                   "miposer": "benchmarks/miposer_eval.py", "imuposer": "benchmarks/miposer_eval.py",
-                   "empose-lbfgs": "benchmarks/empose_lbfgs.py"}
+#: Methods evaluated by a script rather than by `wearpose evaluate`.
+OTHER_PROTOCOLS = {"empose-lbfgs": "benchmarks/empose_lbfgs.py"}
 
 
 def resolve_model(spec: str) -> tuple[str, Path]:
@@ -55,16 +54,35 @@ def resolve_model(spec: str) -> tuple[str, Path]:
     return name or (path.parent.name if path.stem in ("best", "last") else path.stem), path
 
 
-def _check_method(name: str, path: Path) -> None:
+def _method(name: str, path: Path) -> str:
+    """The checkpoint's method, refused when `wearpose evaluate` has no protocol for it."""
     from wearpose.estimators.checkpoint import load_checkpoint
     from wearpose.estimators.empose.baselines import ESTIMATOR_NAMES
+    from wearpose.evaluate.protocols import PROTOCOLS
 
     method = load_checkpoint(path).method
-    if method not in ESTIMATOR_NAMES.values():
+    known = [*ESTIMATOR_NAMES.values(), *PROTOCOLS]
+    if method not in known:
         script = OTHER_PROTOCOLS.get(method)
         hint = f"; evaluate it with `python {script}`" if script else ""
-        raise typer.BadParameter(f"{name} ({path}) is a {method!r} model: `wearpose evaluate` runs the EM-POSE "
-                                 f"protocol ({', '.join(ESTIMATOR_NAMES.values())}){hint}", param_hint="MODELS")
+        raise typer.BadParameter(f"{name} ({path}) is a {method!r} model: `wearpose evaluate` runs the protocols of "
+                                 f"{', '.join(known)}{hint}", param_hint="MODELS")
+    return method
+
+
+def _render_protocol(r: dict[str, Any]) -> None:
+    first = next(iter(r["models"].values()))
+    t = Table(title=f"{first['split']} split: {first['clips']} clips, {first['frames']} frames, kit {first['kit']}")
+    t.add_column("metric", overflow="fold")
+    for name in r["models"]:
+        t.add_column(name, justify="right", overflow="fold")
+    keys = list(dict.fromkeys(k for m in r["models"].values() for k in m["metrics"]))
+    for k in keys:
+        t.add_row(k, *(f"{m['metrics'][k]:.3g}" if k in m["metrics"] else "-" for m in r["models"].values()))
+    console.print(t)
+    console.print(f"protocol: {first['protocol']}", soft_wrap=False)
+    for p in r.get("written", []):
+        console.print(f"wrote {p}")
 
 
 def _render(r: dict[str, Any]) -> None:
@@ -85,7 +103,8 @@ def _render(r: dict[str, Any]) -> None:
 @app.command()
 def evaluate(
     models: list[str] = typer.Argument(..., help="Models: NAME=PATH, a checkpoint path, or shipped weights "
-                                                 "(empose12_cpu, empose6_cpu); all for one kit."),
+                                                 "(empose12_cpu, pip_cpu, birae6_cpu, miposer_cpu, ...); "
+                                                 "all of one method family and kit."),
     split: str = typer.Option("test", help="Corpus split: test (held-out numbers) or val."),
     clips: Optional[int] = typer.Option(None, "--clips", min=1, help="Only the first N clips of the split (sorted ids)."),
     offsets: str = typer.Option("random", help="Evaluation subjects: random (synthetic subjects from the training "
@@ -97,16 +116,22 @@ def evaluate(
     out: Optional[Path] = typer.Option(None, help="Write OUT.md and OUT.json (table, models, setting)."),
     title: Optional[str] = typer.Option(None, help="Title of the markdown file."),
     note: Optional[str] = typer.Option(None, help="A sentence appended to the markdown."),
+    cache: Optional[Path] = typer.Option(None, help="Prepared corpus store to evaluate on (default: the store of "
+                                                    "`wearpose data prepare`)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (progress goes to stderr)."),
 ) -> None:
     """Evaluate checkpoints on simulated held-out recordings with the paper's metrics.
 
-    Every clip of the split is simulated once (kit noise, a synthetic subject's sensor offsets,
-    seeds never used for training) and estimated by every model; MPJPE (root-aligned),
-    PA-MPJPE and MPJAE on the 15 major joints over frames with every sensor valid, mean ± std.
+    EM-POSE models: every clip of the split is simulated once (kit noise, a synthetic subject's
+    sensor offsets, seeds never used for training) and estimated by every model; MPJPE
+    (root-aligned), PA-MPJPE and MPJAE on the 15 major joints over frames with every sensor
+    valid, mean ± std. PIP, BiRAE, MI-Poser, IMUPoser: each model under its paper's protocol
+    and metrics (PIP: SIP, angular, positional, mesh, jitter, translation; BiRAE: MPJAE groups
+    and uncertainty coverage; MI-Poser/IMUPoser: upper-body MPJPE).
 
     Example: wearpose evaluate empose12_cpu BiRNN=runs/birnn12_cpu/best.pt --clips 20 --out results/em12
     Unseen subjects (EM-POSE Table 4): wearpose evaluate empose12_cpu --offsets unseen --spread 2
+    Another method: wearpose evaluate pip_cpu --clips 2 --json
     """
     import torch
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -121,24 +146,54 @@ def evaluate(
         raise typer.BadParameter(f"expected default or none, got {noise!r}", param_hint="--noise")
     if split == "train":
         err_console.print("[yellow]warning[/]: the train split measures fit, not held-out accuracy")
+    from wearpose.estimators.empose.baselines import ESTIMATOR_NAMES
+    from wearpose.motion import CorpusStore
+
     ckpts: dict[str, Path] = {}
+    methods: dict[str, str] = {}
     for spec in models:
         name, path = resolve_model(spec)
         if name in ckpts:
             raise typer.BadParameter(f"two models named {name!r}; use NAME=PATH", param_hint="MODELS")
-        _check_method(name, path)
-        ckpts[name] = path
+        methods[name], ckpts[name] = _method(name, path), path
+    empose = {n for n, m in methods.items() if m in ESTIMATOR_NAMES.values()}
+    if empose and len(empose) < len(methods):
+        raise typer.BadParameter(f"EM-POSE models ({', '.join(sorted(empose))}) and others "
+                                 f"({', '.join(sorted(set(methods) - empose))}) have different protocols; "
+                                 "evaluate them in separate commands", param_hint="MODELS")
+    store = CorpusStore(cache)
+    if not store.clips(split=split):
+        raise typer.BadParameter(f"corpus store {store.root}: the {split!r} split has no clips (nothing to "
+                                 "evaluate); prepare a store with that split (wearpose data prepare --split) or "
+                                 "choose another --split", param_hint="--split")
     torch.set_num_threads(threads)
     columns = (TextColumn("[bold]evaluating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns, console=err_console, transient=True) as bar:
         task = bar.add_task("", total=None)
-        res = evaluate_models(ckpts, split, clips, noise=noise, seed=seed, offsets=offsets, spread=spread,
-                              progress=lambda d, t: bar.update(task, completed=d, total=t))
+        tick = lambda d, t: bar.update(task, completed=d, total=t)  # noqa: E731
+        if empose:
+            res = evaluate_models(ckpts, split, clips, noise=noise, seed=seed, offsets=offsets, spread=spread,
+                                  store=store, progress=tick)
+        else:
+            from wearpose.estimators.run import open_model
+            from wearpose.evaluate.protocols import evaluate_model
+
+            res = {"split": split, "store": str(store.root),
+                   "models": {n: evaluate_model(open_model(p), split=split, clips=clips, seed=seed, noise=noise,
+                                                store=store, progress=tick) for n, p in ckpts.items()}}
+            for n, r in res["models"].items():
+                r["model"] = n
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     res["command"] = command
-    if out is not None:
+    if out is not None and empose:
         extra = {"command": command, **({"note": note} if note else {})}
         md, js = write_table(res, out, title=title or f"wearpose evaluate ({split} split, kit {res['kit']})",
                              produced_by=command, paper=None, extra=extra)
         res["written"] = [str(md), str(js)]
-    _emit(res, as_json, _render)
+    elif out is not None:
+        from wearpose.evaluate.protocols import write_result
+
+        md, js = write_result(res, out, title=title or f"wearpose evaluate ({split} split)", produced_by=command,
+                              note=note)
+        res["written"] = [str(md), str(js)]
+    _emit(res, as_json, _render if empose else _render_protocol)
