@@ -62,9 +62,9 @@ class OscProfile:
     world_up: str
     messages: dict[str, tuple[int, tuple[ChannelMap, ...]]]
 
-    def sensor_info(self, name: str, rate: float) -> SensorInfo:
-        """The declared conventions of one sensor read with this profile."""
-        conv: dict[str, Any] = {"world_up": self.world_up}
+    def conventions(self) -> dict[str, str]:
+        """The declared conventions (``Recording.declared_as`` arguments) of data read with this profile."""
+        conv = {"world_up": self.world_up}
         for _, maps in self.messages.values():
             for m in maps:
                 if m.channel == "acceleration":
@@ -73,9 +73,13 @@ class OscProfile:
                     conv["gyro_unit"] = m.unit
                 elif m.channel == "position":
                     conv["position_unit"] = m.unit
-                elif m.channel == "magnetic_field" and m.unit:
-                    conv["mag_unit"] = m.unit
-        return SensorInfo(name, self.kind, name if name in known_sites() else None, rate, **conv)
+        return conv
+
+    def sensor_info(self, name: str, rate: float) -> SensorInfo:
+        """The declared conventions of one sensor read with this profile."""
+        mag = [m.unit for _, maps in self.messages.values() for m in maps if m.channel == "magnetic_field" and m.unit]
+        extra = {"mag_unit": mag[0]} if mag else {}
+        return SensorInfo(name, self.kind, name if name in known_sites() else None, rate, **self.conventions(), **extra)
 
     def address(self, pattern: str, sensor: str) -> str:
         return pattern.replace("{sensor}", sensor)
@@ -333,20 +337,6 @@ class _Protocol(asyncio.DatagramProtocol):
 
 
 # ------------------------------------------------------------------------- the emulator
-def _profile_conventions(profile: OscProfile) -> dict[str, str]:
-    """``Recording.declared_as`` arguments that write data as this profile declares it."""
-    conv = {"world_up": profile.world_up}
-    for _, maps in profile.messages.values():
-        for m in maps:
-            if m.channel == "acceleration":
-                conv.update(acc_unit=m.unit, acc_frame=m.frame, acc_gravity=m.gravity)
-            elif m.channel == "angular_velocity":
-                conv["gyro_unit"] = m.unit
-            elif m.channel == "position":
-                conv["position_unit"] = m.unit
-    return conv
-
-
 async def emulate_osc(recording: Any, profile: str | Path = "generic", host: str = "127.0.0.1", port: int = 9000,
                       ports: Mapping[str, int] | None = None, *, faults: Any = None, speed: float = 1.0,
                       realtime: bool = True, duration: float | None = None, epoch: float = 1.8e9) -> dict[str, Any]:
@@ -358,7 +348,7 @@ async def emulate_osc(recording: Any, profile: str | Path = "generic", host: str
     from wearpose.stream.inputs.emulate import UdpSender, device_data, play
 
     prof = load_profile(profile)
-    d = device_data(recording, **_profile_conventions(prof))
+    d = device_data(recording, **prof.conventions())
     raw = device_data(recording, acc_unit="g", acc_frame="sensor", acc_gravity="included", world_up=prof.world_up)
     names, T = d.names, len(d.timestamps)
     N = T if duration is None else max(1, int(round(duration * d.rate)))
