@@ -27,6 +27,10 @@ send; with each stage's mean over the slowest 1 % of frames), its GC pauses (``s
 and the client's (``client_gc``), the slowest 1 % of frames split by stage (``tail_top1pct``)
 and the load average sampled during the run (``load_average_samples``) say where a tail comes from.
 Writes ``benchmarks/results/stream.json`` and prints a table.
+
+``--hostile``: the hostile soak instead (``benchmarks/stream_hostile.py``: two honest subjects
+beside a foreign-Origin page, a usurper, oversize, malformed and flooding clients and a slow
+subscriber, then CPU starvation); writes ``benchmarks/results/stream_hostile.{md,json}``.
 """
 
 from __future__ import annotations
@@ -200,9 +204,34 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "stream.json")
+    ap.add_argument("--out", type=Path, default=None, help="default results/stream.json (--hostile: stream_hostile.json)")
+    ap.add_argument("--hostile", action="store_true",
+                    help="the hostile soak (benchmarks/stream_hostile.py): two honest em12 subjects for --duration "
+                         "beside hostile clients, then --starve-duration of CPU starvation")
+    ap.add_argument("--starve-duration", type=float, default=60.0, help="--hostile: seconds of the starvation phase")
+    ap.add_argument("--hostile-model", default="null",
+                    help="--hostile: estimator of the two honest subjects (null: pass-through; or empose12_cpu)")
+    ap.add_argument("--busy", type=int, default=2, help="--hostile: busy-loop processes pinned with the server")
     args = ap.parse_args()
     torch.set_num_threads(1)
+    if args.out is None:
+        args.out = Path(__file__).parent / "results" / ("stream_hostile.json" if args.hostile else "stream.json")
+    if args.hostile:
+        sys.path.insert(0, str(Path(__file__).parent))
+        import stream_hostile
+
+        machine = {"platform": platform.platform(), "cpu_model": cpu_model(), "cpus": os.cpu_count(),
+                   "python": platform.python_version(), "torch": torch.__version__,
+                   "load_average_start": [round(x, 2) for x in os.getloadavg()]}
+        rec = kit_recording(args.clip, "em12", args.rate, args.seed)
+        res = stream_hostile.run(args, rec, ROOT, git_state(), machine)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(res, indent=2, default=str) + "\n")
+        md = stream_hostile.markdown(res)
+        args.out.with_suffix(".md").write_text(md)
+        print(md)
+        print(f"wrote {args.out} and {args.out.with_suffix('.md')}")
+        raise SystemExit(0 if res["passed"] else 1)
     out: dict[str, Any] = {
         "command": "python benchmarks/stream.py " + " ".join(sys.argv[1:]),
         "git": git_state(),
