@@ -101,7 +101,7 @@ async def hostile_phase(rec: Any, url: str, token: str, duration: float, n: dict
     st = stack_recording(rec)
     stop = asyncio.Event()
     honest = [asyncio.create_task(replay(rec, url, subject=k, fmt="binary", realtime=True, duration=duration,
-                                         drain_timeout=60.0)) for k in (0, 1)]
+                                         drain_timeout=300.0)) for k in (0, 1)]  # a loaded machine's backlog
     await asyncio.sleep(5.0)  # both honest subjects are open (hello answered) before the usurper starts
 
     async def foreign_origin() -> None:
