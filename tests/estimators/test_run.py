@@ -30,6 +30,12 @@ def test_use_calibration_window_only_touches_estimators_that_calibrate() -> None
     assert use_calibration_window(other, rec) is None
     assert use_calibration_window(Est(), _Rec({})) is None
 
+    class NoDefault:  # MI-Poser, segments: no window of their own until a recording marks one
+        calibration_window = None
+
+    est = NoDefault()
+    assert use_calibration_window(est, rec) == (0.1, 0.4) and est.calibration_window == (0.1, 0.4)
+
 
 def test_open_model_reads_the_card_and_checkpoint_alike() -> None:
     """Shipped weights and the same file given as a path resolve to the same setting; the card

@@ -147,13 +147,13 @@ def use_calibration_window(estimator: Any, recording: Recording) -> tuple[float,
     """Point an estimator's built-in T-pose calibration at the window ``recording`` marks.
 
     Estimators that calibrate uncalibrated recordings themselves expose a
-    ``calibration_window`` attribute (PIP: ``(0, 1)`` s by default); when the recording's meta
-    marks its T-pose (:func:`wearpose.recording.calibration_window`), that window is used instead
-    of the default. Returns the window applied, or None (no mark, or an estimator without
-    built-in calibration).
+    ``calibration_window`` attribute (PIP: ``(0, 1)`` s by default; MI-Poser and the segment
+    estimator: None, i.e. no window known); when the recording's meta marks its T-pose
+    (:func:`wearpose.recording.calibration_window`), that window is used instead. Returns the
+    window applied, or None (no mark, or an estimator without built-in calibration).
     """
     window = calibration_window(recording)
-    if window is None or getattr(estimator, "calibration_window", None) is None:
+    if window is None or not hasattr(estimator, "calibration_window"):
         return None
     estimator.calibration_window = window
     return window

@@ -158,6 +158,10 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
         self.data_fingerprint = ""
         self.train_command = ""
         self.meta: dict[str, Any] = {}
+        #: ``(t0, t1)`` s of the wearer's T-pose :meth:`estimate` calibrates from when neither the
+        #: call nor the recording gives a calibration (set from a recording's marked T-pose by
+        #: :func:`wearpose.estimators.run.use_calibration_window`); None: no such window.
+        self.calibration_window: tuple[float, float] | None = None
         self.mim = bool(mim)
         self.mim_config = mim_config
         self._calibration: Any = None
@@ -254,7 +258,7 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
             from wearpose.estimators.miposer.mim import mitigate_recording
 
             recording, extras["interference"] = mitigate_recording(recording, self.kit_name, self.mim_config, imu)
-        res = resolve_calibration(recording, calibration, calibration_window, self.body)
+        res = resolve_calibration(recording, calibration, calibration_window or self.calibration_window, self.body)
         raw = raw_inputs(recording, self.kit_name, self.fps)
         if res is None:
             warnings.warn("MI-Poser: no calibration (pass calibration=, calibration_window= or store one with "
