@@ -42,14 +42,15 @@ class Check:
         return asdict(self)
 
 
-def _pins() -> dict[str, tuple[str, bool]]:
-    """``{distribution: (pinned version, optional)}`` from the installed wearpose metadata."""
-    pins: dict[str, tuple[str, bool]] = {}
+def _pins() -> dict[str, tuple[str, str | None]]:
+    """``{distribution: (pinned version, the optional extra that brings it or None)}`` from the
+    installed wearpose metadata (``name==1.0; extra == "ray"``)."""
+    pins: dict[str, tuple[str, str | None]] = {}
     for req in md.requires("wearpose") or []:
         m = re.match(r"^\s*([A-Za-z0-9_.\-]+)\s*==\s*([^;\s]+)\s*(;.*)?$", req)
         if m:
-            extra = m.group(3) or ""
-            pins[m.group(1).lower()] = (m.group(2), "extra" in extra)
+            extra = re.search(r"""extra\s*==\s*['"]([^'"]+)['"]""", m.group(3) or "")
+            pins[m.group(1).lower()] = (m.group(2), extra.group(1) if extra else None)
     return pins
 
 
@@ -72,7 +73,7 @@ def check_dependencies() -> list[Check]:
             out.append(Check("dependencies", dist, "ok", have))
         elif optional:
             out.append(Check("dependencies", dist, "warn", f"{have or 'not installed'} (optional, pinned {want})",
-                             f'only needed for an optional extra: pip install "wearpose[...]" (see pyproject.toml)'))
+                             f'only needed for the optional extra {optional}: pip install "wearpose[{optional}]"'))
         else:
             out.append(Check("dependencies", dist, "fail", f"{have or 'not installed'}, pinned {want}",
                              "re-install: ./run.sh test (or pip install -e .); torch must be the 2.13.0 CPU wheel "

@@ -35,7 +35,7 @@ def simulate(
     body: Optional[str] = typer.Option(None, help="Body asset: default, smpl or a file path."),
     overwrite: bool = typer.Option(False, help="Replace a set in --out that was made with other settings."),
     executor: str = typer.Option("local", help="local (this machine's processes) or ray (a Ray cluster; "
-                                               "pip install 'wearpose[ray]'; corpus and --out on a shared filesystem)."),
+                                               "pip install 'wearpose\\[ray]'; corpus and --out on a shared filesystem)."),
     ray_address: Optional[str] = typer.Option(None, help="Ray cluster address (default $RAY_ADDRESS, else a local Ray)."),
     tpose: Optional[float] = typer.Option(None, "--tpose", metavar="SECONDS",
                                           help="Hold a calibration T-pose this long before each clip (marked in the "
