@@ -45,6 +45,14 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return _atomic(path, ".tmp", lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
 
 
+def atomic_torch_save(path: str | Path, obj: Any) -> Path:
+    """``torch.save(obj)`` to exactly ``path``, atomically, through a temporary file of its own
+    (unique per call: torchrun ranks building the same cache never share one)."""
+    import torch  # here: the recording reader imports this module and needs no torch for it
+
+    return _atomic(path, ".tmp", lambda tmp: torch.save(obj, tmp))
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically."""
     return _atomic(path, ".tmp", lambda tmp: Path(tmp).write_bytes(data))

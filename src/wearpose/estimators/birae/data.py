@@ -42,6 +42,7 @@ from wearpose.estimators.birae.config import BiraeConfig
 from wearpose.estimators.birae.representations import SENSORS, angular_rate, features, pose_to_target, relative_orientations
 from wearpose.estimators.checkpoint import fingerprint
 from wearpose.sensors import SITE_SEGMENT, MimuNoise, get_kit, simulate_mimu
+from wearpose.fileio import atomic_torch_save
 
 DATA_VERSION = 1
 
@@ -282,8 +283,5 @@ def build_split(split: str, cfg: BiraeConfig, *, store: Any = None, limit: int |
         d = torch.load(path, weights_only=True)
         return BiraeData(**{k: d[k] for k in keys}, clip_ids=list(d["clip_ids"]), fingerprint=fp)
     d = build_from_motions((store.load(c) for c in ids), ids, cfg, "train" if split == "train" else split, progress)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save({**d, "clip_ids": ids, "fingerprint": fp}, tmp)
-    tmp.replace(path)
+    atomic_torch_save(path, {**d, "clip_ids": ids, "fingerprint": fp})  # torchrun ranks may build it at once
     return BiraeData(**{k: d[k] for k in keys}, clip_ids=ids, fingerprint=fp)

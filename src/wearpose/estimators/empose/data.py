@@ -22,7 +22,6 @@ ids and all simulation settings, so epochs never re-simulate.
 
 from __future__ import annotations
 
-import os
 
 import warnings
 import zlib
@@ -37,6 +36,7 @@ from wearpose.estimators.checkpoint import fingerprint
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.inputs import hold_last_valid
 from wearpose.geometry import matrix_to_rot6d, rot6d_to_matrix
+from wearpose.fileio import atomic_torch_save
 
 DATA_VERSION = 1
 
@@ -258,11 +258,7 @@ def build_split(split: str, cfg: EmposeConfig, body: Any, *, store: Any = None, 
     d = {k: torch.cat(v) for k, v in cols.items()}
     d.update(betas=torch.stack(betas), off_R=torch.stack(offR), off_t=torch.stack(offt),
              starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    # A per-process temporary name: torchrun ranks may build the same split at the same time.
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    torch.save({**d, "clip_ids": ids, "fingerprint": fp}, tmp)
-    tmp.replace(path)
+    atomic_torch_save(path, {**d, "clip_ids": ids, "fingerprint": fp})  # torchrun ranks may build it at once
     return EmposeData(**d, clip_ids=ids, fingerprint=fp, settings=settings)
 
 

@@ -26,7 +26,6 @@ is the pose at the window's last frame (AvatarPoser predicts the current frame).
 from __future__ import annotations
 
 import math
-import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +42,7 @@ from wearpose.estimators.inputs import hold_last_valid
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.geometry import matrix_to_rot6d
 from wearpose.recording.tpose import tpose_then
+from wearpose.fileio import atomic_torch_save
 
 DATA_VERSION = 1
 #: Tolerance when picking 120 Hz EM samples at the 60 Hz headset instants, s.
@@ -290,8 +290,5 @@ def cached_split(path: Path, ids: Sequence[str], clip_fn: Any, fp: str, settings
             progress(c + 1, len(ids))
     d = {k: torch.cat(v) for k, v in cols.items()}
     d.update(starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")  # per process: parallel builders never share a temp file
-    torch.save({**d, "clip_ids": list(ids), "fingerprint": fp}, tmp)
-    tmp.replace(path)
+    atomic_torch_save(path, {**d, "clip_ids": list(ids), "fingerprint": fp})  # parallel builders: own temp files
     return MiposerData(**d, clip_ids=list(ids), fingerprint=fp, settings=settings)

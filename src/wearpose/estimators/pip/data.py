@@ -38,6 +38,7 @@ from wearpose.estimators.empose.data import clip_seed, num_batches
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.sitting import SITTING_PREFIX
 from wearpose.geometry import matrix_to_rot6d
+from wearpose.fileio import atomic_torch_save
 
 DATA_VERSION = 2
 #: Leaf joints of P_L (PIP Sec. 3.1: wrists, ankles and head), SMPL indices.
@@ -415,8 +416,5 @@ def _simulate_cached(path: Path, ids: list[str], fp: str, settings: dict[str, An
             progress(c + 1, len(ids))
     d = {k: torch.cat(v) for k, v in cols.items()}
     d.update(starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save({**d, "clip_ids": ids, "fingerprint": fp}, tmp)
-    tmp.replace(path)
+    atomic_torch_save(path, {**d, "clip_ids": ids, "fingerprint": fp})  # torchrun ranks may build it at once
     return PipData(**d, clip_ids=ids, fingerprint=fp, settings=settings)
