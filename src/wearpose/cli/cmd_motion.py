@@ -27,9 +27,9 @@ app.add_typer(motion_app, name="motion")
 
 def _mapping_table(row: dict[str, Any]) -> Table:
     t = Table(title=f"joint map of {Path(row['file']).name}: {row['map_source']} (check it; override with --joint-map)")
-    t.add_column("SMPL joint")
-    t.add_column("your joint")
-    t.add_column("how")
+    t.add_column("SMPL joint", overflow="fold")
+    t.add_column("your joint", overflow="fold")
+    t.add_column("how", overflow="fold")
     for smpl, joint, how in row["mapping"]:
         style = "dim" if joint == "-" else None
         t.add_row(smpl, joint if joint != "-" else "- (fill rule)", how, style=style)
@@ -45,7 +45,7 @@ def _bone_table(row: dict[str, Any]) -> Table:
     be = row["bone_error_deg"]
     t = Table(title=f"bone check of {Path(row['file']).name}: angle between each mapped bone and the source's (deg), worst first")
     for c in ("SMPL bone", "your bone", "mean", "max", "at frame"):
-        t.add_column(c, justify="right" if c in ("mean", "max", "at frame") else "left")
+        t.add_column(c, justify="right" if c in ("mean", "max", "at frame") else "left", overflow="fold")
     for r in be.get("ranked", []):
         style = "red" if r["max"] > be.get("warn_deg", float("inf")) else None
         t.add_row(r["bone"], r["source"], f"{r['mean']:.2f}", f"{r['max']:.2f}", str(r["max_frame"]), style=style)
@@ -55,7 +55,8 @@ def _bone_table(row: dict[str, Any]) -> Table:
 def _report_table(res: dict[str, Any]) -> Table:
     t = Table(title=f"motion import -> {res['out']}: {res['converted']} converted, {res['failed']} failed")
     for c in ("file", "skeleton", "units", "up", "rest pose", "frames", "fps", "bone err mean (deg)", "worst bone max (deg)", "status"):
-        t.add_column(c, justify="right" if c in ("frames", "fps", "bone err mean (deg)") else "left")
+        # fold, not ellipsis: at 80 columns a file or skeleton name must stay readable whole
+        t.add_column(c, justify="right" if c in ("frames", "fps", "bone err mean (deg)") else "left", overflow="fold")
     for r in res["files"]:
         name = Path(r["file"]).name
         if not r["ok"]:
