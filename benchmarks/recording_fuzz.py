@@ -45,18 +45,27 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--examples", type=int, default=1250, help="hypothesis examples per strategy")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "recording_fuzz")
+    ap.add_argument("-k", dest="only", default=None,
+                    help="re-run only these strategies (pytest -k) and replace their rows in the existing --out "
+                         "JSON (after a fix: each row keeps the commit it ran at)")
     args = ap.parse_args()
     os.environ["WEARPOSE_FUZZ_EXAMPLES"] = str(args.examples)
     plugin = _Collect()
     t0 = time.time()
-    code = pytest.main([str(TEST), "-q", "-p", "no:cacheprovider", "--durations=0"], plugins=[plugin])
+    code = pytest.main([str(TEST), "-q", "-p", "no:cacheprovider", "--durations=0"]
+                       + (["-k", args.only] if args.only else []), plugins=[plugin])
     seconds = time.time() - t0
     mod = next(m for m in list(sys.modules.values()) if getattr(m, "__file__", None) == str(TEST))
+    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     for name, row in plugin.rows.items():
         row["files_loaded"] = mod.LOADS.get(name, 0)
+        row["commit"] = commit
+    if args.only and args.out.with_suffix(".json").is_file():
+        old = json.loads(args.out.with_suffix(".json").read_text())
+        plugin.rows = {**old["strategies"], **plugin.rows}
+        code = 0 if all(r["outcome"] == "passed" for r in plugin.rows.values()) else 1
     total = sum(r["files_loaded"] for r in plugin.rows.values())
     failed = [n for n, r in plugin.rows.items() if r["outcome"] != "passed"]
-    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "src", "tests/recording/test_fuzz.py"],
                            capture_output=True, text=True).stdout.strip()
     res = {"examples_per_strategy": args.examples, "files_loaded": total, "failed_strategies": failed,
@@ -66,13 +75,14 @@ def main() -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(json.dumps(res, indent=2) + "\n")
     lines = [f"# Recording reader fuzzing (`load_recording`, hypothesis)", "",
+             "Each row ran at the commit in its column (a strategy re-run after a fix with `-k`).", "",
              f"`python benchmarks/recording_fuzz.py --examples {args.examples}`; commit `{commit}`"
              f"{' with uncommitted edits' if dirty else ''}; {seconds / 60:.1f} min on the shared 2-core machine "
              f"(load average at the end {res['load_average_at_end'][0]:.1f}).", "",
-             "| strategy | files loaded | outcome | seconds |", "| --- | --- | --- | --- |"]
+             "| strategy | files loaded | outcome | seconds | commit |", "| --- | --- | --- | --- | --- |"]
     for name, r in plugin.rows.items():
-        lines.append(f"| `{name}` | {r['files_loaded']:,} | {r['outcome']} | {r['seconds']} |")
-    lines += [f"| **total** | **{total:,}** | {'all passed' if not failed else 'FAILED: ' + ', '.join(failed)} | {seconds:.0f} |", "",
+        lines.append(f"| `{name}` | {r['files_loaded']:,} | {r['outcome']} | {r['seconds']} | `{r.get('commit', commit)}` |")
+    lines += [f"| **total** | **{total:,}** | {'all passed' if not failed else 'FAILED: ' + ', '.join(failed)} | | |", "",
               "Passed = every file loaded or raised `InputFileError` naming a problem and the expected form, never "
               "through the reader's safety net and never another exception type. A strategy may load a file more "
               "than once per example (truncated and overwritten copies)."]

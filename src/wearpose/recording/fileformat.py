@@ -284,7 +284,9 @@ def _check_lengths(path: Path, base: str, ts: np.ndarray, key: str, arr: np.ndar
 
 
 def _short(a: np.ndarray) -> str:
-    s = repr(a.tolist()) if a.size <= 4 else f"array of shape {a.shape}"
+    # Small in every dimension, not only in size: shape (2**31, 0) holds nothing, but .tolist()
+    # would build 2**31 empty lists (MemoryError; found by the fuzz test).
+    s = repr(a.tolist()) if a.size <= 4 and all(n <= 4 for n in a.shape) else f"array of shape {a.shape}"
     return f"{s[:60]} (dtype {a.dtype})"
 
 
