@@ -62,7 +62,8 @@ def main() -> int:
         row["commit"] = commit
     if args.only and args.out.with_suffix(".json").is_file():
         old = json.loads(args.out.with_suffix(".json").read_text())
-        plugin.rows = {**old["strategies"], **plugin.rows}
+        earlier = {n: {**r, "commit": r.get("commit", old.get("commit"))} for n, r in old["strategies"].items()}
+        plugin.rows = {**earlier, **plugin.rows}
         code = 0 if all(r["outcome"] == "passed" for r in plugin.rows.values()) else 1
     total = sum(r["files_loaded"] for r in plugin.rows.values())
     failed = [n for n, r in plugin.rows.items() if r["outcome"] != "passed"]
