@@ -368,6 +368,7 @@ def keep_feet_width(p: dict[str, torch.Tensor], heading: float, body: Any, betas
         x2 = torch.where(safe, x1 - f1 * (x1 - x0) / torch.where(safe, den, torch.ones_like(den)), x1)
         x0, f0, x1 = x1, f1, x2.clamp(-20.0, 20.0)
         f1 = f(x1)
+    mask = mask & (f1.abs() < 0.005)  # where the secant did not converge, ease across as between stretches
     d = torch.where(mask, x1, torch.zeros_like(x1))
     t = 0
     while t < T:  # ease across each run of frames without resting feet
@@ -414,7 +415,8 @@ def place(plan: Plan, body: Any, fps: float, g: torch.Generator) -> MotionSequen
     if plan.keep_feet_width:
         mask = torch.zeros(p["l_abd"].shape[0], dtype=torch.bool)
         for _, first, n, contacts in segs:
-            mask[first:first + n] = set(FEET) <= set(contacts)
+            # standing on the feet only: a seat (feet and buttocks) keeps its solved legs
+            mask[first:first + n] = set(FEET) <= set(contacts) and "pelvis" not in contacts
         keep_feet_width(p, plan.heading_deg, body, plan.betas, mask)
     pose = posture_matrices(p, plan.heading_deg)
     T = pose.shape[0]
@@ -584,11 +586,11 @@ def _sit(g: torch.Generator, body: Any, skin: _Skin, fps: float, stand: Posture)
 def _lie(g: torch.Generator, body: Any, skin: _Skin, fps: float, stand: Posture) -> tuple[Posture, list[Phase], dict[str, Any]]:
     """Squat down, sit on the floor, lie back (legs out or knees up), and the same way back up."""
     stand = stand.with_(both_abd=_u(g, 3.0, 8.0), both_out=_u(g, 3.0, 15.0))
-    squat = stand.with_(both_thigh=100.0, both_shank=38.0, pelvis_pitch=35.0, spine_flex=15.0,
+    squat = stand.with_(both_thigh=85.0, both_shank=32.0, pelvis_pitch=30.0, spine_flex=15.0,
                         both_raise=_u(g, 40.0, 80.0), both_plane=_u(g, 0.0, 30.0), both_elbow=_u(g, 10.0, 60.0))
     lean_back, thigh = _u(g, -25.0, -10.0), _u(g, 100.0, 125.0)
     seated = stand.with_(pelvis_pitch=lean_back, spine_flex=_u(g, 0.0, 15.0), both_thigh=thigh,
-                         both_raise=_u(g, 15.0, 40.0), both_plane=_u(g, 20.0, 60.0), both_elbow=_u(g, 0.0, 40.0))
+                         both_raise=_u(g, 45.0, 75.0), both_plane=_u(g, 0.0, 30.0), both_elbow=_u(g, 10.0, 60.0))  # hands off the floor
 
     def heel_down(x: float) -> dict[str, float]:  # shank x < 0: feet ahead of the knees; ankle <= 35 deg
         return {"both_shank": x, "both_foot": min(0.0, x + 35.0)}
