@@ -55,6 +55,17 @@ def sit_up_motion(T: int = 150) -> tuple[torch.Tensor, torch.Tensor]:
     return local, pelvis
 
 
+def get_up_motion() -> tuple[torch.Tensor, torch.Tensor]:
+    """A floor clip: two sit-ups lying on the back, then rising stiffly about the ankles to stand
+    (the lying-down clip played backwards)."""
+    up_local, up_pelvis = lying_down_motion(T=60)
+    rise_local, rise_pelvis = up_local.flip(0), up_pelvis.flip(0)
+    sit_local, _ = sit_up_motion(T=100)
+    sit_local = sit_local[:67]  # two sit-ups, ending flat on the back
+    sit_pelvis = rise_pelvis[:1].repeat(sit_local.shape[0], 1)
+    return torch.cat([sit_local, rise_local]), torch.cat([sit_pelvis, rise_pelvis])
+
+
 def _import(tmp_path, motion: tuple[torch.Tensor, torch.Tensor], axis: str, up: str | None = None):
     sk = custom_skeleton_motion(*motion, REST, scale=100.0, world=UP_AXES[axis].T)
     f = tmp_path / f"clip_{axis.replace('-', 'm')}.bvh"
@@ -75,8 +86,18 @@ def test_lying_down_clip_gets_its_up_axis_and_warns_of_the_disagreement(tmp_path
 
 @pytest.mark.parametrize("axis", ["y", "-z"])
 def test_floor_clip_gets_its_up_axis(tmp_path, axis: str) -> None:
-    r = _import(tmp_path, sit_up_motion(), axis)
+    r = _import(tmp_path, get_up_motion(), axis)
     assert r.up["axis"] == axis and r.up["evidence"]["floor"]["axis"] == axis, r.up
+
+
+def test_sit_ups_alone_keep_the_upright_reading_and_warn(tmp_path) -> None:
+    """Sit-ups with no standing are, as motion, toe touches turned 90 deg: the floor evidence
+    does not decide (no upright frame on it), the upright reading is kept and the report warns
+    that it disagrees with the floor."""
+    r = _import(tmp_path, sit_up_motion(), "y")
+    ev = r.up["evidence"]
+    assert ev["floor"]["axis"] is None and r.up["axis"] == ev["standing"]["axis"] == "-z"
+    assert any(w.startswith("up axis") and "--up" in w for w in r.warnings), r.warnings
 
 
 def test_up_option_overrides_the_detector(tmp_path) -> None:

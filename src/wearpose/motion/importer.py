@@ -226,6 +226,12 @@ UP_FLOOR_MIN_EXTENT_CHANGE = 0.5
 #: than :data:`UP_FLOOR_MAX_SUPPORT` leg lengths (a floor holds the lowest point to a few cm).
 UP_FLOOR_RATIO = 0.15
 UP_FLOOR_MAX_SUPPORT = 0.08
+#: ... and when the body's ankles -> head vector along it goes from upright (at least this share
+#: of its longest length) to flat (at most :data:`UP_FLOOR_FLAT`): the clip stands and lies on
+#: that floor. Without such a change a clip is as much "upright, reaching forward" as "lying,
+#: lifting the arms" (or "toe touches" as "sit-ups"), and upright, the common case, is kept.
+UP_FLOOR_TALL = 0.7
+UP_FLOOR_FLAT = 0.45
 #: Standing evidence whose mean direction agrees less than this (cosine) is weak: a warning.
 UP_STANDING_AGREEMENT = 0.9
 
@@ -241,7 +247,10 @@ def floor_evidence(P: torch.Tensor, leg: float) -> dict[str, dict[str, float]]:
     - ``ratio``: support / extent_change: small when the body changes posture along ``a`` while
       its lowest point stays put -- a floor;
     - ``on_support``: mean share of joints within 0.15 leg lengths of the lowest point (a body
-      lying on a floor rests many joints on it; the far end of a lying body, only its feet).
+      lying on a floor rests many joints on it; the far end of a lying body, only its feet);
+    - ``extent``: the body's extent along ``a``, 5th and 95th percentile, leg lengths
+      (:func:`detect_up` adds ``upright``: the ankles -> head vector along ``a`` over its
+      longest length, 5th and 95th percentile).
     """
     out: dict[str, dict[str, float]] = {}
     qs = torch.tensor([0.05, 0.5, 0.95], dtype=P.dtype)
@@ -255,15 +264,19 @@ def floor_evidence(P: torch.Tensor, leg: float) -> dict[str, dict[str, float]]:
             near = float(((h - low[:, None]) < 0.15 * leg).double().mean())
             out[("" if sign > 0 else "-") + "xyz"[k]] = {"support": round(support, 4), "extent_change": round(change, 4),
                                                         "ratio": round(support / max(change, 1e-12), 4),
-                                                        "on_support": round(near, 4)}
+                                                        "on_support": round(near, 4),
+                                                        "extent": [round(float(qe[0]) / max(leg, 1e-12), 4),
+                                                                   round(float(qe[2]) / max(leg, 1e-12), 4)]}
     return out
 
 
-def _floor_axis(ev: dict[str, dict[str, float]]) -> str | None:
-    """The signed axis the floor evidence picks, or None when it does not decide (rule in
-    :func:`floor_evidence`; between two floor-like axes, the one with more joints on it)."""
+def _floor_axis(ev: dict[str, dict[str, Any]], need_upright: bool = True) -> str | None:
+    """The signed axis the floor evidence picks, or None when it does not decide (thresholds
+    ``UP_FLOOR_*``; between two floor-like axes, the one with more joints on it).
+    ``need_upright=False``: the floor-like axis even without upright and flat frames on it."""
     cand = [a for a, e in ev.items() if e["extent_change"] >= UP_FLOOR_MIN_EXTENT_CHANGE and e["ratio"] < UP_FLOOR_RATIO
-            and e["support"] < UP_FLOOR_MAX_SUPPORT]
+            and e["support"] < UP_FLOOR_MAX_SUPPORT
+            and (not need_upright or (e["upright"][1] >= UP_FLOOR_TALL and e["upright"][0] <= UP_FLOOR_FLAT))]
     if not cand:
         return None
     best = min(ev[a]["ratio"] for a in cand)
@@ -315,6 +328,12 @@ def detect_up(motion: BvhMotion, smap: SkeletonMap, max_frames: int = UP_MAX_FRA
     # while the body walks away) would pose as a still "lowest point".
     body = sorted({skel.index(n) for n in smap.joints.values()})
     fev = floor_evidence(P[:, body], leg)
+    # How upright the body stands along each signed axis: ankles -> head along it over its
+    # longest length (5th and 95th percentile over the clip).
+    for a, e in fev.items():
+        share = (-1.0 if a.startswith("-") else 1.0) * v[:, "xyz".index(a[-1])] / ext.max().clamp_min(1e-12)
+        q = torch.quantile(share, torch.tensor([0.05, 0.95], dtype=share.dtype))
+        e["upright"] = [round(float(q[0]), 4), round(float(q[1]), 4)]
     floor_axis = _floor_axis(fev)
     axis = floor_axis if floor_axis is not None else stand_axis
     k = "xyz".index(axis[-1])
@@ -330,6 +349,10 @@ def detect_up(motion: BvhMotion, smap: SkeletonMap, max_frames: int = UP_MAX_FRA
         warnings.append(f"up axis: the most extended frames point along {stand_axis} (agreement {abs(float(u[k_stand])):.2f}), "
                         f"but the floor says {axis} (the clip lies down, sits up or gets up); {axis} was used "
                         f"(pass --up {stand_axis} if the subject is upright along it)")
+    elif floor_axis is None and (maybe := _floor_axis(fev, need_upright=False)) is not None and maybe != axis:
+        warnings.append(f"up axis: the lowest point stays still along {maybe} while the body changes posture (a floor?), "
+                        f"but the body is never both upright and flat along it; the upright reading {axis} was kept (pass "
+                        f"--up {maybe} if the clip lies on a floor: sit-ups and toe touches move alike)")
     elif floor_axis is None and agreement < UP_STANDING_AGREEMENT:
         warnings.append(f"up axis: weak evidence: the most extended frames agree with {axis} only {agreement:.2f} and the "
                         "clip never changes posture on a floor; check the result (wearpose view) and pass --up if it is wrong")
