@@ -106,13 +106,13 @@ async def hostile_phase(rec: Any, url: str, token: str, duration: float, n: dict
 
     async def foreign_origin() -> None:
         for tok in (None, token):
-            n["origin_attempts"] += 1
-            try:
+            try:  # counted once answered: an attempt still in flight when /stats is read is not one yet
                 c = await StreamClient(url, origin=EVIL, token=tok).connect()
+                n["origin_attempts"] += 1
                 n["origin_admitted"] += 1
                 await c.close()
             except StreamError:
-                pass
+                n["origin_attempts"] += 1
 
     usurper = await StreamClient(url).connect()
     frame = encode_frame_binary(FramePacket(0, 0, 0.0, st.valid[0], np.nan_to_num(st.data[0])))
