@@ -134,3 +134,27 @@ def test_device_frame_converts_like_the_file() -> None:
     masked = canonical_frame(infos, DeviceFrame(0, 0.0, np.array([False, True]),
                                                 {"orientation": R, "acceleration": acc, "angular_velocity": gyro}), chans)
     assert np.isnan(masked[0]).all() and np.isfinite(masked[1, :15]).all()  # 15: all but the magnetic field
+
+
+def test_osc_frames_wait_for_a_device_whose_socket_drains_later() -> None:
+    """Each NGIMU has its own socket: on a busy server one device's backlog is read ahead of
+    another's. A frame is only incomplete for a sensor once that sensor's own stream moved past it."""
+    from wearpose.stream.inputs.osc import OscInput
+
+    src = OscInput("ngimu", {"a": 9100, "b": 9101}, 60.0)
+    frames = []
+    src.attach(frames.append, lambda exc: frames.append(exc))
+
+    def bundle(k: int) -> bytes:
+        return encode_bundle(1.8e9 + k / 60.0, [("/quaternion", [1.0, 0, 0, 0]), ("/sensors", [0.0] * 10),
+                                               ("/linear", [0.0, 0.0, 0.0])])
+
+    for k in range(10):
+        src.datagram(bundle(k), ["a"])  # device a's whole backlog first
+    for k in range(10):
+        if k != 4:  # device b lost frame 4
+            src.datagram(bundle(k), ["b"])
+    # 4 waits until b has sent frame 6 (window 2), after the complete 5; then in order
+    assert [f.seq for f in frames] == [0, 1, 2, 3, 5, 4, 6, 7, 8, 9]
+    masked = {f.seq: f.valid.tolist() for f in frames}
+    assert masked[4] == [True, False] and all(v == [True, True] for k, v in masked.items() if k != 4)

@@ -10,8 +10,9 @@ declared :class:`~wearpose.recording.SensorInfo`, converted by ``Recording.to_ca
 Frames are identified by the OSC **bundle time tag** (NTP format, the device's clock; the NGIMU
 time-tags every bundle): the sequence number is ``round((t - t_first) * rate)``. A sensor's
 frame is complete when every message of the profile has arrived for that time tag; a frame is
-handed on when every sensor is complete, or -- with the missing sensors masked -- once a
-message ``window`` frames newer has arrived. A message outside a bundle, with the wrong number
+handed on when every sensor is complete, or -- with the missing sensors masked -- once each
+missing sensor has sent a frame ``window`` frames newer (or 2 s of frames have passed: a device
+that stopped). A message outside a bundle, with the wrong number
 or type of arguments, or a quaternion that is not unit-norm, is malformed (counted); messages
 the profile does not name (``/battery``, ``/temperature``...) are ignored (counted).
 """
@@ -197,7 +198,8 @@ class OscInput(LiveInput):
         rate: the devices' send rate, Hz (frames are on this grid).
         host: interface to listen on.
         port: the one port of ``devices: address`` profiles.
-        window: frames a partial frame waits for its missing sensors.
+        window: frames a sensor's own stream must have moved past a frame it did not send for it
+            to count as missing there (a device silent for 2 s releases the frames it holds).
     """
 
     name = "osc"
@@ -220,6 +222,8 @@ class OscInput(LiveInput):
         self._t0: float | None = None
         self._pending: dict[int, dict[str, Any]] = {}
         self._done_below: int | None = None  # frames below this were handed on
+        self._newest = [-1] * len(self.sensors)  # per sensor: the newest frame it sent
+        self.timeout_frames = max(window + 1, int(round(2.0 * self.rate)))  # 2 s
         self._transports: list[Any] = []
         self.counts.update(bundles=0, late=0)
 
@@ -281,7 +285,8 @@ class OscInput(LiveInput):
         for j, pattern, vals in parsed:
             f["got"].setdefault(j, set()).add(pattern)
             f["values"].setdefault(j, {}).update(vals)
-        self._flush(seq)
+            self._newest[j] = max(self._newest[j], seq)
+        self._flush()
 
     def _lookup(self, addr: str, names: Sequence[str]) -> tuple[int, str] | None:
         key = self._addr.get(addr)
@@ -299,9 +304,16 @@ class OscInput(LiveInput):
         want = set(self.profile.messages)
         return len(f["got"]) == len(self.sensors) and all(g == want for g in f["got"].values())
 
-    def _flush(self, newest: int) -> None:
+    def _flush(self) -> None:
+        # A sensor is missing from a frame once *its own* stream has moved `window` frames past
+        # it (each device has its own socket, drained at its own pace when the server is busy);
+        # a device that stopped altogether holds frames at most `timeout_frames`.
+        newest = max(self._newest)
+        want = set(self.profile.messages)
         for seq in sorted(self._pending):
-            if self._complete(self._pending[seq]) or newest - seq >= self.window:
+            f = self._pending[seq]
+            if all(f["got"].get(j) == want or self._newest[j] - seq >= self.window for j in range(len(self.sensors))) \
+                    or newest - seq >= self.timeout_frames:
                 self._release(seq)
 
     def _release(self, seq: int) -> None:
