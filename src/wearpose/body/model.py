@@ -214,14 +214,24 @@ class BodyModel(nn.Module):
         return self.J_template + torch.einsum("jcs,...s->...jc", self.J_shapedirs, betas.to(self.dtype))
 
     def _skin_buffers(self, vidx: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
-        """Skinning buffers of the vertices ``vidx`` (all: ``None``), component-major as :meth:`_skin`
-        uses them: template ``(3, 1, V')``, shape dirs ``(3, S, V')``, weights ``(24, V')``, pose
-        dirs ``(3, 207, V')`` (or ``None``). Cached per vertex set (:meth:`_patch`)."""
-        sel = (lambda x: x) if vidx is None else (lambda x: x[vidx])  # noqa: E731
-        v_t, sd, w = sel(self.v_template), sel(self.shapedirs), sel(self.weights)
+        """Skinning buffers of the vertices ``vidx`` (all: ``None``) as :meth:`_skin` uses them.
+
+        Whole mesh, component-major: template ``(3, 1, V)``, shape dirs ``(3, S, V)``, weights
+        ``(24, V)``, pose dirs ``(3, 207, V)`` (or ``None``). A patch, vertex-major (vertices as
+        the rows of every matrix product, so a vertex's rounding does not depend on which other
+        vertices are in the patch): template ``(V'*3, 1)``, shape dirs ``(V'*3, S)``, weights
+        ``(V', 24)``, pose dirs ``(V'*3, 207)``. Cached (:meth:`_patch`, :meth:`_patch_buffers`)."""
+        if vidx is not None:
+            n = len(vidx)
+            pd = None
+            if self.has_posedirs:
+                pd = self.posedirs.view(-1, self.num_vertices, 3)[:, vidx].reshape(self.posedirs.shape[0], n * 3).T.contiguous()
+            return (self.v_template[vidx].reshape(-1, 1), self.shapedirs[vidx].reshape(n * 3, -1).contiguous(),
+                    self.weights[vidx].contiguous(), pd)
+        v_t, sd, w = self.v_template, self.shapedirs, self.weights
         pd = None
         if self.has_posedirs:
-            pd = sel(self.posedirs.view(-1, self.num_vertices, 3).transpose(0, 1)).permute(2, 1, 0).contiguous()
+            pd = self.posedirs.view(-1, self.num_vertices, 3).permute(2, 0, 1).contiguous()
         return v_t.T.unsqueeze(1).contiguous(), sd.permute(1, 2, 0).contiguous(), w.T.contiguous(), pd
 
     def _skin(self, vidx: torch.Tensor | None, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor,
@@ -236,21 +246,31 @@ class BodyModel(nn.Module):
         ``SKIN_CHUNK_VERTEX_FRAMES``): every step is one matrix product or an element-wise op
         on contiguous rows."""
         v_t, sd, w, pd = buffers if buffers is not None else self._patch_buffers(vidx)
-        Vp = w.shape[1]
+        patch = vidx is not None
+        Vp = w.shape[0] if patch else w.shape[1]
         J_rest = self.J_template + torch.einsum("jcs,ns->njc", self.J_shapedirs, betas)  # (N, 24, 3)
         G, J = forward_kinematics(R, J_rest, self.parents)  # (N, 24, 3, 3), (N, 24, 3)
         # Skinning transform of joint j: x -> G_j (x - J_rest_j) + J_j, stored as G's columns then t.
         t = J - (G @ J_rest.unsqueeze(-1)).squeeze(-1)  # (N, 24, 3)
         A = torch.cat([G.transpose(-1, -2).reshape(-1, NUM_JOINTS, 9), t + trans[:, None]], dim=-1)  # (N, 24, 12)
         feat = (R[:, 1:] - torch.eye(3, dtype=R.dtype, device=R.device)).reshape(R.shape[0], -1) if pd is not None else None
-        step = max(1, SKIN_CHUNK_VERTEX_FRAMES // max(1, Vp))
+        # A patch (sites) goes in one chunk: its frames' rounding must not depend on which other
+        # sites share the call (a kit's sensor must read the same with or without the others).
+        step = max(1, SKIN_CHUNK_VERTEX_FRAMES // max(1, Vp)) if vidx is None else R.shape[0]
         verts, normals = [], []
         for a in range(0, R.shape[0], step):
             n = min(step, R.shape[0] - a)
-            vs = v_t + betas[a:a + n] @ sd  # (3, n, V') shaped rest vertices
-            if pd is not None:
-                vs = vs + feat[a:a + n] @ pd  # + pose correctives
-            T = A[a:a + n].permute(2, 0, 1) @ w  # (12, n, V')
+            if patch:  # vertex-major products (see _skin_buffers), then component-major
+                vs = torch.addmm(v_t, sd, betas[a:a + n].T)  # (V'*3, n)
+                if pd is not None:
+                    vs = torch.addmm(vs, pd, feat[a:a + n].T)
+                vs = vs.view(Vp, 3, n).permute(1, 2, 0)  # (3, n, V')
+                T = (w @ A[a:a + n].permute(1, 2, 0).reshape(NUM_JOINTS, 12 * n)).view(Vp, 12, n).permute(1, 2, 0)
+            else:
+                vs = v_t + betas[a:a + n] @ sd  # (3, n, V') shaped rest vertices
+                if pd is not None:
+                    vs = vs + feat[a:a + n] @ pd  # + pose correctives
+                T = A[a:a + n].permute(2, 0, 1) @ w  # (12, n, V')
             X = torch.addcmul(T[9:12], T[0:3], vs[0:1])
             X = torch.addcmul(X, T[3:6], vs[1:2])
             X = torch.addcmul(X, T[6:9], vs[2:3])  # (3, n, V')
