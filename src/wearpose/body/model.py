@@ -217,16 +217,17 @@ class BodyModel(nn.Module):
         """Skinning buffers of the vertices ``vidx`` (all: ``None``) as :meth:`_skin` uses them.
 
         Whole mesh, component-major: template ``(3, 1, V)``, shape dirs ``(3, S, V)``, weights
-        ``(24, V)``, pose dirs ``(3, 207, V)`` (or ``None``). A patch, vertex-major (vertices as
-        the rows of every matrix product, so a vertex's rounding does not depend on which other
-        vertices are in the patch): template ``(V'*3, 1)``, shape dirs ``(V'*3, S)``, weights
-        ``(V', 24)``, pose dirs ``(V'*3, 207)``. Cached (:meth:`_patch`, :meth:`_patch_buffers`)."""
+        ``(24, V)``, pose dirs ``(3, 207, V)`` (or ``None``). A patch, in the products' layout of
+        the previous implementation and of :mod:`wearpose.estimators.empose.fastgrad` (vertices
+        as the rows of the skinning-weight product, so a vertex's rounding does not depend on
+        which other vertices are in the patch): template ``(V'*3,)``, shape dirs ``(S, V'*3)``,
+        weights ``(V', 24)``, pose dirs ``(207, V'*3)``. Cached (:meth:`_patch`, :meth:`_patch_buffers`)."""
         if vidx is not None:
             n = len(vidx)
             pd = None
             if self.has_posedirs:
-                pd = self.posedirs.view(-1, self.num_vertices, 3)[:, vidx].reshape(self.posedirs.shape[0], n * 3).T.contiguous()
-            return (self.v_template[vidx].reshape(-1, 1), self.shapedirs[vidx].reshape(n * 3, -1).contiguous(),
+                pd = self.posedirs.view(-1, self.num_vertices, 3)[:, vidx].reshape(self.posedirs.shape[0], n * 3).contiguous()
+            return (self.v_template[vidx].reshape(-1), self.shapedirs[vidx].reshape(n * 3, -1).T.contiguous(),
                     self.weights[vidx].contiguous(), pd)
         v_t, sd, w = self.v_template, self.shapedirs, self.weights
         pd = None
@@ -261,10 +262,10 @@ class BodyModel(nn.Module):
         for a in range(0, R.shape[0], step):
             n = min(step, R.shape[0] - a)
             if patch:  # vertex-major products (see _skin_buffers), then component-major
-                vs = torch.addmm(v_t, sd, betas[a:a + n].T)  # (V'*3, n)
+                vs = v_t + betas[a:a + n] @ sd  # (n, V'*3)
                 if pd is not None:
-                    vs = torch.addmm(vs, pd, feat[a:a + n].T)
-                vs = vs.view(Vp, 3, n).permute(1, 2, 0)  # (3, n, V')
+                    vs = vs + feat[a:a + n] @ pd
+                vs = vs.view(n, Vp, 3).permute(2, 0, 1)  # (3, n, V')
                 T = (w @ A[a:a + n].permute(1, 2, 0).reshape(NUM_JOINTS, 12 * n)).view(Vp, 12, n).permute(1, 2, 0)
             else:
                 vs = v_t + betas[a:a + n] @ sd  # (3, n, V') shaped rest vertices
