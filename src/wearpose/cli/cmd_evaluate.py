@@ -116,6 +116,8 @@ def evaluate(
     out: Optional[Path] = typer.Option(None, help="Write OUT.md and OUT.json (table, models, setting)."),
     title: Optional[str] = typer.Option(None, help="Title of the markdown file."),
     note: Optional[str] = typer.Option(None, help="A sentence appended to the markdown."),
+    frame_stride: int = typer.Option(1, "--frame-stride", min=1,
+                                     help="Sparse-IMU protocols: score every N-th frame (the MI-Poser cards used 4)."),
     cache: Optional[Path] = typer.Option(None, help="Prepared corpus store to evaluate on (default: the store of "
                                                     "`wearpose data prepare`)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (progress goes to stderr)."),
@@ -172,6 +174,8 @@ def evaluate(
         task = bar.add_task("", total=None)
         tick = lambda d, t: bar.update(task, completed=d, total=t)  # noqa: E731
         if empose:
+            if frame_stride != 1:
+                raise typer.BadParameter("the EM-POSE protocol scores every frame", param_hint="--frame-stride")
             res = evaluate_models(ckpts, split, clips, noise=noise, seed=seed, offsets=offsets, spread=spread,
                                   store=store, progress=tick)
         else:
@@ -180,7 +184,8 @@ def evaluate(
 
             res = {"split": split, "store": str(store.root),
                    "models": {n: evaluate_model(open_model(p), split=split, clips=clips, seed=seed, noise=noise,
-                                                store=store, progress=tick) for n, p in ckpts.items()}}
+                                                store=store, progress=tick, frame_stride=frame_stride)
+                              for n, p in ckpts.items()}}
             for n, r in res["models"].items():
                 r["model"] = n
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
