@@ -60,9 +60,9 @@ def test_open_model_names_what_it_accepts(tmp_path: Path) -> None:
     assert seg.checkpoint is None and seg.fps is None and seg.make().name == "segments"
 
 
-def test_make_builds_fresh_estimators_from_one_read(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The checkpoint is read by open_model and never again, however many estimators are made
-    (the server makes one per subject)."""
+@pytest.fixture
+def torch_loads(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The files ``torch.load`` reads during the test, in order."""
     calls: list[str] = []
     real = torch.load
 
@@ -71,16 +71,21 @@ def test_make_builds_fresh_estimators_from_one_read(monkeypatch: pytest.MonkeyPa
         return real(f, *a, **k)
 
     monkeypatch.setattr(torch, "load", counting)
+    return calls
+
+
+def test_make_builds_fresh_estimators_from_one_read(torch_loads: list[str]) -> None:
+    """The checkpoint is read by open_model and never again, however many estimators are made
+    (the server makes one per subject)."""
     src = open_model("empose12_cpu")
     e1, e2 = src.make(), src.factory()
-    assert len(calls) == 1 and e1 is not e2
+    assert len(torch_loads) == 1 and e1 is not e2
     assert e1.sensor_names == e2.sensor_names == src.sensors
     assert isinstance(src, ModelSource)
 
 
 @pytest.mark.parametrize("as_path", [False, True])
-def test_wearpose_estimate_reads_its_checkpoint_once(as_path: bool, tmp_path: Path,
-                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+def test_wearpose_estimate_reads_its_checkpoint_once(as_path: bool, tmp_path: Path, torch_loads: list[str]) -> None:
     from typer.testing import CliRunner
 
     from tests.cli.test_cmd_estimate import _kit_recording
@@ -91,15 +96,8 @@ def test_wearpose_estimate_reads_its_checkpoint_once(as_path: bool, tmp_path: Pa
     rec = _kit_recording("em12", 30.0)
     save_recording(rec, tmp_path / "rec.npz")
     model = str(weight_path("empose12_cpu")) if as_path else "empose12_cpu"
-    calls: list[str] = []
-    real = torch.load
-
-    def counting(f, *a, **k):
-        calls.append(str(f))
-        return real(f, *a, **k)
-
-    monkeypatch.setattr(torch, "load", counting)
+    torch_loads.clear()  # only what the command reads
     res = CliRunner().invoke(app, ["estimate", str(tmp_path / "rec.npz"), "--model", model,
                                    "--out", str(tmp_path / "pose.npz"), "--json"])
     assert res.exit_code == 0, res.output
-    assert [c for c in calls if c.endswith(".pt")] == [str(weight_path("empose12_cpu"))], calls
+    assert [c for c in torch_loads if c.endswith(".pt")] == [str(weight_path("empose12_cpu"))], torch_loads

@@ -17,12 +17,15 @@ from __future__ import annotations
 import shlex
 import sys
 from pathlib import Path
-from typing import Any, Optional
+from typing import TYPE_CHECKING, Any, Optional
 
 import typer
 from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
+
+if TYPE_CHECKING:
+    from wearpose.estimators.run import ModelSource
 
 #: Methods evaluated by a script rather than by `wearpose evaluate`.
 OTHER_PROTOCOLS = {"empose-lbfgs": "benchmarks/empose_lbfgs.py"}
@@ -54,20 +57,21 @@ def resolve_model(spec: str) -> tuple[str, Path]:
     return name or (path.parent.name if path.stem in ("best", "last") else path.stem), path
 
 
-def _method(name: str, path: Path) -> str:
-    """The checkpoint's method, refused when `wearpose evaluate` has no protocol for it."""
-    from wearpose.estimators.checkpoint import load_checkpoint
+def _open(name: str, path: Path) -> ModelSource:
+    """The model at ``path`` (its checkpoint read once, :func:`wearpose.estimators.run.open_model`),
+    refused when `wearpose evaluate` has no protocol for its method."""
     from wearpose.estimators.empose.baselines import ESTIMATOR_NAMES
+    from wearpose.estimators.run import open_model
     from wearpose.evaluate.protocols import PROTOCOLS
 
-    method = load_checkpoint(path).method
+    source = open_model(path)
     known = [*ESTIMATOR_NAMES.values(), *PROTOCOLS]
-    if method not in known:
-        script = OTHER_PROTOCOLS.get(method)
+    if source.method not in known:
+        script = OTHER_PROTOCOLS.get(source.method)
         hint = f"; evaluate it with `python {script}`" if script else ""
-        raise typer.BadParameter(f"{name} ({path}) is a {method!r} model: `wearpose evaluate` runs the protocols of "
-                                 f"{', '.join(known)}{hint}", param_hint="MODELS")
-    return method
+        raise typer.BadParameter(f"{name} ({path}) is a {source.method!r} model: `wearpose evaluate` runs the "
+                                 f"protocols of {', '.join(known)}{hint}", param_hint="MODELS")
+    return source
 
 
 def _render_protocol(r: dict[str, Any]) -> None:
@@ -152,16 +156,16 @@ def evaluate(
     from wearpose.motion import CorpusStore
 
     ckpts: dict[str, Path] = {}
-    methods: dict[str, str] = {}
+    sources: dict[str, ModelSource] = {}
     for spec in models:
         name, path = resolve_model(spec)
         if name in ckpts:
             raise typer.BadParameter(f"two models named {name!r}; use NAME=PATH", param_hint="MODELS")
-        methods[name], ckpts[name] = _method(name, path), path
-    empose = {n for n, m in methods.items() if m in ESTIMATOR_NAMES.values()}
-    if empose and len(empose) < len(methods):
+        sources[name], ckpts[name] = _open(name, path), path
+    empose = {n for n, s in sources.items() if s.method in ESTIMATOR_NAMES.values()}
+    if empose and len(empose) < len(sources):
         raise typer.BadParameter(f"EM-POSE models ({', '.join(sorted(empose))}) and others "
-                                 f"({', '.join(sorted(set(methods) - empose))}) have different protocols; "
+                                 f"({', '.join(sorted(set(sources) - empose))}) have different protocols; "
                                  "evaluate them in separate commands", param_hint="MODELS")
     store = CorpusStore(cache)
     if not store.clips(split=split):
@@ -179,13 +183,12 @@ def evaluate(
             res = evaluate_models(ckpts, split, clips, noise=noise, seed=seed, offsets=offsets, spread=spread,
                                   store=store, progress=tick)
         else:
-            from wearpose.estimators.run import open_model
             from wearpose.evaluate.protocols import evaluate_model
 
             res = {"split": split, "store": str(store.root),
-                   "models": {n: evaluate_model(open_model(p), split=split, clips=clips, seed=seed, noise=noise,
+                   "models": {n: evaluate_model(src, split=split, clips=clips, seed=seed, noise=noise,
                                                 store=store, progress=tick, frame_stride=frame_stride)
-                              for n, p in ckpts.items()}}
+                              for n, src in sources.items()}}
             for n, r in res["models"].items():
                 r["model"] = n
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -28,6 +27,7 @@ from typing import Any, Sequence
 import torch
 
 from wearpose.errors import InputFileError, WearposeError
+from wearpose.fileio import atomic_torch_save
 
 FORMAT = "wearpose.checkpoint"
 VERSION = 1
@@ -82,12 +82,7 @@ class Checkpoint:
 
 def save_checkpoint(ckpt: Checkpoint, path: str | Path) -> Path:
     """Write atomically (temp file + rename) so a killed run never leaves a torn checkpoint."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(ckpt.to_dict(), tmp)
-    os.replace(tmp, path)
-    return path
+    return atomic_torch_save(path, ckpt.to_dict())
 
 
 #: What a checkpoint file is, for error messages.
