@@ -34,6 +34,10 @@ UPPER_BODY: tuple[int, ...] = (0, 3, 6, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 2
 #: 22/23 stay at identity as in AvatarPoser).
 PREDICTED_JOINTS = 22
 
+#: The rotation loss of the ``cpu`` and ``tiny`` presets (issue 22): geodesic per joint, the spine
+#: (SMPL 3, 6, 9) 5x, their twist about the bone hinged beyond 40 deg (the training targets' range).
+FIXED_LOSS: dict[str, Any] = {"rot_loss": "geodesic", "spine_rot_weight": 5.0, "lambda_twist": 1.0}
+
 
 @dataclass(frozen=True)
 class MiposerConfig(ConfigIO):
@@ -48,7 +52,12 @@ class MiposerConfig(ConfigIO):
     direction, ``layers`` LSTM layers.
     Loss: ``lambda_rot`` (L1 on the 21 local 6D rotations), ``lambda_root`` (L1 on the root 6D in
     the heading frame), ``lambda_pos`` (L1 on head-relative joint positions, m), ``lambda_hand``
-    (extra weight on the two wrist joints' positions, AvatarPoser's hand alignment term).
+    (extra weight on the two wrist joints' positions, AvatarPoser's hand alignment term);
+    ``rot_loss`` the rotation term: ``"l1_6d"`` (the default, what the v1 weights were trained
+    with: L1 on the raw 6D numbers) or ``"geodesic"`` (per-joint angle of the Gram-Schmidt rotation,
+    rad, issue 22's waist-tear fix), ``spine_rot_weight`` (geodesic only: the spine joints' weight
+    in it), ``lambda_twist`` / ``twist_limit_deg`` (a hinge on the spine joints' twist about the
+    bone beyond the limit, rad; 0 = off). The defaults keep a stored config's old loss.
     Data: ``rate`` Hz, ``window`` frames, ``stride`` frames between training windows,
     ``train_noise`` the simulated sensors' error model (``default`` / ``none``), ``tpose_s`` /
     ``blend_s`` the calibration T-pose held before each clip and the blend into the clip, ``seed``.
@@ -69,6 +78,10 @@ class MiposerConfig(ConfigIO):
     lambda_root: float = 1.0
     lambda_pos: float = 5.0
     lambda_hand: float = 5.0
+    rot_loss: str = "l1_6d"
+    spine_rot_weight: float = 1.0
+    lambda_twist: float = 0.0
+    twist_limit_deg: float = 40.0
     rate: float = 60.0
     window: int = 40
     stride: int = 6
@@ -95,6 +108,8 @@ class MiposerConfig(ConfigIO):
             raise ConfigError("MiposerConfig: window >= 2, stride >= 1 and layers >= 1 required")
         if self.train_noise not in ("default", "none"):
             raise ConfigError(f"MiposerConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
+        if self.rot_loss not in ("l1_6d", "geodesic"):
+            raise ConfigError(f"MiposerConfig.rot_loss: expected 'l1_6d' or 'geodesic', got {self.rot_loss!r}")
         if self.lr_schedule not in ("constant", "cosine"):
             raise ConfigError(f"MiposerConfig.lr_schedule: expected 'constant' or 'cosine', got {self.lr_schedule!r}")
 
@@ -124,9 +139,9 @@ class MiposerConfig(ConfigIO):
         if name == "cpu":
             if model == "imuposer":
                 return replace(base, batch_size=32, epochs=10, val_clips=60)
-            return replace(base, ff=512, dense=True, stride=20, batch_size=32, epochs=3, val_clips=60)
+            return replace(base, ff=512, dense=True, stride=20, batch_size=32, epochs=3, val_clips=60, **FIXED_LOSS)
         if name == "tiny":
             return replace(base, d_model=32, layers=1, heads=4, ff=64, hidden=32, batch_size=8, epochs=1, dense=True,
                            window=12 if model == "avatarposer" else 24, stride=6, lr=3e-3, val_clips=2, dropout=0.0,
-                           tpose_s=0.5, blend_s=0.25)
+                           tpose_s=0.5, blend_s=0.25, **(FIXED_LOSS if model == "avatarposer" else {}))
         raise ConfigError(f"unknown MI-Poser config preset {name!r}; expected paper, cpu or tiny")
