@@ -22,6 +22,8 @@ from wearpose.geometry.rotations import (
     axis_angle_to_matrix,
     euler_to_matrix,
     geodesic_angle,
+    smooth_geodesic_angle,
+    twist_angle,
     matrix_to_axis_angle,
     matrix_to_euler,
     matrix_to_quat,
@@ -69,7 +71,7 @@ from wearpose.geometry.units import (
 __all__ = [
     "axis_angle_to_matrix", "matrix_to_axis_angle", "quat_to_matrix", "matrix_to_quat",
     "rot6d_to_matrix", "matrix_to_rot6d", "euler_to_matrix", "matrix_to_euler",
-    "geodesic_angle", "slerp_matrix", "project_to_so3", "rotation_between",
+    "geodesic_angle", "smooth_geodesic_angle", "twist_angle", "slerp_matrix", "project_to_so3", "rotation_between",
     "rotation_x", "rotation_y", "rotation_z", "heading", "vector_heading", "best_yaw",
     "Z_UP_TO_Y_UP", "Y_UP_TO_Z_UP", "SMPL_TO_X_FORWARD_BODY", "change_world_rotation", "change_world_points",
     "MIRROR_X", "mirror_rotation", "mirror_points",

@@ -199,6 +199,35 @@ def geodesic_angle(R1: torch.Tensor, R2: torch.Tensor) -> torch.Tensor:
     return _roma().rotmat_geodesic_distance(R1, R2)
 
 
+def smooth_geodesic_angle(R1: torch.Tensor, R2: torch.Tensor, eps: float = 1e-12) -> torch.Tensor:
+    """Angle (radians, ``[0, pi]``) of ``R1^T R2`` with finite gradients everywhere, for losses;
+    ``(..., 3, 3)`` x2 -> ``(...)``.
+
+    ``atan2(sin, cos)`` of the relative rotation ``M``: ``sin`` = the norm of ``vee((M - M^T) / 2)``
+    (smoothed by ``eps`` under the square root), ``cos`` = ``(tr M - 1) / 2``. Unlike
+    :func:`geodesic_angle` (``asin``, infinite slope at pi) the slope is 1 per radian up to pi, so
+    a loss on it pulls a 180 deg error back as hard as a small one; the angle is off by at most
+    ``sqrt(eps)`` near 0 and pi.
+    """
+    _check_last(R1, (3, 3), "R1")
+    _check_last(R2, (3, 3), "R2")
+    M = R1.transpose(-1, -2) @ R2
+    v = torch.stack([M[..., 2, 1] - M[..., 1, 2], M[..., 0, 2] - M[..., 2, 0], M[..., 1, 0] - M[..., 0, 1]], -1) / 2
+    s = torch.sqrt((v * v).sum(-1) + eps)
+    c = (M[..., 0, 0] + M[..., 1, 1] + M[..., 2, 2] - 1) / 2
+    return torch.atan2(s, c)
+
+
+def twist_angle(R: torch.Tensor, axis: torch.Tensor) -> torch.Tensor:
+    """Magnitude (radians, ``[0, pi]``) of the twist of ``R`` ``(..., 3, 3)`` about the unit
+    ``axis`` ``(3,)`` (the swing-twist decomposition ``R = swing @ twist``, ``twist`` about
+    ``axis``): ``2 atan2(|q_v . axis|, q_w)`` of ``R``'s quaternion (``q_w >= 0``). For a joint's
+    local rotation and its bone axis this is the turn about the bone -> ``(...)``."""
+    q = matrix_to_quat(R)
+    a = axis.to(q)
+    return 2 * torch.atan2((q[..., 1:] * a).sum(-1).abs(), q[..., 0])
+
+
 def slerp_matrix(R0: torch.Tensor, R1: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
     """Spherical linear interpolation between rotations.
 

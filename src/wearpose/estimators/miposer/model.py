@@ -14,9 +14,18 @@ local rotations (6D). The hands (SMPL 22/23) stay at identity. The global transl
 regressed: as AvatarPoser, the posed body is moved so that its head joint lands on the measured
 head position (:func:`head_anchored_translation`).
 
-Loss (:func:`ik_loss`): L1 on the local 6D rotations, L1 on the root 6D, L1 on the
+Loss (:func:`ik_loss`): the local rotations' term (:func:`rotation_term`: L1 on the raw 6D
+numbers as AvatarPoser, or the per-joint geodesic angle with the spine weighted up), an optional
+hinge on the spine's twist about the bone (:func:`twist_prior`), L1 on the root 6D, L1 on the
 head-relative joint positions of the posed body (forward kinematics, m) with extra weight on
 the wrists (AvatarPoser's hand term).
+
+Why the geodesic (issue 22, docs/miposer.md): a spine joint turned 180 deg about the bone and
+turned back by the joints above it leaves every joint position right, so only the rotation term
+can see it. L1 on the raw 6D averaged over 126 numbers let the v1 weights sit there; L1 on the
+Gram-Schmidt-normalised 6D would not help either: for a turn ``a`` about one column's axis it is
+``1 - cos a + |sin a|``, which has a local minimum at 180 deg. The geodesic angle rises to 180 deg
+with slope 1, so the gradient always turns the joint back.
 """
 
 from __future__ import annotations
@@ -26,11 +35,15 @@ from torch import nn
 
 from wearpose.body.skeleton import NUM_JOINTS
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
-from wearpose.geometry import heading, matrix_to_rot6d, rot6d_to_matrix, rotation_y
+from wearpose.geometry import heading, matrix_to_rot6d, rot6d_to_matrix, rotation_y, smooth_geodesic_angle, twist_angle
 
 #: Numbers per sensor and frame in :func:`window_features`.
 FEATURES_PER_SENSOR = 18
 HEAD, LEFT_WRIST, RIGHT_WRIST = 15, 20, 21
+#: SMPL spine1, spine2, spine3: the joints whose twist about the bone positions cannot tell.
+SPINE = (3, 6, 9)
+#: The bone axis of a local rotation in SMPL's rest pose (the spine runs along +Y).
+BONE_AXIS = (0.0, 1.0, 0.0)
 
 
 def heading_frame(R_head: torch.Tensor, p_head: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -111,6 +124,31 @@ def head_anchored_translation(body: object, pose: torch.Tensor, p_head: torch.Te
     return p_head - J[..., HEAD, :]
 
 
+def rotation_term(local6: torch.Tensor, gt6: torch.Tensor, cfg: MiposerConfig) -> torch.Tensor:
+    """The local rotations' loss of ``local6`` against ``gt6``, both ``(N, 21, 6)`` (SMPL joints 1..21).
+
+    ``cfg.rot_loss == "l1_6d"``: mean absolute difference of the raw numbers (AvatarPoser, the v1
+    weights). ``"geodesic"``: per joint the angle (rad) between the Gram-Schmidt rotations
+    (:func:`~wearpose.geometry.smooth_geodesic_angle`), the :data:`SPINE` joints weighted by
+    ``cfg.spine_rot_weight``, summed over joints / 21 and averaged over ``N``.
+    """
+    if cfg.rot_loss == "l1_6d":
+        return (local6 - gt6).abs().mean()
+    ang = smooth_geodesic_angle(rot6d_to_matrix(local6), rot6d_to_matrix(gt6))  # (N, 21) rad
+    w = torch.ones(ang.shape[-1], dtype=ang.dtype, device=ang.device)
+    w[[j - 1 for j in SPINE]] = cfg.spine_rot_weight
+    return (ang * w).sum(-1).mean() / ang.shape[-1]
+
+
+def twist_prior(local6: torch.Tensor, cfg: MiposerConfig) -> torch.Tensor:
+    """Hinge on the :data:`SPINE` joints' twist about the bone beyond ``cfg.twist_limit_deg``
+    (rad, mean over joints and ``N``) of the predicted ``local6`` ``(N, 21, 6)``: a prior where
+    the joint positions cannot tell (the training targets stay within ~40 deg)."""
+    R = rot6d_to_matrix(local6[:, [j - 1 for j in SPINE]])
+    tw = twist_angle(R, torch.tensor(BONE_AXIS))
+    return torch.relu(tw - torch.deg2rad(torch.tensor(cfg.twist_limit_deg, dtype=tw.dtype))).mean()
+
+
 def ik_loss(net_out: tuple[torch.Tensor, torch.Tensor], C: torch.Tensor, gt_pose6: torch.Tensor, body: object,
             cfg: MiposerConfig) -> tuple[torch.Tensor, dict[str, float], torch.Tensor, torch.Tensor]:
     """Loss of one batch (module doc).
@@ -132,7 +170,7 @@ def ik_loss(net_out: tuple[torch.Tensor, torch.Tensor], C: torch.Tensor, gt_pose
         root6, local6, gt_pose6 = root6.reshape(-1, 6), local6.reshape(-1, *local6.shape[2:]), gt_pose6.reshape(-1, *gt_pose6.shape[2:])
     gt_R = rot6d_to_matrix(gt_pose6)
     gt_root_c = matrix_to_rot6d(C @ gt_R[:, 0])
-    l_rot = (local6 - gt_pose6[:, 1:]).abs().mean()
+    l_rot = rotation_term(local6, gt_pose6[:, 1:], cfg)
     l_root = (root6 - gt_root_c).abs().mean()
     pose = decode_pose(root6, local6, C)
     gt = torch.eye(3, dtype=gt_R.dtype, device=gt_R.device).repeat(gt_R.shape[0], NUM_JOINTS, 1, 1)
@@ -144,5 +182,10 @@ def ik_loss(net_out: tuple[torch.Tensor, torch.Tensor], C: torch.Tensor, gt_pose
     l_pos = d[:, :PREDICTED_JOINTS].mean()
     l_hand = d[:, [LEFT_WRIST, RIGHT_WRIST]].mean()
     loss = cfg.lambda_rot * l_rot + cfg.lambda_root * l_root + cfg.lambda_pos * l_pos + cfg.lambda_hand * l_hand
-    parts = {k: float(v.detach()) for k, v in (("l_rot", l_rot), ("l_root", l_root), ("l_pos", l_pos), ("l_hand", l_hand))}
+    terms = [("l_rot", l_rot), ("l_root", l_root), ("l_pos", l_pos), ("l_hand", l_hand)]
+    if cfg.lambda_twist:
+        l_twist = twist_prior(local6, cfg)
+        loss = loss + cfg.lambda_twist * l_twist
+        terms.append(("l_twist", l_twist))
+    parts = {k: float(v.detach()) for k, v in terms}
     return loss, parts, J, Jg
