@@ -34,7 +34,7 @@ from wearpose.recording.types import (
 )
 from wearpose.recording.checks import ConventionIssue, check_recording, check_stream
 from wearpose.recording.fileformat import FORMAT_NAME, FORMAT_VERSION, load_recording, recording_arrays, save_recording
-from wearpose.recording.simulated import recording_from_simulation
+from wearpose.recording.simulated import recording_from_simulation, simulate_recording
 from wearpose.recording.resample import decimate, decimation_factor
 from wearpose.recording.tpose import CALIBRATION_WINDOW_KEY, calibration_window, prepend_tpose
 from wearpose.recording.converters import (
@@ -59,7 +59,7 @@ __all__ = [
     "KINDS", "CHANNELS", "REQUIRED_CHANNELS", "OPTIONAL_CHANNELS",
     "ConventionIssue", "check_stream", "check_recording",
     "FORMAT_NAME", "FORMAT_VERSION", "load_recording", "save_recording", "recording_arrays",
-    "recording_from_simulation",
+    "recording_from_simulation", "simulate_recording",
     "decimate", "decimation_factor",
     "CALIBRATION_WINDOW_KEY", "prepend_tpose", "calibration_window",
     "from_dip_imu", "from_totalcapture", "from_empose", "from_ximu3", "amass_ground_truth",

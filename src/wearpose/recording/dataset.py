@@ -153,27 +153,18 @@ def _simulate_one(job: dict[str, Any]) -> dict[str, Any]:
     """Simulate, convert and write one clip. Never raises: errors come back as ``ok=False``."""
     t0 = time.perf_counter()
     try:
-        import torch
-
         from wearpose.motion.sequence import MotionSequence
         from wearpose.recording.fileformat import save_recording
-        from wearpose.recording.simulated import recording_from_simulation
-        from wearpose.sensors import simulate
+        from wearpose.recording.simulated import simulate_recording
 
-        motion = MotionSequence.load(job["motion_file"])
-        extra: dict[str, Any] = {}
-        if job.get("tpose"):
-            from wearpose.recording.tpose import CALIBRATION_WINDOW_KEY, prepend_tpose
-
-            motion, extra[CALIBRATION_WINDOW_KEY] = prepend_tpose(motion, job["tpose"])
-        with torch.no_grad():
-            res = simulate(motion, job["kit"], _BODY, seed=job["seed"], noise=job["noise"], rate=job["rate"],
-                           offsets="random" if job["offsets"] == "random" else None,
-                           shape=None if job.get("shapes", "none") == "none" else job["shapes"])
-        motion = res.motion if res.motion is not None else motion  # re-fitted to the wearer's body
+        rec, res = simulate_recording(
+            MotionSequence.load(job["motion_file"]), job["kit"], _BODY, seed=job["seed"], noise=job["noise"],
+            rate=job["rate"], offsets="random" if job["offsets"] == "random" else None,
+            shape=None if job.get("shapes", "none") == "none" else job["shapes"], tpose_s=job.get("tpose") or None,
+            subject=job["subject"], source_pose=job["source_pose"],
+            meta={"clip_id": job["id"], "clip_seed": job["seed"], "base_seed": job["base_seed"]})
+        motion = rec.ground_truth
         # save_recording writes atomically: an interrupted run never leaves a half-written file.
-        rec = recording_from_simulation(res, motion, job["subject"], source_pose=job["source_pose"],
-                                        meta={"clip_id": job["id"], "clip_seed": job["seed"], "base_seed": job["base_seed"], **extra})
         out = Path(job["out"])
         save_recording(rec, out)
         frames = max(s.num_frames for s in rec.sensors)

@@ -185,3 +185,34 @@ def recording_from_simulation(result: Any, motion: Any = None, subject: dict[str
     if meta:
         rec_meta.update(meta)
     return Recording(streams, motion, 0.0, subj, rec_meta)
+
+
+def simulate_recording(motion: Any, kit: Any, body: Any, *, seed: int = 0, noise: Any = "default",
+                       rate: float | None = None, offsets: str | None = "random", shape: Any = None,
+                       tpose_s: float | None = None, subject: dict[str, Any] | str | None = None,
+                       source_pose: bool = True, meta: dict[str, Any] | None = None) -> tuple[Recording, Any]:
+    """A motion worn by a simulated kit, as a :class:`Recording`: the one path from a motion to
+    simulated sensors (``wearpose simulate``, the latency bench).
+
+    Args:
+        motion: a :class:`wearpose.motion.MotionSequence`.
+        kit, body, seed, noise, rate, offsets, shape: as :func:`wearpose.sensors.simulate`
+            (``offsets="random"``: a random subject's EM sensor offsets; None: none).
+        tpose_s: seconds of calibration T-pose held before the motion (IMU kits; marked in
+            ``meta["calibration_window"]``, :func:`wearpose.recording.prepend_tpose`); None: none.
+        subject, source_pose, meta: as :func:`recording_from_simulation`.
+
+    Returns:
+        ``(recording, result)``: the recording (ground truth = the motion as worn: re-fitted to
+        the wearer's body when ``shape`` draws one) and the :class:`~wearpose.sensors.SimulationResult`.
+    """
+    from wearpose.recording.tpose import CALIBRATION_WINDOW_KEY, prepend_tpose
+    from wearpose.sensors import simulate
+
+    extra = dict(meta or {})
+    if tpose_s:
+        motion, extra[CALIBRATION_WINDOW_KEY] = prepend_tpose(motion, tpose_s)
+    with torch.no_grad():
+        res = simulate(motion, kit, body, seed=seed, noise=noise, rate=rate, offsets=offsets, shape=shape)
+    motion = res.motion if res.motion is not None else motion
+    return recording_from_simulation(res, motion, subject, source_pose=source_pose, meta=extra), res
