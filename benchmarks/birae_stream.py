@@ -37,7 +37,8 @@ from wearpose.evaluate.latency import import_baseline, latency_stats, machine_in
 def _latency(args: argparse.Namespace) -> dict[str, Any]:
     from wearpose.estimators import iter_frames
     from wearpose.estimators.birae import BiraeEstimator
-    from wearpose.estimators.birae.data import SCENARIOS, clip_seed, make_recording, synthesize
+    from wearpose.estimators.birae.data import SCENARIOS, make_recording, synthesize
+    from wearpose.estimators.seeding import clip_seed
     from wearpose.motion import load_motion
     from wearpose.weights import weight_path
 
@@ -54,7 +55,7 @@ def _latency(args: argparse.Namespace) -> dict[str, Any]:
     setups["stream"].set_online("stream")
     est = setups["stream"]
     clip = args.clip
-    s = synthesize(load_motion(clip), 60.0, SCENARIOS["noise"], clip_seed(clip, 0, "bench"), channels=True)
+    s = synthesize(load_motion(clip), 60.0, SCENARIOS["noise"], clip_seed(clip, 0, "birae:bench"), channels=True)
     rec = make_recording(s["R_world"], 60.0, s["sim"])
     for e in setups.values():
         e.reset()

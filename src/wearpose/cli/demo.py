@@ -113,7 +113,8 @@ def run_sensor_demo(clip: str, out: str | Path, weights: str = "empose12_cpu", m
         the 15 major joints on frames where every sensor is valid (EM-POSE Sec. 6.2).
     """
     from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.estimators.empose.data import clip_seed, recording_from_clip, simulate_clip
+    from wearpose.estimators.empose.data import recording_from_clip, simulate_clip
+    from wearpose.estimators.seeding import clip_seed
     from wearpose.estimators.empose.estimator import EmposeEstimator
     from wearpose.evaluate import mpjae, mpjpe, pa_mpjpe
     from wearpose.weights import card, weight_path

@@ -20,7 +20,8 @@ the synthesis of the 97-minute corpus cheap). Errors are those of
   is per sensor: a heading error common to all six sensors cancels exactly in Eq. 1 (tested).
   The magnitudes are assumptions (the paper gives none) and are recorded with every result.
 
-Per-clip seeds derive from the clip id and a namespace, so data are deterministic and
+Per-clip seeds derive from the clip id and a namespace (:func:`~wearpose.estimators.seeding.clip_seed`
+in ``birae:<namespace>``), so data are deterministic and
 training draws never repeat evaluation draws. The training split is cached frame-concatenated
 under ``<corpus cache>/estimators/birae/`` keyed by a fingerprint of clip ids and settings.
 """
@@ -28,7 +29,6 @@ under ``<corpus cache>/estimators/birae/`` keyed by a fingerprint of clip ids an
 from __future__ import annotations
 
 import math
-import zlib
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -41,6 +41,7 @@ from wearpose.body.skeleton import JOINT_INDEX, NUM_JOINTS
 from wearpose.estimators.birae.config import BiraeConfig
 from wearpose.estimators.birae.representations import SENSORS, angular_rate, features, pose_to_target, relative_orientations
 from wearpose.estimators.checkpoint import fingerprint
+from wearpose.estimators.seeding import clip_seed
 from wearpose.sensors import SITE_SEGMENT, MimuNoise, get_kit, simulate_mimu
 from wearpose.fileio import atomic_torch_save
 
@@ -51,11 +52,6 @@ def segment_joints() -> list[int]:
     """SMPL joint per ``mimu6`` sensor (kit order): the bone the sensor's site rides on."""
     kit = get_kit("mimu6")
     return [JOINT_INDEX[SITE_SEGMENT[kit.sensor(n).site]] for n in SENSORS]
-
-
-def clip_seed(clip_id: str, seed: int, namespace: str = "train") -> int:
-    """Deterministic per-clip seed; ``namespace`` separates training from evaluation draws."""
-    return (zlib.crc32(f"birae:{namespace}:{clip_id}".encode()) + 7919 * int(seed)) % (2 ** 31 - 1)
 
 
 def augmentation_noise(cfg: BiraeConfig) -> MimuNoise:
@@ -248,7 +244,7 @@ def build_from_motions(motions: Iterable[Any], ids: list[str], cfg: BiraeConfig,
     aug = augmentation_noise(cfg)
     for c, (m, cid) in enumerate(zip(motions, ids)):
         clean = synthesize(m, cfg.rate, None)
-        noisy = synthesize(m, cfg.rate, aug, clip_seed(cid, cfg.seed, namespace))
+        noisy = synthesize(m, cfg.rate, aug, clip_seed(cid, cfg.seed, f"birae:{namespace}"))
         cols["R_rel"].append(clean["R_rel"])
         cols["rate"].append(clean["ang_rate"])
         cols["R_rel_aug"].append(noisy["R_rel"])

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 
 import warnings
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Sequence
@@ -35,15 +34,11 @@ import torch
 from wearpose.estimators.checkpoint import fingerprint
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.inputs import hold_last_valid
+from wearpose.estimators.seeding import clip_seed
 from wearpose.geometry import matrix_to_rot6d, rot6d_to_matrix
 from wearpose.fileio import atomic_torch_save
 
 DATA_VERSION = 1
-
-
-def clip_seed(clip_id: str, seed: int, namespace: str = "train") -> int:
-    """Deterministic per-clip simulation seed (``namespace`` separates train from evaluation draws)."""
-    return (zlib.crc32(f"{namespace}:{clip_id}".encode()) + 7919 * int(seed)) % (2 ** 31 - 1)
 
 
 def frame_measurements(frame: Any, sensor_names: Sequence[str],

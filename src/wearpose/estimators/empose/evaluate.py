@@ -92,7 +92,8 @@ def simulate_eval_clip(motion: Any, est: Any, clip_id: str, seed: int, *, noise:
     """The evaluation simulation of one clip (:func:`~wearpose.estimators.empose.data.simulate_clip`
     with the sensor noise seeded in the ``"eval"`` namespace, so ``random`` and ``unseen`` share the
     noise draw and differ only in the subject)."""
-    from wearpose.estimators.empose.data import clip_seed, simulate_clip
+    from wearpose.estimators.empose.data import simulate_clip
+    from wearpose.estimators.seeding import clip_seed
 
     if offsets not in SUBJECT_MODES:
         raise ConfigError(f"evaluation offsets: expected one of {', '.join(SUBJECT_MODES)}, got {offsets!r}")
@@ -352,7 +353,8 @@ def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit:
     """
     from wearpose.body.skeleton import MAJOR_JOINTS
     from wearpose.estimators.empose.baselines import load_any
-    from wearpose.estimators.empose.data import clip_seed, recording_from_clip, simulate_clip
+    from wearpose.estimators.empose.data import recording_from_clip, simulate_clip
+    from wearpose.estimators.seeding import clip_seed
     from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
     from wearpose.motion import CorpusStore
 

@@ -8,7 +8,8 @@ from typing import Any
 
 import torch
 
-from wearpose.estimators.empose.data import EmposeData, build_split, clip_seed, recording_from_clip, simulate_clip
+from wearpose.estimators.empose.data import EmposeData, build_split, recording_from_clip, simulate_clip
+from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.empose.estimator import EmposeEstimator
 from wearpose.estimators.empose.model import lgd_loss, sensor_features
 from wearpose.estimators.train import WindowTask, train_estimator

@@ -30,7 +30,7 @@ from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.baselines import OfflineOnlyError
-from wearpose.estimators.empose.data import clip_seed
+from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.inputs import InputSpec, prepare
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.estimators.miposer.data import MiposerData, cached_split

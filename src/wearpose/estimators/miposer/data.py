@@ -37,7 +37,8 @@ import torch
 from wearpose.calibration import CalibrationResult, apply_miposer, calibrate, em_to_world
 from wearpose.errors import ShapeError
 from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.empose.data import clip_seed, num_batches
+from wearpose.estimators.empose.data import num_batches
+from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.inputs import hold_last_valid
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.geometry import matrix_to_rot6d

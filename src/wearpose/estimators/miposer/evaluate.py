@@ -31,7 +31,7 @@ from typing import Any, Callable, Sequence
 import torch
 
 from wearpose.body.skeleton import JOINT_NAMES
-from wearpose.estimators.empose.data import clip_seed
+from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.miposer.config import UPPER_BODY
 
 #: Metres -> report centimetres (MI-Poser reports cm).

@@ -34,7 +34,8 @@ import torch
 
 from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.empose.data import clip_seed, num_batches
+from wearpose.estimators.empose.data import num_batches
+from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.sitting import SITTING_PREFIX
 from wearpose.geometry import matrix_to_rot6d

@@ -264,7 +264,7 @@ def heldout_sitting_clip(i: int, body: Any, fps: float = 60.0, seed: int = 0, tr
     draws test ids), cut after its seated hold: it ends seated (input for
     :func:`~wearpose.estimators.pip.evaluate.sitting_drift`'s ``seq``); ``transitions`` as in
     :func:`sitting_motion`."""
-    from wearpose.estimators.empose.data import clip_seed
+    from wearpose.estimators.seeding import clip_seed
 
     m = sitting_motion(torch.Generator().manual_seed(clip_seed(sitting_clip_id("test", i), seed, "pip-sitting")),
                        body, fps, transitions=transitions)

@@ -27,7 +27,8 @@ BAND_JOINTS = (("left shoulder", "left_shoulder"), ("left elbow", "left_elbow"),
 def run_demo(clip: str, out: str | Path, max_seconds: float = 10.0, seed: int = 0) -> dict[str, Any]:
     """Run the demo (module doc); returns ``{"clip", "frames", "fps", "html", "title", "metrics", "plot", ...}``."""
     from wearpose.body import BodyModel, JOINT_INDEX, MAJOR_JOINTS
-    from wearpose.estimators.birae.data import SCENARIOS, clip_seed, make_recording, synthesize
+    from wearpose.estimators.birae.data import SCENARIOS, make_recording, synthesize
+    from wearpose.estimators.seeding import clip_seed
     from wearpose.estimators.birae.estimator import BiraeEstimator
     from wearpose.estimators.birae.evaluate import group_errors
     from wearpose.viewer.demos.birae_plots import uncertainty_bands
@@ -43,7 +44,7 @@ def run_demo(clip: str, out: str | Path, max_seconds: float = 10.0, seed: int = 
     seq = seq.slice(0, min(seq.num_frames, int(round(max_seconds * seq.fps))))
     ests = {k: BiraeEstimator.load(weight_path(w)) for k, w in WEIGHTS.items()}
     k = 180.0 / math.pi
-    noisy = synthesize(seq, 60.0, SCENARIOS["noise"], clip_seed(clip, seed, "demo-noise"), channels=True)
+    noisy = synthesize(seq, 60.0, SCENARIOS["noise"], clip_seed(clip, seed, "birae:demo-noise"), channels=True)
     rec = make_recording(noisy["R_world"], 60.0, noisy["sim"], motion=noisy["motion"], meta={"clip": clip})
     rec.save(out / "recording.npz")
     est = ests["6param"]
@@ -56,7 +57,7 @@ def run_demo(clip: str, out: str | Path, max_seconds: float = 10.0, seed: int = 
     metrics = {f"mpjae_{g}_deg": float(e.mean() * k) for g, e in errs.items()}
     metrics["within_1sigma_pct"] = 100 * coverage(resid, track.extras["sigma"])
     metrics["mean_sigma_deg"] = float(track.extras["sigma"].mean() * k)
-    mag = synthesize(seq, 60.0, SCENARIOS["magnetic"], clip_seed(clip, seed, "demo-magnetic"), channels=True)
+    mag = synthesize(seq, 60.0, SCENARIOS["magnetic"], clip_seed(clip, seed, "birae:demo-magnetic"), channels=True)
     mrec = make_recording(mag["R_world"], 60.0, mag["sim"], meta={"clip": clip})
     for name, e in ests.items():
         metrics[f"magnetic_mpjae_{name}_deg"] = float(group_errors(e.estimate(mrec).local_rot, gt)["all"].mean() * k)

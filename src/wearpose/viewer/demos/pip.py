@@ -88,7 +88,7 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
     Returns:
         ``{"clip", "frames", "fps", "weights", "html", "title", "metrics": {...}}``.
     """
-    from wearpose.estimators.empose.data import clip_seed
+    from wearpose.estimators.seeding import clip_seed
     from wearpose.estimators.pip.data import EDGE_FRAMES
     from wearpose.estimators.pip.estimator import PipEstimator
     from wearpose.evaluate import compute_all
