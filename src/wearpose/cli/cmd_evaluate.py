@@ -1,15 +1,14 @@
 """``wearpose evaluate``: checkpoints on simulated held-out recordings, in the paper's metrics.
 
 Thin: resolves the model arguments (``NAME=path``, a checkpoint path, or shipped weights such as
-``empose12_cpu``) and calls :func:`wearpose.estimators.empose.evaluate.evaluate_models` (one
-simulation per clip shared by every model; metrics from :mod:`wearpose.evaluate`), then prints
-the table and optionally writes markdown + JSON with
-:func:`~wearpose.estimators.empose.evaluate.write_table`.
-
-Methods: the EM-POSE family (``empose``, ``empose-resnet``, ``empose-birnn``,
-``empose-twostage``) compared on shared simulations; PIP, BiRAE, MI-Poser and IMUPoser each
-under their paper's protocol (:mod:`wearpose.evaluate.protocols`); the L-BFGS optimiser's
-protocol is ``benchmarks/empose_lbfgs.py``.
+``empose12_cpu``), finds each model's protocol in its method's declaration
+(:class:`wearpose.estimators.method.EstimatorEntry`), and runs it: a ``compare`` protocol
+(the EM-POSE family: :func:`wearpose.estimators.empose.evaluate.evaluate_models`, one
+simulation per clip shared by every model) or each model's own ``protocol``
+(:func:`wearpose.evaluate.protocols.evaluate_model`: PIP, BiRAE, MI-Poser, IMUPoser, any
+declared method). Prints the table and optionally writes markdown + JSON. An estimator
+evaluated elsewhere says where (its declaration's ``evaluated_by``: the L-BFGS optimiser's
+``benchmarks/empose_lbfgs.py``).
 """
 
 from __future__ import annotations
@@ -25,11 +24,8 @@ from rich.table import Table
 from wearpose.cli.app import _emit, app, console, err_console
 
 if TYPE_CHECKING:
+    from wearpose.estimators.method import EstimatorEntry
     from wearpose.estimators.run import ModelSource
-
-#: Methods evaluated by a script rather than by `wearpose evaluate`.
-OTHER_PROTOCOLS = {"empose-lbfgs": "benchmarks/empose_lbfgs.py"}
-
 
 def resolve_model(spec: str) -> tuple[str, Path]:
     """``NAME=TARGET`` or ``TARGET`` -> (display name, checkpoint path); TARGET is a file or the
@@ -60,18 +56,27 @@ def resolve_model(spec: str) -> tuple[str, Path]:
 def _open(name: str, path: Path) -> ModelSource:
     """The model at ``path`` (its checkpoint read once, :func:`wearpose.estimators.run.open_model`),
     refused when `wearpose evaluate` has no protocol for its method."""
-    from wearpose.estimators.empose.baselines import ESTIMATOR_NAMES
     from wearpose.estimators.run import open_model
-    from wearpose.evaluate.protocols import PROTOCOLS
 
     source = open_model(path)
-    known = [*ESTIMATOR_NAMES.values(), *PROTOCOLS]
-    if source.method not in known:
-        script = OTHER_PROTOCOLS.get(source.method)
-        hint = f"; evaluate it with `python {script}`" if script else ""
+    entry = _entry(source.method)
+    if entry is None or not (entry.protocol or entry.compare):
+        known = [n for n, e in _entries().items() if e.protocol or e.compare]
+        hint = f"; evaluate it with `{entry.evaluated_by}`" if entry is not None and entry.evaluated_by else ""
         raise typer.BadParameter(f"{name} ({path}) is a {source.method!r} model: `wearpose evaluate` runs the "
                                  f"protocols of {', '.join(known)}{hint}", param_hint="MODELS")
     return source
+
+
+def _entries() -> dict[str, EstimatorEntry]:
+    """Every declared estimator's entry, by registry name."""
+    from wearpose.estimators.registry import get_method, list_methods
+
+    return {e.name: e for m in list_methods() for e in get_method(m).estimators}
+
+
+def _entry(method: str) -> EstimatorEntry | None:
+    return _entries().get(method)
 
 
 def _render_protocol(r: dict[str, Any]) -> None:
@@ -142,7 +147,7 @@ def evaluate(
     import torch
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from wearpose.estimators.empose.evaluate import SUBJECT_MODES, evaluate_models, write_table
+    from wearpose.estimators.empose.evaluate import SUBJECT_MODES, write_table
 
     if split not in ("test", "val", "train"):
         raise typer.BadParameter(f"expected test or val, got {split!r}", param_hint="--split")
@@ -152,7 +157,6 @@ def evaluate(
         raise typer.BadParameter(f"expected default or none, got {noise!r}", param_hint="--noise")
     if split == "train":
         err_console.print("[yellow]warning[/]: the train split measures fit, not held-out accuracy")
-    from wearpose.estimators.empose.baselines import ESTIMATOR_NAMES
     from wearpose.motion import CorpusStore
 
     ckpts: dict[str, Path] = {}
@@ -162,10 +166,11 @@ def evaluate(
         if name in ckpts:
             raise typer.BadParameter(f"two models named {name!r}; use NAME=PATH", param_hint="MODELS")
         sources[name], ckpts[name] = _open(name, path), path
-    empose = {n for n, s in sources.items() if s.method in ESTIMATOR_NAMES.values()}
-    if empose and len(empose) < len(sources):
-        raise typer.BadParameter(f"EM-POSE models ({', '.join(sorted(empose))}) and others "
-                                 f"({', '.join(sorted(set(sources) - empose))}) have different protocols; "
+    compare = {n: getattr(_entry(s.method), "compare", None) for n, s in sources.items()}
+    compared = {n for n, c in compare.items() if c}
+    if compared and (len(compared) < len(sources) or len(set(compare.values())) > 1):
+        raise typer.BadParameter(f"EM-POSE models ({', '.join(sorted(compared))}) and others "
+                                 f"({', '.join(sorted(set(sources) - compared))}) have different protocols; "
                                  "evaluate them in separate commands", param_hint="MODELS")
     store = CorpusStore(cache)
     if not store.clips(split=split):
@@ -177,11 +182,14 @@ def evaluate(
     with Progress(*columns, console=err_console, transient=True) as bar:
         task = bar.add_task("", total=None)
         tick = lambda d, t: bar.update(task, completed=d, total=t)  # noqa: E731
-        if empose:
+        if compared:
             if frame_stride != 1:
                 raise typer.BadParameter("the EM-POSE protocol scores every frame", param_hint="--frame-stride")
-            res = evaluate_models(ckpts, split, clips, noise=noise, seed=seed, offsets=offsets, spread=spread,
-                                  store=store, progress=tick)
+            from wearpose.estimators.method import resolve
+
+            run_compare = resolve(next(iter(compare.values())))
+            res = run_compare(ckpts, split, clips, noise=noise, seed=seed, offsets=offsets, spread=spread,
+                              store=store, progress=tick)
         else:
             from wearpose.evaluate.protocols import evaluate_model
 
@@ -193,7 +201,7 @@ def evaluate(
                 r["model"] = n
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     res["command"] = command
-    if out is not None and empose:
+    if out is not None and compared:
         extra = {"command": command, **({"note": note} if note else {})}
         md, js = write_table(res, out, title=title or f"wearpose evaluate ({split} split, kit {res['kit']})",
                              produced_by=command, paper=None, extra=extra)
@@ -204,4 +212,4 @@ def evaluate(
         md, js = write_result(res, out, title=title or f"wearpose evaluate ({split} split)", produced_by=command,
                               note=note)
         res["written"] = [str(md), str(js)]
-    _emit(res, as_json, _render if empose else _render_protocol)
+    _emit(res, as_json, _render if compared else _render_protocol)

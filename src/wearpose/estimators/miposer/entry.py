@@ -1,0 +1,71 @@
+"""MI-Poser's training entry (``wearpose train miposer``: options -> config -> estimator ->
+training run) and the evaluation protocols of MI-Poser and its IMUPoser baseline
+(``wearpose evaluate``), named by its declaration :data:`wearpose.estimators.miposer.METHOD`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from wearpose.estimators.method import OptionError, TrainRun, finite_metrics
+
+
+def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]:
+    """Train the ``--model`` network (MI-Poser's IK network or the IMUPoser baseline) for
+    ``--wrists`` wrist sensors with the ``--config`` preset.
+
+    Returns:
+        :func:`~wearpose.estimators.miposer.train.train_miposer`'s result with ``method`` (the
+        estimator's registry name), ``model``, ``wrists`` and ``config``.
+    """
+    from wearpose.estimators.miposer.config import MiposerConfig
+    from wearpose.estimators.miposer.train import train_miposer
+
+    model, wrists = opts["model"], opts["wrists"]
+    if model not in ("avatarposer", "imuposer"):
+        raise OptionError("--model", f"unknown model {model!r}; expected avatarposer or imuposer")
+    if wrists not in (1, 2):
+        raise OptionError("--wrists", f"expected 1 or 2, got {wrists}")
+    cfg = MiposerConfig.preset(run.config, wrists=wrists, model=model).override(batch_size=opts["batch_size"])
+    if model == "imuposer":
+        from wearpose.estimators.miposer.baselines import ImuPoserEstimator
+
+        est: Any = ImuPoserEstimator(cfg)
+        out = run.out or Path("runs") / f"imuposer_{run.config}"
+    else:
+        from wearpose.estimators.miposer.estimator import MiposerEstimator
+
+        est = MiposerEstimator(cfg)
+        out = run.out or Path("runs") / f"miposer{wrists}_{run.config}"
+    res = train_miposer(est, out, **run.loop())
+    return {"method": est.name, "model": model, "wrists": wrists, "config": cfg.to_dict(), **res}
+
+
+def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noise: str,
+             progress: Callable[[int, int], None] | None, frame_stride: int = 1) -> dict[str, Any]:
+    """MI-Poser's protocol: simulated headset VIO + wrist EM after a 1 s T-pose, calibrated and
+    uncalibrated upper-body MPJPE, pelvis-aligned (:func:`wearpose.estimators.miposer.evaluate.evaluate_miposer`)."""
+    from wearpose.estimators.miposer.evaluate import evaluate_miposer
+
+    res = evaluate_miposer({"model": est}, split, clips, seed=seed, noise=noise, frame_stride=frame_stride,
+                           store=store, progress=progress)
+    m = res["models"]["model"]
+    metrics = {f"{cond}_{k}": v for cond, s in m.items() for k, v in finite_metrics(s).items() if k != "frames"}
+    return {"frames": m["calibrated"]["frames"], "clip_ids": store.clips(split=split)[: clips or None],
+            "metrics": metrics,
+            "protocol": "simulated headset VIO + wrist EM after a 1 s T-pose, calibrated and uncalibrated; "
+                        "upper-body MPJPE, pelvis-aligned (MI-Poser protocol)", "detail": res}
+
+
+def imuposer_protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noise: str,
+                      progress: Callable[[int, int], None] | None, frame_stride: int = 1) -> dict[str, Any]:
+    """The IMU-only baseline's upper-body MPJPE on MI-Poser's clips
+    (:func:`~wearpose.estimators.miposer.evaluate.evaluate_imuposer`)."""
+    from wearpose.estimators.miposer.evaluate import evaluate_imuposer
+
+    res = evaluate_imuposer(est, split, clips, seed=seed, noise=noise, frame_stride=frame_stride, store=store,
+                            progress=progress)
+    metrics = {k: v for k, v in finite_metrics(res["summary"]).items() if k != "frames"}
+    return {"frames": res["summary"]["frames"], "clip_ids": store.clips(split=split)[: clips or None],
+            "metrics": metrics, "protocol": "simulated head + wrist IMUs (IMUPoser baseline), upper-body MPJPE, "
+                                            "pelvis-aligned, on MI-Poser's clips", "detail": res}

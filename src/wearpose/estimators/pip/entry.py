@@ -1,0 +1,65 @@
+"""PIP's training entry (``wearpose train pip``: options -> config -> estimator -> training run)
+and evaluation protocol (``wearpose evaluate``), named by its declaration
+:data:`wearpose.estimators.pip.METHOD`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from wearpose.errors import ConfigError
+from wearpose.estimators.method import TrainRun, finite_metrics
+
+#: Options that override the :class:`~wearpose.estimators.pip.config.PipConfig` field of the same name.
+_SAME_NAME = ("hidden", "batch_size", "learned_init", "sitting_clips", "lr", "seq_len", "window_stride", "min_window",
+              "sitting_window", "sitting_transitions", "sitting_hanging_arms")
+
+
+def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]:
+    """Train PIP's kinematics RNNs with the ``--config`` preset, overridden by the options given
+    (augmentation, synthetic sitting, windows), optionally starting from ``--init-from``'s weights.
+
+    Returns:
+        :func:`~wearpose.estimators.pip.train.train_pip`'s result with ``method`` and ``config``.
+    """
+    from wearpose.estimators.pip.config import PipConfig
+    from wearpose.estimators.pip.estimator import PipEstimator
+    from wearpose.estimators.pip.sitting import SIT_HOLD_S
+    from wearpose.estimators.pip.train import train_pip
+
+    cfg = PipConfig.preset(run.config).override(
+        **{k: opts[k] for k in _SAME_NAME}, aug_mirror=opts["mirror"] or None,
+        aug_speed_copies=opts["speed_copies"] or None,
+        sitting_stand_s=SIT_HOLD_S if opts["balanced_sitting"] else None)
+    if opts["hidden"] is not None:
+        cfg = cfg.override(init_widths=(opts["hidden"], 2 * opts["hidden"]))
+    out = run.out or Path("runs") / f"pip_{run.config}{'' if opts['learned_init'] else '_noinit'}"
+    est = PipEstimator(cfg, physics=False)
+    init_from = opts["init_from"]
+    if init_from is not None and not run.resume:
+        from wearpose.estimators.checkpoint import load_checkpoint
+
+        ck = load_checkpoint(init_from)
+        ck.check(method="pip", path=init_from)
+        est.model.load_state_dict(ck.weights)  # same architecture required (strict)
+        est.meta["init_from"] = str(init_from)
+    res = train_pip(est, out, **run.loop())
+    return {"method": "pip", "config": cfg.to_dict(), **res}
+
+
+def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noise: str,
+             progress: Callable[[int, int], None] | None, frame_stride: int = 1) -> dict[str, Any]:
+    """PIP's evaluation protocol for ``wearpose evaluate``: simulated imu6 (bone orientations,
+    free acceleration, IMU noise per ``noise``), known initial state; SIP / angular / positional
+    / mesh error, jitter, translation error
+    (:func:`wearpose.estimators.pip.evaluate.evaluate_variants`)."""
+    from wearpose.estimators.pip.evaluate import evaluate_variants
+
+    if frame_stride != 1:
+        raise ConfigError("PIP's protocol scores every frame (the physics runs through the whole clip); drop --frame-stride")
+    res = evaluate_variants({"model": est}, split, clips, noise=noise, seed=seed, store=store, progress=progress)
+    row = res["rows"]["model"]
+    metrics = finite_metrics(row)
+    metrics.pop("zmp_frames_pct", None)
+    return {"frames": res["frames"], "clip_ids": [c["clip"] for c in row["per_clip"]], "metrics": metrics,
+            "protocol": res["protocol"], "detail": res}
