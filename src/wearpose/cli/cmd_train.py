@@ -23,6 +23,7 @@ import typer
 from typer.core import TyperGroup
 
 from wearpose.cli.app import _emit, app, console
+from wearpose.cli.helptext import reflow
 
 if TYPE_CHECKING:
     from wearpose.estimators.method import MethodSpec, TrainOption
@@ -88,7 +89,7 @@ def training_command(spec: MethodSpec) -> click.Command:
 
     command.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
     command.__annotations__ = {p.name: p.annotation for p in params}
-    command.__doc__ = training.doc
+    command.__doc__ = reflow(training.doc)  # the same paragraph joining as every other command's help
     command.__name__ = f"train_{spec.name.replace('-', '_')}"
     one = typer.Typer(add_completion=False)
     one.command(spec.name)(command)

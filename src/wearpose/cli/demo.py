@@ -21,38 +21,31 @@ from wearpose.body import BodyModel
 from wearpose.evaluate import compute_all
 from wearpose.motion import MotionSequence, load_motion, read_amass, save_amass
 from wearpose.viewer import write_html
+from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
 
-#: ``wearpose demo --kit K`` -> "module:function". Each function has the signature
-#: ``fn(clip: str, out: Path) -> dict`` and returns at least ``{"clip", "frames", "fps", "html",
-#: "title", "metrics": {name: float}}`` (metrics in report units, names ending in the unit, e.g.
-#: ``mpjpe_mm``). Each method's subpackage owns its ``demo.py``; a kit whose module is absent from
-#: this build is reported as unavailable.
-KIT_DEMOS: dict[str, str] = {
-    "em12": "wearpose.cli.demo:run_sensor_demo",
-    "em6": "wearpose.cli.demo:run_sensor_demo_em6",
-    "imu6": "wearpose.viewer.demos.pip:run_demo",
-    "mimu6": "wearpose.viewer.demos.birae:run_demo",
-    "miposer": "wearpose.viewer.demos.miposer:run_demo",
-}
+def kit_demos() -> dict[str, str]:
+    """``wearpose demo --kit K`` -> ``"module:function"``, from every method's declaration
+    (:attr:`wearpose.estimators.method.MethodSpec.demos`). Each function has the signature
+    ``fn(clip: str, out: Path) -> dict`` and returns at least ``{"clip", "frames", "fps", "html",
+    "title", "metrics": {name: float}}`` (metrics in report units, names ending in the unit, e.g.
+    ``mpjpe_mm``)."""
+    from wearpose.estimators.registry import get_method, list_methods
+
+    return {kit: target for m in list_methods() for kit, target in get_method(m).demos.items()}
 
 
 def kit_demo(kit: str) -> Any:
-    """The demo function for ``kit`` (ConfigError naming the available kits when absent)."""
-    import importlib
-    import importlib.util
-
+    """The demo function for ``kit`` (ConfigError naming the kits with a demo when absent, or
+    saying that the module its method declares is not part of this build)."""
     from wearpose.errors import ConfigError
+    from wearpose.estimators.method import resolve, target_available
 
-    if kit not in KIT_DEMOS:
-        raise ConfigError(f"--kit {kit!r}: no demo for this kit; expected one of {', '.join(KIT_DEMOS)}")
-    mod, fn = KIT_DEMOS[kit].split(":")
-    try:
-        found = importlib.util.find_spec(mod) is not None
-    except ModuleNotFoundError:
-        found = False
-    if not found:
-        raise ConfigError(f"--kit {kit!r}: the estimator for this kit ({mod}) is not part of this build yet")
-    return getattr(importlib.import_module(mod), fn)
+    demos = kit_demos()
+    if kit not in demos:
+        raise ConfigError(f"--kit {kit!r}: no demo for this kit; expected one of {', '.join(demos)}")
+    if not target_available(demos[kit]):
+        raise ConfigError(f"--kit {kit!r}: the demo of this kit ({demos[kit]}) is not part of this build")
+    return resolve(demos[kit])
 
 
 def _evaluate(body: BodyModel, ref: MotionSequence, other: MotionSequence) -> dict[str, float]:
@@ -90,6 +83,7 @@ def run_roundtrip_demo(clip: str, out: str | Path, body: str | None = None, max_
     back_amass = read_amass(amass, rest_joints=rest)
     metrics = {"wearpose_npz": _evaluate(model, seq, back_ours), "amass_npz": _evaluate(model, seq, back_amass)}
     html = write_html(out / "demo.html", model, seq.pose, seq.betas, seq.trans, seq.fps, title=f"wearpose demo: {clip}",
+                      site_names=(), label="original clip",
                       info={"round-trip MPJPE (mm)": f"{metrics['amass_npz'].get('mpjpe_mm', float('nan')):.2g}"})
     result = {"clip": clip, "frames": seq.num_frames, "fps": seq.fps, "html": str(html),
               "files": [str(ours), str(amass)], "body": model.asset_id, "metrics": metrics}
@@ -142,9 +136,13 @@ def run_sensor_demo(clip: str, out: str | Path, weights: str = "empose12_cpu", m
         "valid_frames_pct": float(ok.float().mean() * 100),
     }
     gt = r["motion"]
+    n_em = len(est.sensor_names)
     html = write_html(out / "demo.html", body, world.local_rot, world.betas, world.trans, gt.fps,
-                      title=f"wearpose demo: EM-POSE ({est.kit_name}) on {clip}", label="estimate (12 EM sensors)",
-                      compare=[("ground truth", gt.pose, gt.betas, gt.trans)],
+                      title=f"wearpose demo: EM-POSE ({est.kit_name}) on {clip}",
+                      label=f"estimate ({n_em} EM sensors, {est.kit_name})",
+                      compare=[("ground truth", gt.pose, gt.betas, gt.trans)], colours=[ESTIMATE_COLOUR, TRUTH_COLOUR],
+                      site_names=kit_sites(est.kit_name, body, est.sensor_names),
+                      sites_label=f"{n_em} EM sensors ({est.kit_name})",
                       info={"MPJPE (mm)": f"{metrics['mpjpe_mm']:.1f}", "MPJAE (deg)": f"{metrics['mpjae_deg']:.1f}"})
     result = {"clip": clip, "frames": gt.num_frames, "fps": gt.fps, "weights": weights,
               "title": f"{clip}: EM-POSE ({weights}) from {len(est.sensor_names)} simulated EM sensors, "

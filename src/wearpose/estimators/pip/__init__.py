@@ -45,9 +45,9 @@ METHOD = MethodSpec(
         Augmented data (3x the corpus: mirrored copies and one speed-changed copy of every clip):
         wearpose train pip --config cpu --threads 1 --mirror --speed-copies 1 --out runs/pip_aug
 
-        Long windows (20 s, short clips padded; 200 frames for the sitting clips) and sit-downs with
-        trunk lean, as the shipped pip_cpu: wearpose train pip --config cpu --threads 1 --mirror
-        --speed-copies 1 --sitting-clips 150 --balanced-sitting --sitting-transitions lean --seq-len 1200
+        The shipped pip_cpu (20 s windows, short clips padded; 200 frames for the sitting clips;
+        sit-downs with trunk lean):
+        wearpose train pip --config cpu --threads 1 --mirror --speed-copies 1 --sitting-clips 150 --balanced-sitting --sitting-transitions lean --seq-len 1200
         --window-stride 600 --min-window 60 --sitting-window 200 --out runs/pip_lean
         """,
         done="done: best val joint error {best:.1f} mm; checkpoints in {out_dir}",
