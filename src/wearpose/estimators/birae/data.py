@@ -41,11 +41,13 @@ from wearpose.body.skeleton import JOINT_INDEX, NUM_JOINTS
 from wearpose.estimators.birae.config import BiraeConfig
 from wearpose.estimators.birae.representations import SENSORS, angular_rate, features, pose_to_target, relative_orientations
 from wearpose.estimators.checkpoint import fingerprint
+from wearpose.estimators.clipstore import cached_clips, concat_clips
 from wearpose.estimators.seeding import clip_seed
 from wearpose.sensors import SITE_SEGMENT, MimuNoise, get_kit, simulate_mimu
-from wearpose.fileio import atomic_torch_save
 
 DATA_VERSION = 1
+#: Per-frame tensors of the cache, ``(F, ...)``.
+DATA_KEYS = ("R_rel", "R_rel_aug", "rate", "rate_aug", "target")
 
 
 def segment_joints() -> list[int]:
@@ -239,26 +241,16 @@ def data_settings(cfg: BiraeConfig) -> dict[str, Any]:
 def build_from_motions(motions: Iterable[Any], ids: list[str], cfg: BiraeConfig, namespace: str = "train",
                        progress: Any = None) -> dict[str, Any]:
     """Synthesise clean + augmented data for ``motions`` (``ids`` seed them). Returns the tensor dict."""
-    cols: dict[str, list[torch.Tensor]] = {k: [] for k in ("R_rel", "R_rel_aug", "rate", "rate_aug", "target")}
-    starts, lengths, total = [], [], 0
     aug = augmentation_noise(cfg)
-    for c, (m, cid) in enumerate(zip(motions, ids)):
+
+    def one(clip: tuple[Any, str]) -> dict[str, torch.Tensor]:
+        m, cid = clip
         clean = synthesize(m, cfg.rate, None)
         noisy = synthesize(m, cfg.rate, aug, clip_seed(cid, cfg.seed, f"birae:{namespace}"))
-        cols["R_rel"].append(clean["R_rel"])
-        cols["rate"].append(clean["ang_rate"])
-        cols["R_rel_aug"].append(noisy["R_rel"])
-        cols["rate_aug"].append(noisy["ang_rate"])
-        cols["target"].append(clean["target"])
-        T = clean["target"].shape[0]
-        starts.append(total)
-        lengths.append(T)
-        total += T
-        if progress is not None:
-            progress(c + 1, len(ids))
-    d = {k: torch.cat(v) if v else torch.zeros(0) for k, v in cols.items()}
-    d.update(starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
-    return d
+        return {"R_rel": clean["R_rel"], "R_rel_aug": noisy["R_rel"], "rate": clean["ang_rate"],
+                "rate_aug": noisy["ang_rate"], "target": clean["target"]}
+
+    return concat_clips(zip(motions, ids), one, DATA_KEYS, total=len(ids), progress=progress)
 
 
 def build_split(split: str, cfg: BiraeConfig, *, store: Any = None, limit: int | None = None,
@@ -274,10 +266,6 @@ def build_split(split: str, cfg: BiraeConfig, *, store: Any = None, limit: int |
     fp = fingerprint(ids, {**settings, "split": split})
     root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "birae"
     path = root / f"{split}-{fp[:16]}.pt"
-    keys = ("R_rel", "R_rel_aug", "rate", "rate_aug", "target", "starts", "lengths")
-    if path.is_file():
-        d = torch.load(path, weights_only=True)
-        return BiraeData(**{k: d[k] for k in keys}, clip_ids=list(d["clip_ids"]), fingerprint=fp)
-    d = build_from_motions((store.load(c) for c in ids), ids, cfg, "train" if split == "train" else split, progress)
-    atomic_torch_save(path, {**d, "clip_ids": ids, "fingerprint": fp})  # torchrun ranks may build it at once
-    return BiraeData(**{k: d[k] for k in keys}, clip_ids=ids, fingerprint=fp)
+    d = cached_clips(path, ids, fp, lambda: build_from_motions((store.load(c) for c in ids), ids, cfg,
+                                                                "train" if split == "train" else split, progress))
+    return BiraeData(**{k: d[k] for k in (*DATA_KEYS, "starts", "lengths")}, clip_ids=d["clip_ids"], fingerprint=fp)

@@ -32,13 +32,16 @@ import numpy as np
 import torch
 
 from wearpose.estimators.checkpoint import fingerprint
+from wearpose.estimators.clipstore import cached_clips, concat_clips
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.inputs import hold_last_valid
 from wearpose.estimators.seeding import clip_seed
 from wearpose.geometry import matrix_to_rot6d, rot6d_to_matrix
-from wearpose.fileio import atomic_torch_save
 
 DATA_VERSION = 1
+#: Per-frame tensors of the cache (``(F, ...)``; with ``clip`` ``(F,)``) and per-clip ones (``(C, ...)``).
+FRAME_KEYS = ("position", "orientation", "valid", "pose6", "joints")
+CLIP_KEYS = ("betas", "off_R", "off_t")
 
 
 def frame_measurements(frame: Any, sensor_names: Sequence[str],
@@ -223,38 +226,18 @@ def build_split(split: str, cfg: EmposeConfig, body: Any, *, store: Any = None, 
     settings = data_settings(cfg, body)
     fp = fingerprint(ids, {**settings, "split": split})
     root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "empose"
-    path = root / f"{split}-{fp[:16]}.pt"
-    if path.is_file():
-        d = torch.load(path, weights_only=True)
-        return EmposeData(**{k: d[k] for k in ("position", "orientation", "valid", "pose6", "joints", "clip", "betas",
-                                               "off_R", "off_t", "starts", "lengths")},
-                          clip_ids=list(d["clip_ids"]), fingerprint=fp, settings=settings)
-    cols: dict[str, list[torch.Tensor]] = {k: [] for k in ("position", "orientation", "valid", "pose6", "joints", "clip")}
-    betas, offR, offt, starts, lengths = [], [], [], [], []
-    total = 0
-    for c, cid in enumerate(ids):
+
+    def one(cid: str) -> dict[str, torch.Tensor]:
         r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed))
-        p, R = hold_last_valid(r["position"], r["valid"]), hold_last_valid(r["orientation"], r["valid"])
-        T = p.shape[0]
-        cols["position"].append(p)
-        cols["orientation"].append(R)
-        cols["valid"].append(r["valid"])
-        cols["pose6"].append(matrix_to_rot6d(r["pose"]))
-        cols["joints"].append(r["joints"])
-        cols["clip"].append(torch.full((T,), c, dtype=torch.long))
-        betas.append(r["betas"])
-        offR.append(r["off_R"])
-        offt.append(r["off_t"])
-        starts.append(total)
-        lengths.append(T)
-        total += T
-        if progress is not None:
-            progress(c + 1, len(ids))
-    d = {k: torch.cat(v) for k, v in cols.items()}
-    d.update(betas=torch.stack(betas), off_R=torch.stack(offR), off_t=torch.stack(offt),
-             starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
-    atomic_torch_save(path, {**d, "clip_ids": ids, "fingerprint": fp})  # torchrun ranks may build it at once
-    return EmposeData(**d, clip_ids=ids, fingerprint=fp, settings=settings)
+        return {"position": hold_last_valid(r["position"], r["valid"]),
+                "orientation": hold_last_valid(r["orientation"], r["valid"]), "valid": r["valid"],
+                "pose6": matrix_to_rot6d(r["pose"]), "joints": r["joints"],
+                "betas": r["betas"], "off_R": r["off_R"], "off_t": r["off_t"]}
+
+    d = cached_clips(root / f"{split}-{fp[:16]}.pt", ids, fp,
+                     lambda: concat_clips(ids, one, FRAME_KEYS, clip_keys=CLIP_KEYS, clip_column=True, progress=progress))
+    return EmposeData(**{k: d[k] for k in (*FRAME_KEYS, "clip", *CLIP_KEYS, "starts", "lengths")},
+                      clip_ids=d["clip_ids"], fingerprint=fp, settings=settings)
 
 
 def recording_from_clip(r: dict[str, Any], cfg: EmposeConfig) -> Any:

@@ -37,13 +37,13 @@ import torch
 from wearpose.calibration import CalibrationResult, apply_miposer, calibrate, em_to_world
 from wearpose.errors import ShapeError
 from wearpose.estimators.checkpoint import fingerprint
+from wearpose.estimators.clipstore import cached_clips, concat_clips
 from wearpose.estimators.empose.data import num_batches
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.inputs import hold_last_valid
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.geometry import matrix_to_rot6d
 from wearpose.recording.tpose import tpose_then
-from wearpose.fileio import atomic_torch_save
 
 DATA_VERSION = 1
 #: Tolerance when picking 120 Hz EM samples at the 60 Hz headset instants, s.
@@ -271,25 +271,9 @@ def build_split(split: str, cfg: MiposerConfig, body: Any, *, store: Any = None,
 def cached_split(path: Path, ids: Sequence[str], clip_fn: Any, fp: str, settings: dict[str, Any],
                  progress: Any = None) -> MiposerData:
     """Load ``path`` or build it: ``clip_fn(clip_id)`` gives one clip's per-frame tensors
-    (``R``, ``p``, ``valid``, ``pose6``, ``in_clip``); they are concatenated and saved atomically."""
-    keys = ("R", "p", "valid", "pose6", "in_clip", "clip", "starts", "lengths")
-    if path.is_file():
-        d = torch.load(path, weights_only=True)
-        return MiposerData(**{k: d[k] for k in keys}, clip_ids=list(d["clip_ids"]), fingerprint=fp, settings=settings)
-    cols: dict[str, list[torch.Tensor]] = {k: [] for k in keys[:6]}
-    starts, lengths, total = [], [], 0
-    for c, cid in enumerate(ids):
-        r = clip_fn(cid)
-        T = r["R"].shape[0]
-        for k in keys[:5]:
-            cols[k].append(r[k])
-        cols["clip"].append(torch.full((T,), c, dtype=torch.long))
-        starts.append(total)
-        lengths.append(T)
-        total += T
-        if progress is not None:
-            progress(c + 1, len(ids))
-    d = {k: torch.cat(v) for k, v in cols.items()}
-    d.update(starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
-    atomic_torch_save(path, {**d, "clip_ids": list(ids), "fingerprint": fp})  # parallel builders: own temp files
-    return MiposerData(**d, clip_ids=list(ids), fingerprint=fp, settings=settings)
+    (``R``, ``p``, ``valid``, ``pose6``, ``in_clip``); they are concatenated and saved atomically
+    (:mod:`wearpose.estimators.clipstore`)."""
+    frames = ("R", "p", "valid", "pose6", "in_clip")
+    d = cached_clips(path, ids, fp, lambda: concat_clips(ids, clip_fn, frames, clip_column=True, progress=progress))
+    return MiposerData(**{k: d[k] for k in (*frames, "clip", "starts", "lengths")}, clip_ids=d["clip_ids"],
+                       fingerprint=fp, settings=settings)

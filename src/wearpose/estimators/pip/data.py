@@ -34,12 +34,12 @@ import torch
 
 from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.estimators.checkpoint import fingerprint
+from wearpose.estimators.clipstore import cached_clips, concat_clips
 from wearpose.estimators.empose.data import num_batches
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.sitting import SITTING_PREFIX
 from wearpose.geometry import matrix_to_rot6d
-from wearpose.fileio import atomic_torch_save
 
 DATA_VERSION = 2
 #: Leaf joints of P_L (PIP Sec. 3.1: wrists, ankles and head), SMPL indices.
@@ -399,23 +399,6 @@ def _simulate_cached(path: Path, ids: list[str], fp: str, settings: dict[str, An
                      progress: Any = None) -> PipData:
     """Load ``path`` or simulate every clip id with ``one(cid)`` (:func:`simulate_clip`'s dict),
     concatenate and save it there."""
-    if path.is_file():
-        d = torch.load(path, weights_only=True)
-        return PipData(**{k: d[k] for k in (*TENSORS, "starts", "lengths")}, clip_ids=list(d["clip_ids"]),
-                       fingerprint=fp, settings=settings)
-    cols: dict[str, list[torch.Tensor]] = {k: [] for k in TENSORS}
-    starts, lengths, total = [], [], 0
-    for c, cid in enumerate(ids):
-        r = one(cid)
-        for k in TENSORS:
-            cols[k].append(r[k])
-        T = int(r["x"].shape[0])
-        starts.append(total)
-        lengths.append(T)
-        total += T
-        if progress is not None:
-            progress(c + 1, len(ids))
-    d = {k: torch.cat(v) for k, v in cols.items()}
-    d.update(starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
-    atomic_torch_save(path, {**d, "clip_ids": ids, "fingerprint": fp})  # torchrun ranks may build it at once
-    return PipData(**d, clip_ids=ids, fingerprint=fp, settings=settings)
+    d = cached_clips(path, ids, fp, lambda: concat_clips(ids, one, TENSORS, progress=progress))
+    return PipData(**{k: d[k] for k in (*TENSORS, "starts", "lengths")}, clip_ids=d["clip_ids"], fingerprint=fp,
+                   settings=settings)

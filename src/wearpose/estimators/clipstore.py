@@ -1,0 +1,80 @@
+"""The clip store every method's training data shares: clips simulated one by one, concatenated
+frame-wise, cached in one tensor file per split and settings.
+
+A method gives :func:`concat_clips` a function that turns one clip (an id, or whatever the
+method iterates over) into its tensors and says which of them are per frame (concatenated along
+the first axis, ``(F, ...)``) and which per clip (stacked, ``(C, ...)``); it gets back one dict
+with ``starts`` / ``lengths`` ``(C,)`` (first frame and frame count of every clip, long) and,
+when asked, ``clip`` ``(F,)`` (the clip index of every frame). :func:`cached_clips` loads such a
+dict from its cache file or builds and saves it atomically (each process through its own
+temporary file: several torchrun ranks may build the same file at once).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+import torch
+
+from wearpose.fileio import atomic_torch_save
+
+
+def concat_clips(clips: Iterable[Any], one: Callable[[Any], dict[str, torch.Tensor]], frame_keys: Sequence[str], *,
+                 clip_keys: Sequence[str] = (), clip_column: bool = False, total: int | None = None,
+                 progress: Callable[[int, int], Any] | None = None) -> dict[str, torch.Tensor]:
+    """Run ``one`` on every clip and concatenate its tensors.
+
+    Args:
+        clips: what ``one`` takes, one item per clip, in order (a list, or an iterator that loads
+            motions lazily; then give ``total``).
+        one: one clip -> dict holding at least ``frame_keys`` (``(T, ...)``, the same ``T`` for
+            all, taken from the first) and ``clip_keys``.
+        frame_keys: per-frame tensors, concatenated to ``(F, ...)`` (an empty run gives
+            ``torch.zeros(0)``).
+        clip_keys: per-clip tensors, stacked to ``(C, ...)``.
+        clip_column: add ``clip`` ``(F,)`` long, the index of each frame's clip.
+        total: the number of clips for ``progress`` (default ``len(clips)``).
+        progress: optional ``progress(done, total)`` after each clip.
+
+    Returns:
+        ``frame_keys`` (then ``clip``), ``clip_keys``, ``starts`` and ``lengths`` ``(C,)`` long.
+    """
+    n = len(clips) if total is None else total  # type: ignore[arg-type]
+    cols: dict[str, list[torch.Tensor]] = {k: [] for k in (*frame_keys, *(("clip",) if clip_column else ()))}
+    per_clip: dict[str, list[torch.Tensor]] = {k: [] for k in clip_keys}
+    starts, lengths, start = [], [], 0
+    for c, item in enumerate(clips):
+        r = one(item)
+        T = int(r[frame_keys[0]].shape[0])
+        for k in frame_keys:
+            cols[k].append(r[k])
+        if clip_column:
+            cols["clip"].append(torch.full((T,), c, dtype=torch.long))
+        for k in clip_keys:
+            per_clip[k].append(r[k])
+        starts.append(start)
+        lengths.append(T)
+        start += T
+        if progress is not None:
+            progress(c + 1, n)
+    d = {k: torch.cat(v) if v else torch.zeros(0) for k, v in cols.items()}
+    d.update({k: torch.stack(v) for k, v in per_clip.items()})
+    d.update(starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
+    return d
+
+
+def cached_clips(path: Path, ids: Sequence[str], fingerprint: str,
+                 build: Callable[[], dict[str, torch.Tensor]]) -> dict[str, Any]:
+    """The tensors cached at ``path``, or ``build()``'s, saved there first.
+
+    The file holds the tensors, ``clip_ids`` (``ids``) and ``fingerprint``; the returned dict
+    has the same keys (``clip_ids`` a list). ``path`` is written atomically through a temporary
+    file of this process (:func:`wearpose.fileio.atomic_torch_save`).
+    """
+    if path.is_file():
+        d = torch.load(path, weights_only=True)
+        return {**d, "clip_ids": list(d["clip_ids"])}
+    d = {**build(), "clip_ids": list(ids), "fingerprint": fingerprint}
+    atomic_torch_save(path, d)
+    return d

@@ -1,0 +1,50 @@
+"""The shared clip store (wearpose.estimators.clipstore): concatenation, per-clip tensors, the
+clip column, the cache round trip."""
+
+from pathlib import Path
+
+import torch
+
+from wearpose.estimators.clipstore import cached_clips, concat_clips
+
+
+def _clip(T: int, c: float) -> dict[str, torch.Tensor]:
+    return {"x": torch.full((T, 2), c), "m": torch.arange(T) % 2 == 0, "b": torch.tensor([c, -c])}
+
+
+def test_concat_clips_frames_clips_and_index():
+    seen: list[tuple[int, int]] = []
+    d = concat_clips([3, 1, 4], lambda T: _clip(T, float(T)), ("x", "m"), clip_keys=("b",), clip_column=True,
+                     progress=lambda done, total: seen.append((done, total)))
+    assert list(d) == ["x", "m", "clip", "b", "starts", "lengths"]
+    assert d["x"].shape == (8, 2) and d["x"][:, 0].tolist() == [3, 3, 3, 1, 4, 4, 4, 4]
+    assert d["m"].dtype == torch.bool and d["m"].tolist() == [True, False, True, True, True, False, True, False]
+    assert d["clip"].tolist() == [0, 0, 0, 1, 2, 2, 2, 2] and d["clip"].dtype == torch.long
+    assert d["b"].tolist() == [[3, -3], [1, -1], [4, -4]]
+    assert d["starts"].tolist() == [0, 3, 4] and d["lengths"].tolist() == [3, 1, 4]
+    assert seen == [(1, 3), (2, 3), (3, 3)]
+
+
+def test_concat_clips_lazy_iterator_and_empty():
+    seen: list[tuple[int, int]] = []
+    d = concat_clips(iter([2, 2]), lambda T: _clip(T, 1.0), ("x",), total=2, progress=lambda *a: seen.append(a))
+    assert "clip" not in d and d["lengths"].tolist() == [2, 2] and seen == [(1, 2), (2, 2)]
+    e = concat_clips([], lambda T: _clip(T, 1.0), ("x",))
+    assert e["x"].numel() == 0 and e["starts"].tolist() == [] and e["lengths"].dtype == torch.long
+
+
+def test_cached_clips_builds_once_then_loads_the_same(tmp_path: Path):
+    calls = []
+
+    def build() -> dict[str, torch.Tensor]:
+        calls.append(1)
+        return concat_clips([2, 3], lambda T: _clip(T, 0.5), ("x", "m"), clip_column=True)
+
+    path = tmp_path / "cache" / "train-0123.pt"
+    a = cached_clips(path, ["a", "b"], "fp", build)
+    b = cached_clips(path, ["a", "b"], "fp", build)
+    assert calls == [1] and path.is_file()
+    assert not list(path.parent.glob("*.tmp*"))  # written through a temporary file, none left over
+    assert a["clip_ids"] == b["clip_ids"] == ["a", "b"] and a["fingerprint"] == b["fingerprint"] == "fp"
+    for k in ("x", "m", "clip", "starts", "lengths"):
+        assert torch.equal(a[k], b[k]) and a[k].dtype == b[k].dtype
