@@ -79,7 +79,7 @@ async def serve_and_emulate(name: str, recording: Recording, factory: Callable[[
         srv.outputs.append(sink)
         src, emulate = _input_and_emulator(name, recording)
         bridge = InputBridge(srv, src, 0, dict(recording.subject or {}))
-        if name == "lsl":  # the inlet resolves the emulator's outlet: start both together
+        if name in ("lsl", "ximu3"):  # the inlet resolves the outlet / connects to the devices: start both together
             emu_task = asyncio.create_task(emulate(src, faults, speed, duration))
             await bridge.start()
             emu = await emu_task
@@ -111,6 +111,13 @@ def _input_and_emulator(name: str, rec: Recording) -> tuple[Any, Callable[..., A
         port = _free_udp_ports(1)[0]
         src = OscInput("generic", list(rec.names), _rate(rec), port=port)
         return src, lambda s, f, sp, d: emulate_osc(rec, "generic", "127.0.0.1", port, faults=f, speed=sp, duration=d)
+    if name == "ximu3":  # TCP: the emulated devices listen on 127.0.0.1, the input connects (nothing else listens)
+        from wearpose.stream.inputs.ximu3 import Ximu3Input, emulate_ximu3
+
+        ports = dict(zip(rec.names, _free_tcp_ports(len(rec.names))))
+        src = Ximu3Input(ports, _rate(rec), "127.0.0.1", "tcp", timeout=30.0)
+        return src, lambda s, f, sp, d: emulate_ximu3(rec, "127.0.0.1", ports=ports, transport="tcp", faults=f, speed=sp,
+                                                      duration=d, connect_timeout=30.0)
     if name == "lsl":
         import uuid
 
@@ -131,6 +138,18 @@ def _free_udp_ports(n: int) -> list[int]:
     import socket
 
     socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
+    for s in socks:
+        s.bind(("127.0.0.1", 0))
+    ports = [s.getsockname()[1] for s in socks]
+    for s in socks:
+        s.close()
+    return ports
+
+
+def _free_tcp_ports(n: int) -> list[int]:
+    import socket
+
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_STREAM) for _ in range(n)]
     for s in socks:
         s.bind(("127.0.0.1", 0))
     ports = [s.getsockname()[1] for s in socks]

@@ -15,8 +15,10 @@ from wearpose.stream import estimator_factory
 from wearpose.stream.replay import Faults
 
 #: input -> (kit, rate Hz, shipped weights). LSL carries EM-POSE's 12 EM sensors (positions in
-#: cm, declared); OSC (NGIMU profile) and MVN (tracker kinematics) PIP's 6 IMUs.
-CASES = {"lsl": ("em12", 30.0, "empose12_cpu"), "osc": ("imu6", 60.0, "pip_cpu"), "mvn": ("imu6", 60.0, "pip_cpu")}
+#: cm, declared); OSC (NGIMU profile), MVN (tracker kinematics) and x-IMU3 (the official ximu3
+#: package over TCP, binary messages) PIP's 6 IMUs.
+CASES = {"lsl": ("em12", 30.0, "empose12_cpu"), "osc": ("imu6", 60.0, "pip_cpu"), "mvn": ("imu6", 60.0, "pip_cpu"),
+         "ximu3": ("imu6", 60.0, "pip_cpu")}
 SECONDS = 2.0
 
 

@@ -16,7 +16,8 @@ from wearpose.cli.cmd_serve import stream_app
 
 @stream_app.command("emulate")
 def stream_emulate(
-    input_name: str = typer.Argument(..., metavar="INPUT", help="lsl, osc or mvn: the wire format to speak."),
+    input_name: str = typer.Argument(..., metavar="INPUT", help="lsl, osc, mvn or ximu3: the wire format to "
+                                                                         "speak."),
     recording: Path = typer.Argument(..., help="A wearpose recording (.npz) to play at its real rate."),
     host: str = typer.Option("127.0.0.1", help="Where to send (OSC, MVN); loopback by default."),
     port: Optional[int] = typer.Option(None, help="UDP port (MVN: 9763; OSC address profiles: 9000; OSC ngimu: "
@@ -25,6 +26,11 @@ def stream_emulate(
     lsl_loopback: bool = typer.Option(False, "--lsl-loopback", help="Keep LSL on this machine (as wearpose serve)."),
     osc_profile: str = typer.Option("ngimu", help="osc: the address map (ngimu, generic or a YAML file)."),
     osc_sensor: Optional[List[str]] = typer.Option(None, "--osc-sensor", help="osc ngimu: NAME=PORT per sensor."),
+    ximu3_sensor: Optional[List[str]] = typer.Option(None, "--ximu3-sensor", help="ximu3: NAME=PORT per device "
+                                                                                  "(default --port + i, from 7000)."),
+    ximu3_transport: str = typer.Option("tcp", help="ximu3: tcp (each device listens; start serve after or "
+                                                    "before) or udp (sends to the port)."),
+    ximu3_format: str = typer.Option("binary", help="ximu3: binary (float32) or ascii (four decimals) messages."),
     speed: float = typer.Option(1.0, help="Playback speed (1 = the recording's real rate)."),
     duration: Optional[float] = typer.Option(None, help="Seconds to play, looping the recording (default: once)."),
     malformed: float = typer.Option(0.0, help="Send a malformed packet after this fraction of frames."),
@@ -32,10 +38,11 @@ def stream_emulate(
     seed: int = typer.Option(0, help="Seed of the injected faults."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
-    """Play a recording as a live device (LSL outlet, OSC devices, Xsens MVN streamer) on loopback.
+    """Play a recording as a live device (LSL outlet, OSC devices, Xsens MVN streamer, x-IMU3s) on loopback.
 
     Sensor names must be those the input reads: MVN segments (pelvis, head, left_forearm, ...)
-    for mvn; any names for lsl and osc. Start `wearpose serve --input INPUT` first (lsl: either order).
+    for mvn; any names for lsl, osc and ximu3. Start `wearpose serve --input INPUT` first (lsl,
+    ximu3 over tcp: either order).
 
     Example: wearpose stream emulate mvn recs/imu6.npz --malformed 0.01 --dropout 0.001
     """
@@ -58,13 +65,20 @@ def stream_emulate(
         raise ConfigError(str(exc)) from None
     if ports is not None and not isinstance(ports, dict):
         raise ConfigError("--osc-sensor for the emulator: NAME=PORT (where each device sends)")
+    from wearpose.cli.cmd_serve import _ximu3_ports
+
+    try:
+        x3 = _ximu3_ports(ximu3_sensor)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
     faults = Faults(malformed=malformed, dropout=dropout, seed=seed)
     err_console.print(f"emulating {input_name} from {recording.name} ({rec.duration:.1f} s, {len(rec.names)} sensors)",
                       highlight=False)
     try:
         res = asyncio.run(emulate_input(input_name, rec, host=host, port=port, lsl_stream=lsl_stream, osc_profile=osc_profile,
-                                  osc_ports=ports, faults=faults, speed=speed, duration=duration))
-    except ValueError as exc:  # e.g. a sensor name that is no MVN segment
+                                  osc_ports=ports, ximu3_ports=x3, ximu3_transport=ximu3_transport,
+                                  ximu3_format=ximu3_format, faults=faults, speed=speed, duration=duration))
+    except (ValueError, TimeoutError) as exc:  # e.g. a sensor name that is no MVN segment
         raise ConfigError(f"{recording}: {exc}") from None
 
     def render(r: dict[str, Any]) -> None:

@@ -72,13 +72,15 @@ def serve(
     max_lag: float = typer.Option(0.5, min=0.0, help="Overload policy: a frame waiting longer than this (s) with "
                                                      "newer frames queued is shed unestimated (counted); 0: never "
                                                      "shed, every frame estimated however late."),
-    input_: Optional[List[str]] = typer.Option(None, "--input", help="Live device input (repeatable): lsl, osc or mvn; "
+    input_: Optional[List[str]] = typer.Option(None, "--input", help="Live device input (repeatable): lsl, osc, mvn or "
+                                                                     "ximu3; "
                                                                      "the i-th feeds subject --input-subject + i "
                                                                      "(docs/devices.md)."),
     input_subject: int = typer.Option(0, help="Subject id of the first --input."),
-    device_host: str = typer.Option("127.0.0.1", help="Interface the OSC and MVN inputs listen on."),
-    device_rate: Optional[float] = typer.Option(None, help="Device frame rate, Hz (OSC: required; MVN: default 60; "
-                                                           "LSL: default the stream's nominal rate)."),
+    device_host: str = typer.Option("127.0.0.1", help="Interface the OSC and MVN inputs listen on; x-IMU3: the "
+                                                      "devices' address."),
+    device_rate: Optional[float] = typer.Option(None, help="Device frame rate, Hz (OSC, x-IMU3: required; MVN: "
+                                                           "default 60; LSL: default the stream's nominal rate)."),
     lsl_stream: str = typer.Option("wearpose-sensors", help="--input lsl: name of the LSL sensor stream."),
     lsl_loopback: bool = typer.Option(False, "--lsl-loopback", help="Keep LSL on this machine: a liblsl config with "
                                                                    "ResolveScope machine, KnownPeers 127.0.0.1, "
@@ -94,6 +96,10 @@ def serve(
     mvn_character: int = typer.Option(0, help="--input mvn: MVN character ID."),
     mvn_pose_subject: Optional[int] = typer.Option(None, help="--input mvn: also publish MVN's own pose (type-02 "
                                                               "datagrams) as this subject, beside the estimate."),
+    ximu3_sensor: Optional[List[str]] = typer.Option(None, "--ximu3-sensor", help="--input ximu3: NAME=PORT per "
+                                                                                  "device (tcp: its TCP port; udp: "
+                                                                                  "the local receive port), repeatable."),
+    ximu3_transport: str = typer.Option("tcp", help="--input ximu3: tcp (connect to each device) or udp."),
     output: Optional[List[str]] = typer.Option(None, "--output", help="Pose output (repeatable): vmc (VMC over OSC) "
                                                                       "or lsl (an LSL outlet per subject)."),
     vmc_host: str = typer.Option("127.0.0.1", help="--output vmc: the VMC receiver's host."),
@@ -105,7 +111,7 @@ def serve(
 ) -> None:
     """Run the streaming server: sensor frames in, poses out (WebSocket, JSON or binary packets).
 
-    Live devices (--input lsl|osc|mvn) feed subjects directly; --output vmc|lsl sends every pose
+    Live devices (--input lsl|osc|mvn|ximu3) feed subjects directly; --output vmc|lsl sends every pose
     on to animation tools and lab recorders (docs/devices.md).
 
     Runs until Ctrl-C / SIGTERM, then finishes the frames it has received and closes cleanly.
@@ -142,7 +148,7 @@ def serve(
                     max_lag_s=max_lag or None)
     inputs, outputs = _devices(input_, device_host, device_rate, lsl_stream, lsl_loopback, osc_profile, osc_sensor,
                                osc_port, mvn_port, mvn_segments, mvn_character, output, vmc_host, vmc_port, vmc_subject,
-                               lsl_out_name, mvn_pose_subject)
+                               lsl_out_name, mvn_pose_subject, ximu3_sensor, ximu3_transport)
     final = run_server(factory, host, port, on_start=started, reorder_window=reorder_window, stride=_stride(stride),
                        workers=workers, udp_port=udp_port, warmup=warmup, threads=threads, token=token,
                        require_token=require_token, allow_origins=origins, limits=limits, inputs=inputs,
@@ -154,7 +160,8 @@ def serve(
 def _devices(inputs: Optional[List[str]], host: str, rate: Optional[float], lsl_stream: str, lsl_loopback: bool,
              osc_profile: str, osc_sensor: Optional[List[str]], osc_port: int, mvn_port: int, mvn_segments: Optional[str],
              mvn_character: int, outputs: Optional[List[str]], vmc_host: str, vmc_port: int, vmc_subject: int,
-             lsl_out_name: str, mvn_pose_subject: Optional[int] = None) -> tuple[list[Any], list[Any]]:
+             lsl_out_name: str, mvn_pose_subject: Optional[int] = None, ximu3_sensor: Optional[List[str]] = None,
+             ximu3_transport: str = "tcp") -> tuple[list[Any], list[Any]]:
     """The --input / --output objects (library: wearpose.stream.inputs / outputs)."""
     from wearpose.errors import ConfigError
     from wearpose.stream.inputs import make_input
@@ -165,16 +172,29 @@ def _devices(inputs: Optional[List[str]], host: str, rate: Optional[float], lsl_
         _lsl_loopback()
     try:
         sensors = parse_sensor_ports(osc_sensor) if osc_sensor else None
+        x3 = _ximu3_ports(ximu3_sensor)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     segs = [x.strip() for x in mvn_segments.split(",") if x.strip()] if mvn_segments else None
     ins = [make_input(n, host=host, rate=rate, lsl_stream=lsl_stream, osc_profile=osc_profile, osc_sensors=sensors,
                       osc_port=osc_port, mvn_port=mvn_port, mvn_segments=segs, mvn_character=mvn_character,
-                      mvn_pose_subject=mvn_pose_subject)
+                      mvn_pose_subject=mvn_pose_subject, ximu3_sensors=x3, ximu3_transport=ximu3_transport)
            for n in inputs or []]
     outs = [make_output(n, vmc_host=vmc_host, vmc_port=vmc_port, vmc_subject=vmc_subject, lsl_name=lsl_out_name)
             for n in outputs or []]
     return ins, outs
+
+
+def _ximu3_ports(items: Optional[List[str]]) -> Optional[dict[str, int]]:
+    """``--ximu3-sensor NAME=PORT`` values (the OSC parser's rule); ValueError otherwise."""
+    from wearpose.stream.inputs.osc import parse_sensor_ports
+
+    if not items:
+        return None
+    ports = parse_sensor_ports(items)
+    if not isinstance(ports, dict):
+        raise ValueError("--ximu3-sensor: give every device as NAME=PORT")
+    return ports
 
 
 def _lsl_loopback() -> None:
