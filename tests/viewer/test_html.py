@@ -8,10 +8,12 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from tests.conftest import make_tiny_asset
 from wearpose.body import BodyModel
+from wearpose.errors import ShapeError
 from wearpose.geometry import axis_angle_to_matrix
 from wearpose.viewer import write_html
 
@@ -45,3 +47,52 @@ def test_page_skinning_matches_body_model(tmp_path: Path) -> None:
         # The tiny asset has at most 2 joints per vertex, so top-4 truncation is exact here.
         np.testing.assert_allclose(pv, ref, atol=1e-5)
     assert payload["T"] == T and payload["site_names"] == ["head", "left_forearm"]
+
+
+def _payload(path: Path) -> dict:
+    return json.loads(re.search(r"const P = (\{.*?\});\n", path.read_text()).group(1))
+
+
+def test_tracks_have_distinct_colours_and_a_legend(tmp_path: Path) -> None:
+    from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR
+
+    body = BodyModel(make_tiny_asset())
+    pose = torch.eye(3).expand(3, 24, 3, 3)
+    trans = torch.zeros(3, 3)
+    path = write_html(tmp_path / "v.html", body, pose, torch.zeros(10), trans, fps=30.0, label="estimate",
+                      compare=[("ground truth", pose, torch.zeros(10), trans)], colours=[ESTIMATE_COLOUR, TRUTH_COLOUR],
+                      site_names=["head"], sites_label="1 EM sensor (kitname)")
+    p = _payload(path)
+    assert [tuple(t["colour"]) for t in p["tracks"]] == [ESTIMATE_COLOUR, TRUTH_COLOUR]
+    assert p["sites_label"] == "1 EM sensor (kitname)" and p["site_names"] == ["head"]
+    html = path.read_text()
+    assert '<span id="legend">' in html and "tr.col" in html  # the legend element; meshes shaded in their track's colour
+    # Default colours differ too; a caller cannot give two tracks one colour.
+    p2 = _payload(write_html(tmp_path / "d.html", body, pose, torch.zeros(10), trans, fps=30.0,
+                             compare=[("b", pose, torch.zeros(10), trans), ("c", pose, torch.zeros(10), trans)]))
+    assert len({tuple(t["colour"]) for t in p2["tracks"]}) == 3
+    with pytest.raises(ShapeError, match="differ in colour"):
+        write_html(tmp_path / "x.html", body, pose, torch.zeros(10), trans, fps=30.0,
+                   compare=[("gt", pose, torch.zeros(10), trans)], colours=[TRUTH_COLOUR, TRUTH_COLOUR])
+
+
+def test_no_sites_when_none_are_named(tmp_path: Path) -> None:
+    body = BodyModel(make_tiny_asset())
+    pose = torch.eye(3).expand(2, 24, 3, 3)
+    p = _payload(write_html(tmp_path / "v.html", body, pose, torch.zeros(10), torch.zeros(2, 3), fps=30.0, site_names=()))
+    assert p["sites"] == [] and p["site_names"] == []
+
+
+@pytest.mark.parametrize("kit", ["em12", "em6", "imu6", "mimu6", "miposer"])
+def test_kit_sites_are_the_kits_sensors(kit: str) -> None:
+    from wearpose.sensors import get_kit, resolve_sites
+    from wearpose.viewer.scene import kit_sites
+
+    body = BodyModel()
+    k = get_kit(kit)
+    sites = kit_sites(kit, body)
+    resolved, _ = resolve_sites(k, body.site_names, body.asset_id)
+    assert set(sites) == {resolved[s.name] for s in k.sensors} and len(sites) == len(set(sites))
+    assert len(sites) < len(body.site_names)  # not every site of the asset
+    first = k.sensors[0].name
+    assert kit_sites(kit, body, [first]) == (resolved[first],)

@@ -5,6 +5,11 @@ frame 24 joint transforms; the browser skins the mesh itself (linear blend skinn
 as :class:`wearpose.body.BodyModel`), so a 10-second clip stays around a megabyte. Drawing is a
 plain 2D canvas (painter's algorithm, Lambert shading): no WebGL or 3D library needed, so the
 file opens anywhere, including headless browsers in tests.
+
+Every track has its own colour (:mod:`wearpose.viewer.scene`: estimates saturated, the ground
+truth grey), named in a legend (``#legend``) and in the label above its head; the sensor dots
+are the sites the caller names (a demo: its kit's sensors only). The camera follows the bodies
+(it looks at their mean root of the frame shown).
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ import torch
 
 from wearpose.body import PARENTS, BodyModel, forward_kinematics
 from wearpose.errors import ShapeError
+from wearpose.viewer.scene import PALETTE, Colour
 
 _TOPK = 4
 
@@ -28,7 +34,7 @@ def _b64(a: np.ndarray, dtype: str) -> str:
 
 
 def _track(body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor, label: str,
-           shift: float) -> dict:
+           shift: float, colour: Colour) -> dict:
     """Per-track arrays: shaped rest mesh, per-frame skinning transforms and joints."""
     with torch.no_grad():
         pose = pose.to(body.dtype)
@@ -40,26 +46,36 @@ def _track(body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, trans: torc
         J[..., 0] += shift  # side-by-side display offset along +X, metres
         t = J - (G @ J_rest.unsqueeze(-1)).squeeze(-1)
         A = torch.cat([G.reshape(*G.shape[:2], 9), t], dim=-1)  # (T, 24, 12)
-    return {"label": label, "verts": _b64(v_shaped.cpu().numpy(), "<f4"), "A": _b64(A.cpu().numpy(), "<f4"),
+    return {"label": label, "colour": [int(c) for c in colour], "verts": _b64(v_shaped.cpu().numpy(), "<f4"), "A": _b64(A.cpu().numpy(), "<f4"),
             "joints": _b64(J.cpu().numpy(), "<f4")}
 
 
 def skinning_payload(body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor,
                      site_names: Sequence[str] | None = None,
                      compare: Sequence[tuple[str, torch.Tensor, torch.Tensor, torch.Tensor]] = (),
-                     label: str = "motion", spacing: float = 1.0) -> dict:
+                     label: str = "motion", spacing: float = 1.0,
+                     colours: Sequence[Colour] | None = None) -> dict:
     """Arrays the page needs, as a JSON-able dict.
 
     Args:
         pose: ``(T, 24, 3, 3)`` local rotations; betas ``(S,)``; trans ``(T, 3)`` m.
+        site_names: sensor sites drawn on every track (None: all sites of the asset; ``()``: none).
         compare: further tracks ``(label, pose, betas, trans)`` with the same ``T``, drawn beside
             the first one, each ``spacing`` metres further along +X (e.g. ground truth).
+        colours: one ``(r, g, b)`` per track, the main track first (default: :data:`PALETTE` in
+            order); two tracks may not share one.
     """
-    tracks = [_track(body, pose, betas, trans, label, 0.0)]
+    n = 1 + len(compare)
+    cols = [tuple(int(c) for c in col) for col in (colours if colours is not None else PALETTE[:n])]
+    if len(cols) != n:
+        raise ShapeError(f"colours: {len(cols)} given for {n} tracks (one per track, the main track first)")
+    if len(set(cols)) != n:
+        raise ShapeError(f"colours: tracks must differ in colour, got {cols}")
+    tracks = [_track(body, pose, betas, trans, label, 0.0, cols[0])]
     for k, (lab, p2, b2, t2) in enumerate(compare, start=1):
         if p2.shape[0] != pose.shape[0]:
             raise ShapeError(f"compare track {lab!r} has {p2.shape[0]} frames, the main track {pose.shape[0]}")
-        tracks.append(_track(body, p2, b2, t2, lab, spacing * k))
+        tracks.append(_track(body, p2, b2, t2, lab, spacing * k, cols[k]))
     w = body.weights.cpu().numpy()
     idx = np.argsort(-w, axis=1)[:, :_TOPK]
     wk = np.take_along_axis(w, idx, axis=1)
@@ -76,20 +92,24 @@ def skinning_payload(body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, t
 def write_html(path: str | Path, body: BodyModel, pose: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor,
                fps: float, title: str = "wearpose", site_names: Sequence[str] | None = None,
                info: dict | None = None, label: str = "motion",
-               compare: Sequence[tuple[str, torch.Tensor, torch.Tensor, torch.Tensor]] = ()) -> Path:
+               compare: Sequence[tuple[str, torch.Tensor, torch.Tensor, torch.Tensor]] = (),
+               colours: Sequence[Colour] | None = None, sites_label: str = "sensor sites") -> Path:
     """Write a page that plays ``pose``/``trans`` on ``body``; returns the path.
 
     Args:
         path: output ``.html``.
         pose: ``(T, 24, 3, 3)`` local joint rotations; betas ``(S,)``; trans ``(T, 3)`` m.
         fps: playback rate (frames per second of the motion).
-        site_names: sensor sites to draw (default: all sites of the asset).
+        site_names: sensor sites to draw (default: all sites of the asset; a demo passes its kit's,
+            :func:`wearpose.viewer.scene.kit_sites`).
         info: extra key/values shown in the page header (e.g. metrics).
         label: name of the main track; ``compare``: further ``(label, pose, betas, trans)``
             tracks drawn beside it (e.g. ground truth next to an estimate).
+        colours: one per track, main first (default :data:`~wearpose.viewer.scene.PALETTE`).
+        sites_label: the sensor dots' legend entry (e.g. "6 IMUs (imu6)").
     """
-    payload = skinning_payload(body, pose, betas, trans, site_names, compare=compare, label=label)
-    payload.update({"fps": float(fps), "title": title, "info": info or {}})
+    payload = skinning_payload(body, pose, betas, trans, site_names, compare=compare, label=label, colours=colours)
+    payload.update({"fps": float(fps), "title": title, "info": info or {}, "sites_label": sites_label})
     html = _TEMPLATE.replace("__PAYLOAD__", json.dumps(payload)).replace("__TITLE__", title)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -105,20 +125,29 @@ body{margin:0;font:13px sans-serif;background:#1d1f24;color:#ddd}
 #c{display:block;width:100vw;height:calc(100vh - 40px);cursor:grab}
 input[type=range]{flex:1;min-width:200px}
 label{white-space:nowrap}
+#legend{display:flex;gap:12px;flex-wrap:wrap}
+#legend span{white-space:nowrap}
+#legend i{display:inline-block;width:12px;height:12px;margin-right:4px;vertical-align:-1px;border-radius:2px}
+#legend i.dot{border-radius:6px;border:1px solid #222}
 </style></head><body>
 <div id="bar"><b id="title"></b><button id="play">pause</button>
 <input id="t" type="range" min="0" value="0"><span id="frame"></span>
 <label><input id="mesh" type="checkbox" checked>mesh</label>
 <label><input id="skel" type="checkbox" checked>skeleton</label>
 <label><input id="site" type="checkbox" checked>sensor sites</label>
-<span id="info"></span></div>
+<span id="legend"></span><span id="info"></span></div>
 <canvas id="c" data-frame="-1"></canvas>
 <script>
 const P = __PAYLOAD__;
 function dec(s, T){const b=atob(s);const u=new Uint8Array(b.length);for(let i=0;i<b.length;i++)u[i]=b.charCodeAt(i);return new T(u.buffer);}
 const V=P.V,F=P.F,T=P.T, faces=dec(P.faces,Uint32Array), widx=dec(P.widx,Uint8Array), w=dec(P.w,Float32Array);
-const TR=P.tracks.map(t=>({label:t.label,rest:dec(t.verts,Float32Array),A:dec(t.A,Float32Array),J:dec(t.joints,Float32Array)}));
+const TR=P.tracks.map(t=>({label:t.label,col:t.colour,rest:dec(t.verts,Float32Array),A:dec(t.A,Float32Array),J:dec(t.joints,Float32Array)}));
 document.getElementById('title').textContent=P.title;
+const SITE_COL='#ffd21f';
+{const lg=document.getElementById('legend');
+ const add=(cls,col,text)=>{const e=document.createElement('span');const i=document.createElement('i');if(cls)i.className=cls;i.style.background=col;e.appendChild(i);e.appendChild(document.createTextNode(text));lg.appendChild(e);};
+ for(const tr of TR)add('',`rgb(${tr.col[0]},${tr.col[1]},${tr.col[2]})`,tr.label);
+ if(P.sites.length)add('dot',SITE_COL,P.sites_label+' ('+P.sites.length+')');}
 document.getElementById('info').textContent=Object.entries(P.info).map(([k,v])=>k+': '+v).join('  ');
 const slider=document.getElementById('t'); slider.max=T-1;
 const cv=document.getElementById('c'), ctx=cv.getContext('2d');
@@ -162,15 +191,15 @@ function drawTrack(tr,proj){
    const ux=sv[b]-sv[a],uy=sv[b+1]-sv[a+1],vx=sv[c]-sv[a],vy=sv[c+1]-sv[a+1];const cr=ux*vy-uy*vx;if(cr>=0)continue;
    const e1=[pv[b]-pv[a],pv[b+1]-pv[a+1],pv[b+2]-pv[a+2]],e2=[pv[c]-pv[a],pv[c+1]-pv[a+1],pv[c+2]-pv[a+2]];
    const n=[e1[1]*e2[2]-e1[2]*e2[1],e1[2]*e2[0]-e1[0]*e2[2],e1[0]*e2[1]-e1[1]*e2[0]];const nl=Math.hypot(n[0],n[1],n[2])||1;
-   const L=0.25+0.75*Math.max(0,(n[0]*0.3+n[1]*0.7+n[2]*0.6)/nl/1.0);const g=Math.round(60+150*L);
-   ctx.fillStyle=`rgb(${g},${Math.round(g*0.93)},${Math.round(g*0.85)})`;ctx.strokeStyle=ctx.fillStyle;
+   const L=0.3+0.7*Math.max(0,(n[0]*0.3+n[1]*0.7+n[2]*0.6)/nl/1.0),c=tr.col;
+   ctx.fillStyle=`rgb(${Math.round(c[0]*L)},${Math.round(c[1]*L)},${Math.round(c[2]*L)})`;ctx.strokeStyle=ctx.fillStyle;
    ctx.beginPath();ctx.moveTo(sv[a],sv[a+1]);ctx.lineTo(sv[b],sv[b+1]);ctx.lineTo(sv[c],sv[c+1]);ctx.closePath();ctx.fill();ctx.stroke();}}
  if(document.getElementById('skel').checked){ctx.strokeStyle='#ff5050';ctx.lineWidth=3;
   for(let j=1;j<24;j++){const p=P.parents[j];const a=proj(J[j0+3*j],J[j0+3*j+1],J[j0+3*j+2]),b=proj(J[j0+3*p],J[j0+3*p+1],J[j0+3*p+2]);
    ctx.beginPath();ctx.moveTo(a[0],a[1]);ctx.lineTo(b[0],b[1]);ctx.stroke();}}
- if(document.getElementById('site').checked){ctx.fillStyle='#40c0ff';
-  for(const v of P.sites){ctx.beginPath();ctx.arc(sv[3*v],sv[3*v+1],5,0,7);ctx.fill();}}
- if(TR.length>1){const h=proj(J[j0+45],J[j0+46]+0.35,J[j0+47]);ctx.fillStyle='#ddd';ctx.font='14px sans-serif';ctx.textAlign='center';ctx.fillText(tr.label,h[0],h[1]);}}
+ if(document.getElementById('site').checked){ctx.fillStyle=SITE_COL;ctx.strokeStyle='#222';ctx.lineWidth=1;
+  for(const v of P.sites){ctx.beginPath();ctx.arc(sv[3*v],sv[3*v+1],5,0,7);ctx.fill();ctx.stroke();}}
+ if(TR.length>1){const h=proj(J[j0+45],J[j0+46]+0.35,J[j0+47]),c=tr.col;ctx.fillStyle=`rgb(${c[0]},${c[1]},${c[2]})`;ctx.font='bold 14px sans-serif';ctx.textAlign='center';ctx.fillText(tr.label,h[0],h[1]);}}
 function tick(now){if(playing){const f=Math.floor((now-t0)*P.fps/1000)%T;if(f!==frame){frame=f;draw();}}requestAnimationFrame(tick);}
 draw();requestAnimationFrame(tick);
 </script></body></html>

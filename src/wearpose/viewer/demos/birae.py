@@ -35,6 +35,7 @@ def run_demo(clip: str, out: str | Path, max_seconds: float = 10.0, seed: int = 
     from wearpose.estimators.birae.uncertainty import coverage
     from wearpose.motion import load_motion
     from wearpose.viewer import write_html
+    from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
     from wearpose.weights import card, weight_path
 
     out = Path(out)
@@ -68,9 +69,11 @@ def run_demo(clip: str, out: str | Path, max_seconds: float = 10.0, seed: int = 
                              f"BiRAE 6-param on {clip} (simulated MIMU noise): estimate +-1 sigma vs ground truth")
     world = est.with_root(track, rec)
     m = noisy["motion"]
+    kit, names = est.kit_name, est.sensor_names
     html = write_html(out / "demo.html", body, world.local_rot, m.betas, m.trans, 60.0,
-                      title=f"wearpose demo: BiRAE (mimu6) on {clip}", label="estimate (6 MIMUs, 6-param)",
-                      compare=[("ground truth", m.pose, m.betas, m.trans)],
+                      title=f"wearpose demo: BiRAE ({kit}) on {clip}", label=f"estimate ({len(names)} MIMUs, 6-param)",
+                      compare=[("ground truth", m.pose, m.betas, m.trans)], colours=[ESTIMATE_COLOUR, TRUTH_COLOUR],
+                      site_names=kit_sites(kit, body, names), sites_label=f"{len(names)} MIMUs ({kit})",
                       info={"MPJAE (deg)": f"{metrics['mpjae_all_deg']:.1f}",
                             "inside 1 sigma (%)": f"{metrics['within_1sigma_pct']:.0f}"})
     result = {"clip": clip, "frames": int(gt.shape[0]), "fps": 60.0, "weights": dict(WEIGHTS),

@@ -79,6 +79,7 @@ def run_demo(clip: str, out: str | Path, weights: str = "miposer_cpu", condition
     from wearpose.motion import load_motion, resample
     from wearpose.sensors import get_kit
     from wearpose.viewer import write_html
+    from wearpose.viewer.scene import ESTIMATE_COLOUR, SECOND_ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
     from wearpose.weights import card, weight_path
 
     out = Path(out)
@@ -130,6 +131,8 @@ def run_demo(clip: str, out: str | Path, weights: str = "miposer_cpu", condition
     viewer = write_html(out / "viewer.html", body, on.local_rot, on.betas, on.trans, est.fps, title=title,
                         label="MI-Poser + MIM", compare=[("MI-Poser, MIM off", off.local_rot, off.betas, off.trans),
                                                          ("ground truth", gt_pose, mm.betas.float(), gt_trans)],
+                        colours=[ESTIMATE_COLOUR, SECOND_ESTIMATE_COLOUR, TRUTH_COLOUR],
+                        site_names=kit_sites(est.kit_name, body), sites_label=f"headset + {len(names)} wrist EM ({est.kit_name})",
                         info={"upper-body MPJPE MIM on (cm)": f"{metrics['mpjpe_upper_mim_on_cm']:.2f}",
                               "MIM off (cm)": f"{metrics['mpjpe_upper_mim_off_cm']:.2f}",
                               "interfered frames (%)": f"{metrics['interfered_true_pct']:.1f}"})

@@ -98,6 +98,7 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
     from wearpose.recording import CALIBRATION_WINDOW_KEY, Recording, prepend_tpose
     from wearpose.sensors import simulate
     from wearpose.viewer import write_html
+    from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -158,7 +159,9 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
              f"{frames} clip frames evaluated at {est.fps:g} fps"
              f"{', physics (dual PD)' if track.extras.get('physics') else ', no physics'}")
     html = write_html(out / "demo.html", body, track.local_rot, track.betas, track.trans, est.fps, title=title,
-                      label="estimate (6 IMUs, PIP)", compare=[("ground truth", gt_pose[:n], gt_betas, gt_trans[:n])],
+                      label=f"estimate ({len(est.sensor_names)} IMUs, PIP)", compare=[("ground truth", gt_pose[:n], gt_betas, gt_trans[:n])],
+                      colours=[ESTIMATE_COLOUR, TRUTH_COLOUR], site_names=kit_sites(est.kit_name, body, est.sensor_names),
+                      sites_label=f"{len(est.sensor_names)} IMUs ({est.kit_name})",
                       info={"SIP err (deg)": f"{metrics.get('sip_error_deg', float('nan')):.1f}",
                             "mesh err (cm)": f"{metrics.get('mesh_error_cm', float('nan')):.1f}"})
     result = {"clip": clip, "frames": frames, "fps": est.fps, "tpose_s": TPOSE_S, "weights": str(path), "weights_licence": licence,
