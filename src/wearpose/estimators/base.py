@@ -23,9 +23,13 @@ import numpy as np
 import torch
 
 from wearpose.body.skeleton import NUM_JOINTS
-from wearpose.errors import ShapeError
+from wearpose.errors import ShapeError, WearposeError
 from wearpose.estimators.checkpoint import load_checkpoint
 
+
+
+class OfflineOnlyError(WearposeError, RuntimeError):
+    """:meth:`Estimator.step` called on an offline-only (non-causal) estimator."""
 
 @dataclass
 class PoseTrack:

@@ -159,6 +159,17 @@ def use_calibration_window(estimator: Any, recording: Recording) -> tuple[float,
     return window
 
 
+def start_online(estimator: Any, recording: Recording) -> None:
+    """Ready ``estimator`` to :meth:`~wearpose.estimators.base.Estimator.step` through
+    ``recording``'s frames as the stream server readies one per subject: the subject's
+    calibration (EM-POSE sensor offsets, read exactly as offline), the marked T-pose window
+    (:func:`use_calibration_window`), then ``reset()``."""
+    if hasattr(estimator, "set_offsets") and hasattr(estimator, "_offsets_from") and (recording.subject or {}).get("offsets"):
+        estimator.set_offsets(*estimator._offsets_from(recording))
+    use_calibration_window(estimator, recording)
+    estimator.reset()
+
+
 @dataclass
 class RunResult:
     """What :func:`estimate_recording` made: the estimate as estimated and placed in the world."""

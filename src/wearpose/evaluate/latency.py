@@ -112,4 +112,80 @@ def import_baseline(src: str | Path, module: str, package: str = "wearpose") -> 
     return mod
 
 
-__all__ = ["reference_timing", "latency_stats", "machine_info", "time_calls", "import_baseline"]
+#: Config fields and estimator attributes that change what one online step costs (recorded beside
+#: every figure): EM-POSE's LGD iterations N, BiRAE's MC-dropout samples M, window and online
+#: mode, MI-Poser's window, the networks' widths, PIP's physics.
+COST_SETTINGS = ("iterations", "mc_samples", "window", "online", "physics", "dual_pd", "hidden", "width",
+                 "d_model", "layers", "rnn_layers")
+
+
+def cost_settings(est: Any) -> dict[str, Any]:
+    """The :data:`COST_SETTINGS` an estimator has, from its attributes first, then its config."""
+    cfg = getattr(est, "config", None)
+    out: dict[str, Any] = {}
+    for key in COST_SETTINGS:
+        v = getattr(est, key, None)
+        if v is None and cfg is not None:
+            v = getattr(cfg, key, None)
+        if isinstance(v, (bool, int, float, str)) or (isinstance(v, tuple) and all(isinstance(x, int) for x in v)):
+            out[key] = list(v) if isinstance(v, tuple) else v
+    return out
+
+
+def step_latency(source: Any, recording: Any, *, frames: int = 300, warmup: int = 10,
+                 path: str | Path = "<recording>") -> dict[str, Any]:
+    """Online step latency of one model on one recording, as the stream server runs it.
+
+    The recording is brought to the model's rate (:func:`wearpose.estimators.run.fit_rate`), the
+    estimator is made once (:meth:`ModelSource.make`), given the recording's subject calibration
+    and T-pose window (:func:`wearpose.estimators.run.start_online`), reset, and stepped through
+    ``warmup + frames`` frames in order; the first ``warmup`` steps (first allocations, lazy
+    set-up) are not counted. Every step is timed in wall time and in the calling thread's CPU
+    time (``time.thread_time``, which other processes' load does not inflate).
+
+    Args:
+        source: a :class:`wearpose.estimators.run.ModelSource` (:func:`~wearpose.estimators.run.open_model`).
+        recording: a :class:`wearpose.recording.Recording` with the model's sensors.
+        frames: steps timed (fewer when the recording is shorter: ``frames`` in the result says).
+
+    Returns:
+        ``model``, ``method``, ``kit``, ``rate_hz``, ``frame_period_ms``, ``settings``
+        (:func:`cost_settings`), ``online_ms`` and ``online_cpu_ms`` (:func:`latency_stats`: the
+        same keys for every method), ``p99_within_frame_period``, ``frames``, ``warmup``, ``note``.
+    """
+    from wearpose.estimators.base import iter_frames
+    from wearpose.estimators.run import fit_rate, start_online
+
+    from wearpose.errors import ConfigError
+    from wearpose.estimators.base import OfflineOnlyError
+
+    rec, note = fit_rate(source, path, recording, None)
+    est = source.make()
+    if not est.sensor_names:
+        raise ConfigError(f"{source.name}: the estimator names its sensors only once it sees a whole recording "
+                          "(offline only, e.g. segments); the latency bench times online steps")
+    start_online(est, rec)
+    wall: list[float] = []
+    cpu: list[float] = []
+    for k, frame in enumerate(iter_frames(rec, est.sensor_names)):
+        if k >= warmup + frames:
+            break
+        t0, c0 = time.perf_counter(), time.thread_time()
+        try:
+            est.step(frame)
+        except OfflineOnlyError as exc:  # bidirectional networks (imuposer, empose-birnn)
+            raise ConfigError(f"{source.name} has no online step: {exc}") from None
+        if k >= warmup:
+            wall.append(time.perf_counter() - t0)
+            cpu.append(time.thread_time() - c0)
+    rate = float(est.fps) if getattr(est, "fps", 0) else float(rec.sensor(est.sensor_names[0]).info.rate)
+    stats = latency_stats(wall)
+    return {"model": source.name, "method": source.method, "kit": source.kit or getattr(est, "kit", None),
+            "rate_hz": rate, "frame_period_ms": 1000.0 / rate, "settings": cost_settings(est),
+            "online_ms": stats, "online_cpu_ms": latency_stats(cpu),
+            "p99_within_frame_period": bool(stats["p99_ms"] <= 1000.0 / rate), "frames": len(wall),
+            "warmup": warmup, "note": note}
+
+
+__all__ = ["reference_timing", "latency_stats", "machine_info", "time_calls", "import_baseline",
+           "COST_SETTINGS", "cost_settings", "step_latency"]

@@ -42,8 +42,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from wearpose.errors import ConfigError, WearposeError
-from wearpose.estimators.base import PoseFrame, PoseTrack, SensorFrame
+from wearpose.errors import ConfigError
+from wearpose.estimators.base import OfflineOnlyError, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.empose.data import EmposeData, frame_measurements
 from wearpose.estimators.empose.estimator import EmposeEstimator
@@ -56,10 +56,6 @@ from wearpose.estimators.registry import register_estimator
 #: Config model name -> registry name of the estimator.
 ESTIMATOR_NAMES: dict[str, str] = {"lgd": "empose", "resnet": "empose-resnet", "birnn": "empose-birnn",
                                    "twostage": "empose-twostage"}
-
-
-class OfflineOnlyError(WearposeError, RuntimeError):
-    """:meth:`Estimator.step` called on an offline-only (non-causal) estimator."""
 
 
 def baseline_config(preset: str, sensors: int, model: str) -> EmposeConfig:

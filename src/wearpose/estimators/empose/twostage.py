@@ -442,7 +442,7 @@ class TwoStageEstimator(EmposeEstimator):
                          extras={**extras, "rec_loss": torch.cat(rec).cpu(), "betas_per_frame": b_all})
 
     def step(self, frame: SensorFrame) -> PoseFrame:
-        from wearpose.estimators.empose.baselines import OfflineOnlyError
+        from wearpose.estimators.base import OfflineOnlyError
 
         raise OfflineOnlyError("empose-twostage has a bidirectional joint mapper (non-causal): use "
                                "estimate(recording) on a whole sequence; for streaming use empose (LGD-RNN)")

@@ -29,7 +29,7 @@ from torch import nn
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
-from wearpose.estimators.empose.baselines import OfflineOnlyError
+from wearpose.estimators.base import OfflineOnlyError
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.inputs import InputSpec, prepare
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig

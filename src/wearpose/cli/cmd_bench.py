@@ -1,0 +1,130 @@
+"""``wearpose bench``: measure a model on the machine at hand.
+
+Thin: ``bench latency`` opens the model (:func:`wearpose.estimators.run.open_model`), gets a
+recording (the user's, or a procedural clip simulated on the model's kit:
+:func:`wearpose.recording.simulate_recording`) and times the online step
+(:func:`wearpose.evaluate.latency.step_latency`) beside the machine reference
+(:func:`wearpose.evaluate.latency.reference_timing`) and the load average, so figures from
+different machines and runs can be compared.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+from pathlib import Path
+from typing import Any, Optional
+
+import typer
+from rich.table import Table
+
+from wearpose.cli.app import _emit, app, console, err_console
+
+bench_app = typer.Typer(help="Measure a model on this machine (latency with the machine's reference timing).\n\n"
+                             "Example: wearpose bench latency empose12_cpu --frames 300 --threads 1 --json",
+                        no_args_is_help=True)
+app.add_typer(bench_app, name="bench")
+
+#: The procedural clip simulated when no ``--recording`` is given (no corpus needed).
+DEFAULT_MOTION = "reach"
+
+
+def _procedural_recording(kit: str, family: str, seed: int) -> Any:
+    """Clip 0 of ``family`` in the evaluation seed namespace, after a 1 s calibration T-pose, worn
+    by ``kit`` (default noise, a random subject's EM offsets)."""
+    from wearpose.body import BodyModel
+    from wearpose.motion.procedural import procedural_clip
+    from wearpose.recording import simulate_recording
+
+    body = BodyModel()
+    motion = procedural_clip(family, 0, body, seed=seed, namespace="eval")
+    rec, _ = simulate_recording(motion, kit, body, seed=seed, tpose_s=1.0,
+                                meta={"clip_id": motion.meta.get("clip")})
+    return rec
+
+
+def _render(res: dict[str, Any]) -> None:
+    s, c = res["online_ms"], res["online_cpu_ms"]
+    t = Table(title=f"{res['model']} online step, {res['frames']} frames at {res['rate_hz']:g} Hz "
+                    f"({res['threads']} thread(s))")
+    for col in ("", "median ms", "p99 ms", "max ms"):
+        t.add_column(col, justify="right" if col else "left")
+    t.add_row("wall", f"{s['median_ms']:.2f}", f"{s['p99_ms']:.2f}", f"{s['max_ms']:.2f}")
+    t.add_row("CPU", f"{c['median_ms']:.2f}", f"{c['p99_ms']:.2f}", f"{c['max_ms']:.2f}")
+    console.print(t)
+    ok = "within" if res["p99_within_frame_period"] else "OVER"
+    load = ", ".join(f"{x:.2f}" for x in res["machine"]["load_average"])
+    console.print(f"p99 {ok} the frame period ({res['frame_period_ms']:.2f} ms); settings "
+                  f"{json.dumps(res['settings'])}; recording {res['recording']}; machine reference "
+                  f"{res['reference']['best_ms']:.1f} ms; load average {load}")
+
+
+@bench_app.command("latency")
+def latency_cmd(
+    model: str = typer.Argument(..., help="Shipped weights (empose12_cpu, pip_cpu, ...), a checkpoint, or segments."),
+    recording: Optional[Path] = typer.Option(None, help="A recording with the model's sensors (default: a procedural "
+                                                        "clip simulated on the model's kit)."),
+    motion: str = typer.Option(DEFAULT_MOTION, help="Procedural family simulated without --recording "
+                                                    "(squat, kneel, pickup, sit, lie, crawl, reach)."),
+    kit: Optional[str] = typer.Option(None, help="Kit to simulate for a weight-free model (segments)."),
+    frames: int = typer.Option(300, min=1, help="Steps timed (after the warm-up)."),
+    warmup: int = typer.Option(10, min=0, help="Steps run first and not timed (tracing, first allocations)."),
+    threads: int = typer.Option(1, min=1, help="torch CPU threads."),
+    seed: int = typer.Option(0, help="Seed of the procedural clip and its simulation."),
+    out: Optional[Path] = typer.Option(None, help="Write OUT.json and OUT.md (the table, settings, machine)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+) -> None:
+    """Time a model's online step (what the stream server runs per frame): median, p99 and max
+    in ms, wall and CPU time, the same keys for every method, with the settings that change the
+    cost (N, M, window), the machine reference timing and the load average.
+
+    Example: wearpose bench latency empose12_cpu --frames 300 --threads 1 --json
+    A recording of your own: wearpose bench latency pip_cpu --recording recs/imu6.npz
+    """
+    import torch
+
+    from wearpose.errors import ConfigError
+    from wearpose.evaluate.latency import machine_info, reference_timing, step_latency
+    from wearpose.estimators.run import open_model
+    from wearpose.recording import load_recording
+
+    torch.set_num_threads(threads)
+    source = open_model(model)
+    if recording is not None:
+        rec, rec_name = load_recording(recording), str(recording)
+    else:
+        use_kit = source.kit or kit
+        if not use_kit:
+            raise ConfigError(f"--model {model!r} has no kit of its own: give --kit (the kit to simulate) or --recording")
+        rec, rec_name = _procedural_recording(use_kit, motion, seed), f"procedural {motion} (eval seed {seed}), kit {use_kit}"
+    machine = machine_info()
+    res = step_latency(source, rec, frames=frames, warmup=warmup, path=recording or "<procedural>")
+    machine_end = machine_info()
+    res.update({"threads": threads, "recording": rec_name, "reference": reference_timing(),
+                "machine": {**machine, "load_average_end": machine_end["load_average"]},
+                "command": shlex.join(["wearpose", *sys.argv[1:]]) if sys.argv[0].endswith("wearpose") else None})
+    if res["frames"] < frames:
+        err_console.print(f"[yellow]note:[/] the recording gave {res['frames']} timed steps, not {frames}")
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.with_suffix(".json").write_text(json.dumps(res, indent=2, default=str) + "\n")
+        out.with_suffix(".md").write_text(latency_markdown(res))
+    _emit(res, as_json, _render)
+
+
+def latency_markdown(res: dict[str, Any]) -> str:
+    """The result as a markdown table with its settings and machine (for benchmarks/results/)."""
+    s, c = res["online_ms"], res["online_cpu_ms"]
+    load = ", ".join(f"{x:.2f}" for x in res["machine"]["load_average"])
+    return "\n".join([
+        f"# {res['model']}: online step latency", "",
+        f"`{res.get('command') or 'wearpose bench latency ' + res['model']}`", "",
+        "| time | median ms | p99 ms | max ms |", "| --- | ---: | ---: | ---: |",
+        f"| wall | {s['median_ms']:.2f} | {s['p99_ms']:.2f} | {s['max_ms']:.2f} |",
+        f"| CPU | {c['median_ms']:.2f} | {c['p99_ms']:.2f} | {c['max_ms']:.2f} |", "",
+        f"{res['frames']} steps after {res['warmup']} warm-up steps at {res['rate_hz']:g} Hz (frame period "
+        f"{res['frame_period_ms']:.2f} ms: p99 {'within' if res['p99_within_frame_period'] else 'over'}); "
+        f"{res['threads']} thread(s); settings `{json.dumps(res['settings'])}`; recording: {res['recording']}.",
+        f"Machine reference ({res['reference']['loop']}): {res['reference']['best_ms']:.1f} ms best; load average "
+        f"{load} at the start, {', '.join(f'{x:.2f}' for x in res['machine']['load_average_end'])} at the end.", ""])
