@@ -207,6 +207,7 @@ def demo(
     kit: str = typer.Option("em12", help="Sensor kit of the sensors mode: em12, em6 (EM-POSE), imu6 (PIP), "
                                          "mimu6 (BiRAE), miposer (MI-Poser)."),
     body: Optional[str] = typer.Option(None, help="Body asset for the roundtrip mode: default, smpl or a file path."),
+    seconds: float = typer.Option(10.0, min=0.5, help="Seconds of the clip used, from its start (a quick look: 2)."),
     as_json: bool = typer.Option(False, "--json", help="Print the metrics as JSON."),
 ) -> None:
     """Sensors -> pose on a held-out clip (or a motion file round trip), with metrics and a page.
@@ -227,7 +228,8 @@ def demo(
     if mode == "auto":
         mode = "sensors" if (kit != "em12" or "empose12_cpu" in list_weights()) else "roundtrip"
     out = out or Path("out") / f"demo-{kit if mode == 'sensors' else 'roundtrip'}"
-    result = kit_demo(kit)(clip, out) if mode == "sensors" else run_roundtrip_demo(clip, out, body=body)
+    result = (kit_demo(kit)(clip, out, max_seconds=seconds) if mode == "sensors"
+              else run_roundtrip_demo(clip, out, body=body, max_seconds=seconds))
     result["mode"] = mode
 
     def render(r: dict[str, Any]) -> None:

@@ -26,7 +26,7 @@ from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
 def kit_demos() -> dict[str, str]:
     """``wearpose demo --kit K`` -> ``"module:function"``, from every method's declaration
     (:attr:`wearpose.estimators.method.MethodSpec.demos`). Each function has the signature
-    ``fn(clip: str, out: Path) -> dict`` and returns at least ``{"clip", "frames", "fps", "html",
+    ``fn(clip: str, out: Path, max_seconds: float) -> dict`` and returns at least ``{"clip", "frames", "fps", "html",
     "title", "metrics": {name: float}}`` (metrics in report units, names ending in the unit, e.g.
     ``mpjpe_mm``)."""
     from wearpose.estimators.registry import get_method, list_methods
@@ -152,6 +152,6 @@ def run_sensor_demo(clip: str, out: str | Path, weights: str = "empose12_cpu", m
     return result
 
 
-def run_sensor_demo_em6(clip: str, out: str | Path) -> dict[str, Any]:
+def run_sensor_demo_em6(clip: str, out: str | Path, max_seconds: float = 10.0) -> dict[str, Any]:
     """:func:`run_sensor_demo` with the shipped 6-sensor weights."""
-    return run_sensor_demo(clip, out, weights="empose6_cpu")
+    return run_sensor_demo(clip, out, weights="empose6_cpu", max_seconds=max_seconds)
