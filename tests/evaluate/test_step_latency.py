@@ -33,8 +33,14 @@ class _Counting:
     def reset(self) -> None:
         self.resets += 1
 
-    def step(self, frame) -> None:
+    def step(self, frame):
         self.steps += 1
+        return _Pose({"stage_ms": 2.0, "label": "x"})
+
+
+@dataclass
+class _Pose:
+    extras: dict
 
 
 def _rec(n: int) -> Recording:
@@ -58,6 +64,8 @@ def test_step_latency_times_frames_after_the_warmup(monkeypatch) -> None:
     assert res["frames"] == 5 and res["online_ms"]["calls"] == 5 and res["warmup"] == 3
     assert res["rate_hz"] == 60.0 and abs(res["frame_period_ms"] - 1000 / 60) < 1e-9
     assert res["settings"]["iterations"] == 3 and res["note"] is None
+    # the estimator's own stage timings (ms in extras), the same statistics; other extras ignored
+    assert res["stages_ms"] == {"stage_ms": {"median_ms": 2.0, "p99_ms": 2.0, "max_ms": 2.0, "calls": 5}}
 
 
 def test_a_short_recording_says_how_many_steps_it_gave(monkeypatch) -> None:

@@ -52,6 +52,8 @@ def _render(res: dict[str, Any]) -> None:
         t.add_column(col, justify="right" if col else "left")
     t.add_row("wall", f"{s['median_ms']:.2f}", f"{s['p99_ms']:.2f}", f"{s['max_ms']:.2f}")
     t.add_row("CPU", f"{c['median_ms']:.2f}", f"{c['p99_ms']:.2f}", f"{c['max_ms']:.2f}")
+    for key, v in res["stages_ms"].items():
+        t.add_row(f"  {key}", f"{v['median_ms']:.2f}", f"{v['p99_ms']:.2f}", f"{v['max_ms']:.2f}")
     console.print(t)
     ok = "within" if res["p99_within_frame_period"] else "OVER"
     load = ", ".join(f"{x:.2f}" for x in res["machine"]["load_average"])
@@ -122,7 +124,9 @@ def latency_markdown(res: dict[str, Any]) -> str:
         f"`{res.get('command') or 'wearpose bench latency ' + res['model']}`", "",
         "| time | median ms | p99 ms | max ms |", "| --- | ---: | ---: | ---: |",
         f"| wall | {s['median_ms']:.2f} | {s['p99_ms']:.2f} | {s['max_ms']:.2f} |",
-        f"| CPU | {c['median_ms']:.2f} | {c['p99_ms']:.2f} | {c['max_ms']:.2f} |", "",
+        f"| CPU | {c['median_ms']:.2f} | {c['p99_ms']:.2f} | {c['max_ms']:.2f} |",
+        *[f"| stage {k} | {v['median_ms']:.2f} | {v['p99_ms']:.2f} | {v['max_ms']:.2f} |"
+          for k, v in res["stages_ms"].items()], "",
         f"{res['frames']} steps after {res['warmup']} warm-up steps at {res['rate_hz']:g} Hz (frame period "
         f"{res['frame_period_ms']:.2f} ms: p99 {'within' if res['p99_within_frame_period'] else 'over'}); "
         f"{res['threads']} thread(s); settings `{json.dumps(res['settings'])}`; recording: {res['recording']}.",

@@ -151,7 +151,9 @@ def step_latency(source: Any, recording: Any, *, frames: int = 300, warmup: int 
     Returns:
         ``model``, ``method``, ``kit``, ``rate_hz``, ``frame_period_ms``, ``settings``
         (:func:`cost_settings`), ``online_ms`` and ``online_cpu_ms`` (:func:`latency_stats`: the
-        same keys for every method), ``p99_within_frame_period``, ``frames``, ``warmup``, ``note``.
+        same keys for every method), ``stages_ms`` (the same statistics of every ``*_ms`` timing
+        the estimator reports in its frames' ``extras``, e.g. PIP's ``kin_ms`` / ``physics_ms``),
+        ``p99_within_frame_period``, ``frames``, ``warmup``, ``note``.
     """
     from wearpose.estimators.base import iter_frames
     from wearpose.estimators.run import fit_rate, start_online
@@ -167,22 +169,27 @@ def step_latency(source: Any, recording: Any, *, frames: int = 300, warmup: int 
     start_online(est, rec)
     wall: list[float] = []
     cpu: list[float] = []
+    parts: dict[str, list[float]] = {}  # the estimator's own timings of its stages (PIP: kin_ms, physics_ms)
     for k, frame in enumerate(iter_frames(rec, est.sensor_names)):
         if k >= warmup + frames:
             break
         t0, c0 = time.perf_counter(), time.thread_time()
         try:
-            est.step(frame)
+            pose = est.step(frame)
         except OfflineOnlyError as exc:  # bidirectional networks (imuposer, empose-birnn)
             raise ConfigError(f"{source.name} has no online step: {exc}") from None
         if k >= warmup:
             wall.append(time.perf_counter() - t0)
             cpu.append(time.thread_time() - c0)
+            for key, v in (getattr(pose, "extras", None) or {}).items():
+                if key.endswith("_ms") and isinstance(v, (int, float)):
+                    parts.setdefault(key, []).append(float(v) / 1000)
     rate = float(est.fps) if getattr(est, "fps", 0) else float(rec.sensor(est.sensor_names[0]).info.rate)
     stats = latency_stats(wall)
     return {"model": source.name, "method": source.method, "kit": source.kit or getattr(est, "kit", None),
             "rate_hz": rate, "frame_period_ms": 1000.0 / rate, "settings": cost_settings(est),
             "online_ms": stats, "online_cpu_ms": latency_stats(cpu),
+            "stages_ms": {key: latency_stats(v) for key, v in parts.items()},
             "p99_within_frame_period": bool(stats["p99_ms"] <= 1000.0 / rate), "frames": len(wall),
             "warmup": warmup, "note": note}
 
