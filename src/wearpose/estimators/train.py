@@ -37,6 +37,7 @@ import torch
 from torch import nn
 
 from wearpose.estimators.checkpoint import load_checkpoint, save_checkpoint
+from wearpose.estimators.trainconfig import TrainConfig
 
 
 class TrainTask(Protocol):
@@ -364,8 +365,10 @@ class WindowTask:
         save_checkpoint(self.est.checkpoint(meta, train_state), path)
 
 
-def loop_settings(cfg: Any, out_dir: str | Path, epochs: int, *, lr: float | None = None, **loop: Any) -> TrainSettings:
-    """:class:`TrainSettings` from a method config's optimisation fields (``lr``, ``lr_schedule``,
+def loop_settings(cfg: TrainConfig, out_dir: str | Path, epochs: int, *, lr: float | None = None,
+                  **loop: Any) -> TrainSettings:
+    """:class:`TrainSettings` from a method config's optimisation fields (its
+    :class:`~wearpose.estimators.trainconfig.TrainConfig` ``lr``, ``lr_schedule``,
     ``lr_min_factor``, ``grad_clip``, and ``lr_decay`` / ``lr_decay_steps`` where the config has
     them) and the run's ``loop`` options (``resume``, ``threads``, ``device``,
     ``checkpoint_every``, ``max_steps``, ``quiet``). ``lr`` overrides ``cfg.lr``."""

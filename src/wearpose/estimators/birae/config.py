@@ -30,13 +30,13 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from wearpose.errors import ConfigError
-from wearpose.estimators.configio import ConfigIO
+from wearpose.estimators.trainconfig import TrainConfig
 
 REPS: tuple[str, ...] = ("6param", "3param", "3param_rate", "zhou6d")
 
 
-@dataclass(frozen=True)
-class BiraeConfig(ConfigIO):
+@dataclass(frozen=True, kw_only=True)
+class BiraeConfig(TrainConfig):
     """Network, data and optimisation settings (see the module doc for the presets).
 
     Network: ``rep`` input representation; ``width`` input FC size; ``hidden`` Bi-LSTM size per
@@ -49,15 +49,17 @@ class BiraeConfig(ConfigIO):
     Data: ``rate`` Hz of the training data; ``seq_len`` subsequence length (truncated BPTT);
     ``min_len`` shortest clip kept (frames); ``aug_*`` augmentation of the second phase (white
     orientation noise std, impulse probability per frame and std, yaw-rate bias std in deg/s);
-    ``seed``; ``train_clips`` / ``val_clips`` first N clips of the split (0 = all).
-    Optimisation: ``lr``, ``lr_schedule`` (``exp`` = x``lr_decay`` every ``lr_decay_steps``;
-    ``cosine``; ``constant``), ``batch_size``, ``epochs_clean`` then ``epochs_aug``,
-    ``grad_clip``.
+    ``train_clips`` / ``val_clips`` first N clips of the split (0 = all).
+    Optimisation: ``epochs_clean`` then ``epochs_aug``, ``lr_decay`` / ``lr_decay_steps``, and
+    :class:`~wearpose.estimators.trainconfig.TrainConfig`'s ``seed``, ``val_clips``, ``lr``,
+    ``lr_schedule`` (``exp`` = x``lr_decay`` every ``lr_decay_steps``; ``cosine``;
+    ``constant``), ``lr_min_factor``, ``batch_size``, ``grad_clip``.
     Inference: ``mc_samples`` M of Eq. 7-8; ``window`` (past, future) frames of the online mode
     at ``rate`` (Sec. V-D: [130, 30] at 60 Hz).
     """
 
     TUPLE_FIELDS = {"window": None}
+    LR_SCHEDULES = ("exp", "cosine", "constant")
 
     rep: str = "6param"
     width: int = 512
@@ -76,28 +78,22 @@ class BiraeConfig(ConfigIO):
     aug_impulse_prob: float = 0.002
     aug_impulse_deg: float = 5.0
     aug_yaw_bias_dps: float = 0.5
-    seed: int = 0
     train_clips: int = 0
-    val_clips: int = 0
-    lr: float = 1e-3
     lr_schedule: str = "exp"
     lr_decay: float = 0.9
     lr_decay_steps: int = 5000
-    lr_min_factor: float = 0.1
     batch_size: int = 16
     epochs_clean: int = 1000
     epochs_aug: int = 1000
-    grad_clip: float = 1.0
     mc_samples: int = 20
     window: tuple[int, int] = (130, 30)
 
     def __post_init__(self) -> None:
+        super().__post_init__()  # the shared training fields (TrainConfig)
         if self.rep not in REPS:
             raise ConfigError(f"BiraeConfig.rep: expected one of {REPS}, got {self.rep!r}")
         if self.loss not in ("nll", "decoupled"):
             raise ConfigError(f"BiraeConfig.loss: expected nll or decoupled, got {self.loss!r}")
-        if self.lr_schedule not in ("exp", "cosine", "constant"):
-            raise ConfigError(f"BiraeConfig.lr_schedule: expected exp, cosine or constant, got {self.lr_schedule!r}")
         if min(self.width, self.hidden, self.layers, self.seq_len, self.batch_size, self.mc_samples) < 1:
             raise ConfigError("BiraeConfig: width, hidden, layers, seq_len, batch_size and mc_samples must be >= 1")
         if not 0.0 <= self.dropout < 1.0:

@@ -20,11 +20,11 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from wearpose.errors import ConfigError
-from wearpose.estimators.configio import ConfigIO
+from wearpose.estimators.trainconfig import TrainConfig
 
 
-@dataclass(frozen=True)
-class EmposeConfig(ConfigIO):
+@dataclass(frozen=True, kw_only=True)
+class EmposeConfig(TrainConfig):
     """LGD-RNN and training settings.
 
     Model: ``hidden`` LSTM width (``rnn_layers`` layers), ``width`` / ``mlp_layers`` of the
@@ -38,15 +38,15 @@ class EmposeConfig(ConfigIO):
     model of the training simulation (``"default"`` / ``"none"``), ``offsets`` subject offsets
     (``"random"`` synthetic subjects per sequence; ``"rot"`` = their rotations only, translations
     zero in the training data and in L_r, the "no t" ablation of Table 3; ``"none"`` = identity,
-    the "no [R|t]" ablation), ``seed``.
+    the "no [R|t]" ablation).
     Ablations of Table 3 (defaults = the full model): ``inputs`` the measured modalities the
     network sees and L_r compares (``"both"``; ``"position"`` = "pos only", ``"orientation"`` =
     "ori only"), ``init`` the start of LGD (``"rnn"`` = Omega^(0) from the RNN; ``"mean"`` = "no
     RNN": one learned constant Omega^(0) for every frame, initialised at the mean training pose
     and mean shape, so LGD runs frame-wise like the original LGD).
-    Optimisation: ``lr``, ``lr_schedule`` (``constant`` / ``cosine``), ``lr_min_factor``,
-    ``batch_size``, ``epochs``, ``grad_clip`` (max global grad norm, 0 = off), ``val_clips``
-    (validation clips used each epoch, 0 = all).
+    Optimisation: ``epochs``, and :class:`~wearpose.estimators.trainconfig.TrainConfig`'s
+    ``seed``, ``val_clips``, ``lr``, ``lr_schedule`` (``constant`` / ``cosine``),
+    ``lr_min_factor``, ``batch_size``, ``grad_clip``; EM-POSE's defaults: lr 1e-4, batch 12.
     Network: ``model`` = ``"lgd"`` (LGD-RNN, default) or a learned baseline of Table 2,
     ``"twostage"`` (:mod:`wearpose.estimators.empose.twostage`, supp. Sec. 9) or
     ``"resnet"`` / ``"birnn"`` (:mod:`wearpose.estimators.empose.baselines`; ``width`` /
@@ -78,14 +78,9 @@ class EmposeConfig(ConfigIO):
     window_stride: int = 16
     train_noise: str = "default"
     offsets: str = "random"
-    seed: int = 0
     lr: float = 1e-4
-    lr_schedule: str = "constant"
-    lr_min_factor: float = 0.1
     batch_size: int = 12
     epochs: int = 50
-    grad_clip: float = 1.0
-    val_clips: int = 0
     model: str = "lgd"
     inputs: str = "both"
     init: str = "rnn"
@@ -93,14 +88,13 @@ class EmposeConfig(ConfigIO):
     mapper_input: str = "raw"
 
     def __post_init__(self) -> None:
+        super().__post_init__()  # the shared training fields (TrainConfig)
         if self.sensors not in (6, 12):
             raise ConfigError(f"EmposeConfig.sensors: expected 6 or 12, got {self.sensors!r}")
         if self.rep not in ("rot6d", "axis_angle"):
             raise ConfigError(f"EmposeConfig.rep: expected 'rot6d' or 'axis_angle', got {self.rep!r}")
         if self.iterations < 0 or self.mlp_layers < 1 or self.rnn_layers < 1:
             raise ConfigError("EmposeConfig: iterations >= 0, mlp_layers >= 1 and rnn_layers >= 1 required")
-        if self.lr_schedule not in ("constant", "cosine"):
-            raise ConfigError(f"EmposeConfig.lr_schedule: expected 'constant' or 'cosine', got {self.lr_schedule!r}")
         if self.train_noise not in ("default", "none") or self.offsets not in ("random", "rot", "none"):
             raise ConfigError(f"EmposeConfig: train_noise must be 'default'/'none' and offsets 'random'/'rot'/'none', "
                               f"got {self.train_noise!r} / {self.offsets!r}")

@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from wearpose.errors import ConfigError
-from wearpose.estimators.configio import ConfigIO
+from wearpose.estimators.trainconfig import TrainConfig
 
 #: SMPL joints MI-Poser reports (Fig. 5 "upper body"): pelvis (the alignment root), the spine,
 #: neck, collars, head, shoulders, elbows and wrists.
@@ -39,8 +39,8 @@ PREDICTED_JOINTS = 22
 FIXED_LOSS: dict[str, Any] = {"rot_loss": "geodesic", "spine_rot_weight": 5.0, "lambda_twist": 1.0}
 
 
-@dataclass(frozen=True)
-class MiposerConfig(ConfigIO):
+@dataclass(frozen=True, kw_only=True)
+class MiposerConfig(TrainConfig):
     """Network, data and optimisation settings (see module doc).
 
     Network (``avatarposer``): ``d_model`` width, ``layers`` encoder layers, ``heads`` attention
@@ -60,9 +60,10 @@ class MiposerConfig(ConfigIO):
     bone beyond the limit, rad; 0 = off). The defaults keep a stored config's old loss.
     Data: ``rate`` Hz, ``window`` frames, ``stride`` frames between training windows,
     ``train_noise`` the simulated sensors' error model (``default`` / ``none``), ``tpose_s`` /
-    ``blend_s`` the calibration T-pose held before each clip and the blend into the clip, ``seed``.
-    Optimisation: ``lr``, ``lr_schedule``, ``lr_min_factor``, ``batch_size``, ``epochs``,
-    ``grad_clip``, ``val_clips`` (0 = all).
+    ``blend_s`` the calibration T-pose held before each clip and the blend into the clip.
+    Optimisation: ``epochs``, and :class:`~wearpose.estimators.trainconfig.TrainConfig`'s
+    ``seed``, ``val_clips``, ``lr``, ``lr_schedule``, ``lr_min_factor``, ``batch_size``,
+    ``grad_clip``; MI-Poser's default schedule: cosine.
     """
 
     model: str = "avatarposer"
@@ -88,16 +89,11 @@ class MiposerConfig(ConfigIO):
     train_noise: str = "default"
     tpose_s: float = 1.0
     blend_s: float = 0.5
-    seed: int = 0
-    lr: float = 1e-3
     lr_schedule: str = "cosine"
-    lr_min_factor: float = 0.1
-    batch_size: int = 32
     epochs: int = 100
-    grad_clip: float = 1.0
-    val_clips: int = 0
 
     def __post_init__(self) -> None:
+        super().__post_init__()  # the shared training fields (TrainConfig)
         if self.model not in ("avatarposer", "imuposer"):
             raise ConfigError(f"MiposerConfig.model: expected 'avatarposer' or 'imuposer', got {self.model!r}")
         if self.wrists not in (1, 2):
@@ -110,8 +106,6 @@ class MiposerConfig(ConfigIO):
             raise ConfigError(f"MiposerConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
         if self.rot_loss not in ("l1_6d", "geodesic"):
             raise ConfigError(f"MiposerConfig.rot_loss: expected 'l1_6d' or 'geodesic', got {self.rot_loss!r}")
-        if self.lr_schedule not in ("constant", "cosine"):
-            raise ConfigError(f"MiposerConfig.lr_schedule: expected 'constant' or 'cosine', got {self.lr_schedule!r}")
 
     @property
     def kit(self) -> str:

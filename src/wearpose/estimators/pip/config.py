@@ -21,12 +21,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from wearpose.errors import ConfigError
-from wearpose.estimators.configio import ConfigIO
+from wearpose.estimators.trainconfig import TrainConfig
 from wearpose.estimators.pip.sitting import STAND_HOLD_S, TRANSITIONS
 
 
-@dataclass(frozen=True)
-class PipConfig(ConfigIO):
+@dataclass(frozen=True, kw_only=True)
+class PipConfig(TrainConfig):
     """PIP kinematics settings.
 
     Model: ``hidden`` LSTM width (``rnn_layers`` layers) of every RNN, ``dropout`` on each RNN's
@@ -47,10 +47,9 @@ class PipConfig(ConfigIO):
     of a sit-down over many seconds, coexist with the corpus's short clips), ``sitting_window``
     (0: the synthetic sitting clips are windowed like the corpus; N > 0: windows of N frames
     every N // 2 for them, e.g. long windows for motion and short ones for sitting),
-    ``train_noise`` IMU
-    error model (``default`` / ``none``), ``max_train_clips`` (0 = whole train split),
-    ``val_clips`` (validation clips per epoch, 0 = all), ``seed``, ``sitting_clips`` synthetic
-    sitting clips (:mod:`~wearpose.estimators.pip.sitting`; the corpus has none) added to the
+    ``train_noise`` IMU error model (``default`` / ``none``), ``max_train_clips`` (0 = whole
+    train split), ``sitting_clips`` synthetic sitting clips
+    (:mod:`~wearpose.estimators.pip.sitting`; the corpus has none) added to the
     train split (and a tenth as many, at least 4, to val); 0 = corpus only; ``sitting_stand_s``
     the range of their standing holds, s (seated holds: 3-20 s; ``(3, 20)`` = balanced);
     ``sitting_transitions`` how they sit down and stand up (``slerp``: pelvis fixed, no lean, the
@@ -62,8 +61,9 @@ class PipConfig(ConfigIO):
     image of every clip; ``aug_speed_copies`` adds that many copies of every clip played at a
     speed drawn per clip log-uniformly from ``aug_speed_range`` (each mirrored with probability
     1/2 when ``aug_mirror``). Validation and test are never augmented.
-    Optimisation: ``lr``, ``lr_schedule``, ``lr_min_factor``, ``batch_size``, ``epochs``,
-    ``grad_clip``.
+    Optimisation: ``epochs``, and :class:`~wearpose.estimators.trainconfig.TrainConfig`'s
+    ``seed``, ``val_clips``, ``lr``, ``lr_schedule``, ``lr_min_factor``, ``batch_size``,
+    ``grad_clip``; PIP's default batch: 256.
     """
 
     TUPLE_FIELDS = {"init_widths": int, "vel_windows": int, "aug_speed_range": float, "sitting_stand_s": float}
@@ -90,8 +90,6 @@ class PipConfig(ConfigIO):
     sitting_window: int = 0
     train_noise: str = "default"
     max_train_clips: int = 0
-    val_clips: int = 0
-    seed: int = 0
     sitting_clips: int = 0
     sitting_stand_s: tuple[float, float] = STAND_HOLD_S
     sitting_transitions: str = "slerp"
@@ -99,20 +97,15 @@ class PipConfig(ConfigIO):
     aug_mirror: bool = False
     aug_speed_copies: int = 0
     aug_speed_range: tuple[float, float] = (0.8, 1.25)
-    lr: float = 1e-3
-    lr_schedule: str = "constant"
-    lr_min_factor: float = 0.1
     batch_size: int = 256
     epochs: int = 100
-    grad_clip: float = 1.0
 
     def __post_init__(self) -> None:
+        super().__post_init__()  # the shared training fields (TrainConfig)
         if self.hidden < 1 or self.rnn_layers < 1:
             raise ConfigError("PipConfig: hidden >= 1 and rnn_layers >= 1 required")
         if not 0.0 <= self.dropout < 1.0:
             raise ConfigError(f"PipConfig.dropout: expected 0 <= p < 1, got {self.dropout!r}")
-        if self.lr_schedule not in ("constant", "cosine"):
-            raise ConfigError(f"PipConfig.lr_schedule: expected 'constant' or 'cosine', got {self.lr_schedule!r}")
         if self.train_noise not in ("default", "none"):
             raise ConfigError(f"PipConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
         if self.seq_len < 2 or self.window_stride < 1:
