@@ -48,3 +48,19 @@ def test_cached_clips_builds_once_then_loads_the_same(tmp_path: Path):
     assert a["clip_ids"] == b["clip_ids"] == ["a", "b"] and a["fingerprint"] == b["fingerprint"] == "fp"
     for k in ("x", "m", "clip", "starts", "lengths"):
         assert torch.equal(a[k], b[k]) and a[k].dtype == b[k].dtype
+
+
+def test_clip_data_counts_the_frames_of_its_clips():
+    from dataclasses import dataclass
+
+    from wearpose.estimators.clipstore import ClipData
+
+    @dataclass(kw_only=True)
+    class Split(ClipData):
+        x: torch.Tensor
+
+    d = concat_clips([3, 1, 4], lambda T: _clip(T, 1.0), ("x",))
+    s = Split(x=d["x"], starts=d["starts"], lengths=d["lengths"], clip_ids=["a", "b", "c"], fingerprint="fp")
+    assert s.num_frames == s.x.shape[0] == 8 and s.settings == {}
+    empty = concat_clips([], lambda T: _clip(T, 1.0), ("x",))
+    assert Split(x=empty["x"], starts=empty["starts"], lengths=empty["lengths"], clip_ids=[], fingerprint="").num_frames == 0

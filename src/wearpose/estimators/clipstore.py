@@ -7,17 +7,43 @@ the first axis, ``(F, ...)``) and which per clip (stacked, ``(C, ...)``); it get
 with ``starts`` / ``lengths`` ``(C,)`` (first frame and frame count of every clip, long) and,
 when asked, ``clip`` ``(F,)`` (the clip index of every frame). :func:`cached_clips` loads such a
 dict from its cache file or builds and saves it atomically (each process through its own
-temporary file: several torchrun ranks may build the same file at once).
+temporary file: several torchrun ranks may build the same file at once). :class:`ClipData` is
+the base of the methods' split classes (``EmposeData``, ``PipData``, ...): the bookkeeping they
+share; each adds its tensors.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 import torch
 
 from wearpose.fileio import atomic_torch_save
+
+
+@dataclass(kw_only=True)
+class ClipData:
+    """One split of clips, frame-concatenated (a method's subclass adds its ``(F, ...)`` tensors).
+
+    Attributes:
+        starts, lengths: ``(C,)`` long, first frame and frame count of every clip.
+        clip_ids: the ``C`` clip ids, in order.
+        fingerprint: of the clip ids and the settings that made the data (the cache key).
+        settings: those settings (empty where a method does not keep them).
+    """
+
+    starts: torch.Tensor
+    lengths: torch.Tensor
+    clip_ids: list[str]
+    fingerprint: str
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def num_frames(self) -> int:
+        """``F``, the frames of all clips."""
+        return int(self.lengths.sum())
 
 
 def concat_clips(clips: Iterable[Any], one: Callable[[Any], dict[str, torch.Tensor]], frame_keys: Sequence[str], *,

@@ -41,7 +41,7 @@ from wearpose.body.skeleton import JOINT_INDEX, NUM_JOINTS
 from wearpose.estimators.birae.config import BiraeConfig
 from wearpose.estimators.birae.representations import SENSORS, angular_rate, features, pose_to_target, relative_orientations
 from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.clipstore import cached_clips, concat_clips
+from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips
 from wearpose.estimators.seeding import clip_seed
 from wearpose.sensors import SITE_SEGMENT, MimuNoise, get_kit, simulate_mimu
 
@@ -174,8 +174,8 @@ def make_recording(R_world: torch.Tensor, fps: float, sim: dict[str, torch.Tenso
     return Recording.from_stacked(infos, ts, ch, ground_truth=motion, meta=dict(meta or {}))
 
 
-@dataclass
-class BiraeData:
+@dataclass(kw_only=True)
+class BiraeData(ClipData):
     """One split, frame-concatenated.
 
     Attributes:
@@ -189,14 +189,6 @@ class BiraeData:
     rate: torch.Tensor
     rate_aug: torch.Tensor
     target: torch.Tensor
-    starts: torch.Tensor
-    lengths: torch.Tensor
-    clip_ids: list[str]
-    fingerprint: str
-
-    @property
-    def num_frames(self) -> int:
-        return int(self.target.shape[0])
 
     def windows(self, seq_len: int, min_len: int) -> torch.Tensor:
         """``(W, 2)`` (first frame, length) of consecutive non-overlapping subsequences (Sec. IV-E),

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 
 from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.clipstore import cached_clips, concat_clips
+from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.inputs import hold_last_valid
 from wearpose.estimators.seeding import clip_seed
@@ -124,8 +124,8 @@ def simulate_clip(motion: Any, cfg: EmposeConfig, body: Any, seed: int, noise: s
             "off_R": sim.em_offsets.R.float(), "off_t": sim.em_offsets.t.float(), "motion": m, "sim": sim}
 
 
-@dataclass
-class EmposeData:
+@dataclass(kw_only=True)
+class EmposeData(ClipData):
     """One split, simulated and frame-concatenated.
 
     Attributes:
@@ -145,15 +145,6 @@ class EmposeData:
     betas: torch.Tensor
     off_R: torch.Tensor
     off_t: torch.Tensor
-    starts: torch.Tensor
-    lengths: torch.Tensor
-    clip_ids: list[str]
-    fingerprint: str
-    settings: dict[str, Any]
-
-    @property
-    def num_frames(self) -> int:
-        return int(self.position.shape[0])
 
     def windows(self, seq_len: int, stride: int) -> torch.Tensor:
         """``(W, 2)`` (first frame, clip index) of every window of ``seq_len`` frames inside one clip."""

@@ -37,7 +37,7 @@ import torch
 from wearpose.calibration import CalibrationResult, apply_miposer, calibrate, em_to_world
 from wearpose.errors import ShapeError
 from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.clipstore import cached_clips, concat_clips
+from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips
 from wearpose.estimators.empose.data import num_batches
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.inputs import hold_last_valid
@@ -173,8 +173,8 @@ def simulate_clip(motion: Any, cfg: MiposerConfig, body: Any, seed: int, noise: 
             "betas": mm.betas.float(), "prefix": prefix, "motion": mm, "sim": sim}
 
 
-@dataclass
-class MiposerData:
+@dataclass(kw_only=True)
+class MiposerData(ClipData):
     """One split, simulated, calibrated and frame-concatenated.
 
     Attributes:
@@ -190,15 +190,6 @@ class MiposerData:
     pose6: torch.Tensor
     in_clip: torch.Tensor
     clip: torch.Tensor
-    starts: torch.Tensor
-    lengths: torch.Tensor
-    clip_ids: list[str]
-    fingerprint: str
-    settings: dict[str, Any]
-
-    @property
-    def num_frames(self) -> int:
-        return int(self.R.shape[0])
 
     def windows(self, window: int, stride: int, clip_only: bool = False) -> torch.Tensor:
         """``(N,)`` last frame of every ``window``-frame window inside one clip, every ``stride``

@@ -34,7 +34,7 @@ import torch
 
 from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.clipstore import cached_clips, concat_clips
+from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips
 from wearpose.estimators.empose.data import num_batches
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.pip.config import PipConfig
@@ -159,8 +159,8 @@ def simulate_clip(motion: Any, cfg: PipConfig, body: Any, seed: int, noise: str 
 TENSORS = ("x", "leaf", "joints", "rot6", "vel", "contact")
 
 
-@dataclass
-class PipData:
+@dataclass(kw_only=True)
+class PipData(ClipData):
     """One split, simulated and frame-concatenated: ``x`` ``(F, 72)`` and the targets of
     :func:`root_frame_targets` (``leaf``, ``joints``, ``rot6``, ``vel``, ``contact``), ``starts``
     / ``lengths`` ``(C,)`` per clip, ``clip_ids``, ``fingerprint``, ``settings``."""
@@ -171,15 +171,6 @@ class PipData:
     rot6: torch.Tensor
     vel: torch.Tensor
     contact: torch.Tensor
-    starts: torch.Tensor
-    lengths: torch.Tensor
-    clip_ids: list[str]
-    fingerprint: str
-    settings: dict[str, Any]
-
-    @property
-    def num_frames(self) -> int:
-        return int(self.x.shape[0])
 
     def windows(self, seq_len: int, stride: int, min_len: int = 0, sitting_len: int = 0) -> torch.Tensor:
         """``(W, 2)`` (first frame, length) of the training windows.
