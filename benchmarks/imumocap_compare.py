@@ -38,6 +38,28 @@ Alignments (each stated, none fitted to the reference):
   ``SMPL_TO_X_FORWARD_BODY``); a constant rotation computed from the two calibrations, whose
   angle is reported.
 
+Diagnostics of the residual (one more aligned row each, ``compare --also FILE...``):
+
+- ``reference --order tree``: imumocap with the IMUs applied parents first. ``Model.set_pose_from_imus``
+  sets each link's joint from its IMU against its parent's pose *at that moment*; x-io's example
+  passes the devices in folder order (``Path.iterdir``, filesystem-dependent; here Right Foot,
+  Right Upper Leg, Left Upper Leg, Pelvis, ...), so a child applied before its parent is solved
+  against the parent's previous frame.
+- ``samples`` then ``reference --samples FILE``: imumocap on the very rows wearpose's grid used
+  (nearest sample per device, no slerp), at wearpose's grid instants.
+
+Full run (the results file)::
+
+    /work/venv312/bin/python benchmarks/imumocap_compare.py reference --out /tmp/imumocap_angles.json
+    /work/venv312/bin/python benchmarks/imumocap_compare.py reference --order tree --out /tmp/imumocap_tree.json
+    .venv/bin/python benchmarks/imumocap_compare.py samples --out /tmp/wearpose_samples.json
+    /work/venv312/bin/python benchmarks/imumocap_compare.py reference --samples /tmp/wearpose_samples.json \
+        --out /tmp/imumocap_file_same.json
+    /work/venv312/bin/python benchmarks/imumocap_compare.py reference --order tree --samples /tmp/wearpose_samples.json \
+        --out /tmp/imumocap_tree_same.json
+    .venv/bin/python benchmarks/imumocap_compare.py compare --also /tmp/imumocap_tree.json \
+        /tmp/imumocap_file_same.json /tmp/imumocap_tree_same.json
+
 Writes ``benchmarks/results/imumocap_compare.{md,json}``.
 """
 
@@ -48,7 +70,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 HERE = Path(__file__).resolve().parent
 LOG = HERE.parents[1] / "shared" / "real-sensors" / "ximu3-lower-body"
@@ -89,8 +111,12 @@ def lower_body_model() -> Any:
     return Model(pelvis, joints)
 
 
-def reference(log: Path, fps: float, out: Path) -> None:
-    """Part 1: imumocap's solution of the log (module doc), written to ``out`` (JSON)."""
+def reference(log: Path, fps: float, out: Path, samples: Path | None = None, order: str = "file") -> None:
+    """Part 1: imumocap's solution of the log (module doc), written to ``out`` (JSON). With
+    ``samples`` (from part ``samples``): imumocap on the very rows wearpose's grid used, no
+    resampling (the diagnostic of the residual). ``order``: the order the IMUs are applied in each
+    frame, ``file`` (x-io's example: the device folders as ``ximu3csv.read`` lists them) or
+    ``tree`` (the model's links, parents first; module doc)."""
     import imumocap
     import imumocap.solvers
     import numpy as np
@@ -100,10 +126,26 @@ def reference(log: Path, fps: float, out: Path) -> None:
 
     raw = ximu3csv.read(log, ximu3csv.DataMessageType.QUATERNION)
     first_us = min(int(d.quaternion.timestamp[0]) for d in raw)
-    devices = ximu3csv.resample(raw, fps)
-    n = len(devices[0].quaternion.timestamp)
-    frames = [{d.device_name: Matrix(quaternion=d.quaternion.quaternion.wxyz[i]) for d in devices} for i in range(n)]
+    if samples is None:  # x-io's example: slerp-resampled to fps on one grid
+        devices = ximu3csv.resample(raw, fps)
+        stamps = [float(t) for t in devices[0].quaternion.timestamp]
+        frames = [{d.device_name: Matrix(quaternion=d.quaternion.quaternion.wxyz[i]) for d in devices}
+                  for i in range(len(stamps))]
+    else:  # the raw rows wearpose's grid used (part "samples"), instants where every device has one
+        want = json.loads(samples.read_text())
+        rows = {d.device_name: {int(t): i for i, t in enumerate(d.quaternion.timestamp)} for d in raw}
+        q = {d.device_name: d.quaternion.quaternion.wxyz for d in raw}
+        stamps, frames = [], []
+        for k, t in enumerate(want["timestamps_us"]):
+            use = {n: want["devices"][n][k] for n in rows}
+            if all(u is not None for u in use.values()):
+                stamps.append(float(t))
+                frames.append({n: Matrix(quaternion=q[n][rows[n][int(u)]]) for n, u in use.items()})
+        devices = raw
+    n = len(frames)
     model = lower_body_model()
+    if order == "tree":  # parents before children: each joint against its parent's current pose
+        frames = [{name: f[name] for name in model.links if name in f} for f in frames]
     heading = imumocap.solvers.calibrate(model, frames[0], mounting=Mounting.Z_BACKWARD)
     rot = {j: [] for j in JOINTS}
     ang = {j: [] for j in JOINTS}
@@ -114,14 +156,16 @@ def reference(log: Path, fps: float, out: Path) -> None:
         for j, (link, _) in JOINTS.items():
             rot[j].append(model.links[link].joint.rotation.tolist())
             ang[j].append(list(model.joints[j].get()))
-    res = {"imumocap": imumocap_version(), "log": str(log), "fps": fps, "calibration": "frame 0, Mounting.Z_BACKWARD",
-           "heading_deg": float(heading), "first_quaternion_us": first_us,
-           "timestamps_us": [float(t) for t in devices[0].quaternion.timestamp],
+    res = {"imumocap": imumocap_version(), "log": str(log), "fps": fps if samples is None else want["rate_hz"],
+           "calibration": "frame 0, Mounting.Z_BACKWARD", "heading_deg": float(heading), "first_quaternion_us": first_us,
+           "order": order, "timestamps_us": stamps, "samples": "slerp-resampled (ximu3csv.resample)" if samples is None else
+           "the raw rows wearpose's nearest-sample grid used",
            "alignment": {j: model.joints[j].alignment.rotation.tolist() for j in JOINTS},
            "rotation": rot, "angles_deg": ang, "pelvis_global": pelvis, "devices": [d.device_name for d in devices]}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(res))
-    print(f"imumocap {res['imumocap']}: {n} frames at {fps} Hz, heading {heading:.2f} deg -> {out}")
+    print(f"{res['imumocap']}: {n} frames ({res['samples']}, order {order}: {list(frames[0])}), heading "
+          f"{heading:.2f} deg -> {out}")
     del np
 
 
@@ -161,7 +205,41 @@ def wearpose_run(log: Path, window: tuple[float, float] | None) -> tuple[Any, An
     return rec, track, cal, names, np.asarray(grid.sensor(names[0]).timestamps, dtype=np.float64)
 
 
-def compare(ref_path: Path, log: Path, out_dir: Path) -> None:
+def samples(log: Path, out: Path) -> None:
+    """Part "samples": for every instant of wearpose's grid, the raw timestamp (us) of each
+    device's sample the segment estimate used there (nearest valid sample within half a sensor
+    period; None where the grid masked it), for ``reference --samples``. Checked against the
+    grid: the chosen sample's quaternion is the grid's orientation at that instant."""
+    import numpy as np
+    import torch
+
+    from wearpose.geometry import geodesic_angle
+
+    rec, track, _, names, grid_t = wearpose_run(log, None)
+    from wearpose.estimators.inputs import nearest_sample_grid
+
+    grid = nearest_sample_grid(rec.to_canonical(), names)
+    canon = rec.to_canonical()
+    devs = {d["device"].lower().replace(" ", "_"): d for d in rec.meta["import"]["devices"]}
+    t0_us = min(d["clock_start_us"] for d in devs.values())
+    out_dev, mismatch = {}, 0
+    for n in names:
+        s, g = canon.sensor(n), grid.sensor(n)
+        ts = np.asarray(s.timestamps, np.float64)
+        i = np.clip(np.searchsorted(ts, grid_t), 1, len(ts) - 1)
+        i = np.where(np.abs(ts[i - 1] - grid_t) <= np.abs(ts[i] - grid_t), i - 1, i)
+        use = g.valid & s.valid[i] & (np.abs(ts[i] - grid_t) <= 0.5 / float(s.info.rate))
+        err = geodesic_angle(torch.from_numpy(np.asarray(s.orientation)[i[use]]).double(),
+                             torch.from_numpy(np.asarray(g.orientation)[use]).double())
+        mismatch += int((err > 1e-6).sum())
+        out_dev[devs[n]["device"]] = [int(round(ts[k] * 1e6)) + t0_us if u else None for k, u in zip(i, use)]
+    res = {"rate_hz": float(track.fps), "timestamps_us": [float(t * 1e6 + t0_us) for t in grid_t], "devices": out_dev,
+           "mismatched_samples": mismatch}
+    out.write_text(json.dumps(res))
+    print(f"{len(grid_t)} grid instants, {len(names)} devices, {mismatch} chosen samples differing from the grid -> {out}")
+
+
+def compare(ref_path: Path, log: Path, out_dir: Path, extra: Sequence[Path] = ()) -> None:
     """Part 2: the RMS table (module doc)."""
     import numpy as np
     import torch
@@ -177,10 +255,18 @@ def compare(ref_path: Path, log: Path, out_dir: Path) -> None:
     # Our decomposition reproduces imumocap's own angles from its own rotations (same definition).
     decomp_err = max(float((zyx_angles_deg(ref_R[j], ref_A[j]) - ref_ang[j]).abs().max()) for j in JOINTS)
     runs = []
-    t_first_ref = (ref["timestamps_us"][0] - ref["first_quaternion_us"]) / 1e6
-    for label, window, same_axes in (("as shipped", None, False),
-                                     ("same calibration instant", (t_first_ref, t_first_ref + 0.1), False),
-                                     ("same instant + same body axes", (t_first_ref, t_first_ref + 0.1), True)):
+    cases = []
+    main_ref = ref
+    for r, tag in [(ref, "")] + [(json.loads(p.read_text()), "") for p in extra]:
+        tag = "" if r is ref else f"imumocap {r['order']} order, {'slerp 30 Hz' if r['samples'].startswith('slerp') else 'wearpose samples'}: "
+        t1 = (r["timestamps_us"][0] - r["first_quaternion_us"]) / 1e6
+        cal_window = (t1, t1 + 0.1)
+        cases += [(r, tag + "same instant + same body axes", cal_window, True)] if tag else \
+            [(r, "as shipped", None, False), (r, "same calibration instant", cal_window, False),
+             (r, "same instant + same body axes", cal_window, True)]
+    for ref, label, window, same_axes in cases:
+        ref_R = {j: torch.tensor(ref["rotation"][j], dtype=torch.float64) for j in JOINTS}
+        ref_ang = {j: torch.tensor(ref["angles_deg"][j], dtype=torch.float64) for j in JOINTS}
         rec, track, cal, names, grid_t = wearpose_run(log, window)
         t0_us = min(d["clock_start_us"] for d in rec.meta["import"]["devices"])
         t_ref = (np.asarray(ref["timestamps_us"]) - t0_us) / 1e6
@@ -229,14 +315,16 @@ def compare(ref_path: Path, log: Path, out_dir: Path) -> None:
                        "mean_deg": {a: float(d[:, k].mean()) for k, a in enumerate(AXES)},
                        "geodesic_rms_deg": float(geo.pow(2).mean().sqrt()),
                        "ref_range_deg": {a: float(ref_ang[j][:, k].max() - ref_ang[j][:, k].min()) for k, a in enumerate(AXES)}}
-        runs.append({"alignment": label, "wearpose_calibration_window_s": track.extras["calibration_window_s"],
+        runs.append({"alignment": label, "reference_samples": ref["samples"],
+                     "wearpose_calibration_window_s": track.extras["calibration_window_s"],
                      "body_axes_rotation_deg": axes_deg, "body_axes_yaw_deg": axes_yaw_deg,
                      "body_axes_tilt_deg": axes_tilt_deg, "frames_compared": int(ok.sum()), "frames_reference": len(t_ref),
                      "joints": rows})
         print(label, int(ok.sum()), {j: round(r["geodesic_rms_deg"], 2) for j, r in rows.items()})
-    res = {"reference": {k: ref[k] for k in ("imumocap", "fps", "calibration", "heading_deg")},
+    res = {"reference": {k: main_ref[k] for k in ("imumocap", "fps", "calibration", "heading_deg", "order", "devices")},
            "log": str(log), "decomposition_check_max_abs_deg": decomp_err, "runs": runs,
-           "command": "benchmarks/imumocap_compare.py reference (Python 3.12 venv) then compare (.venv)"}
+           "command": "benchmarks/imumocap_compare.py: reference, reference --order tree, samples, reference --samples "
+                      "(file and tree order), compare --also (module doc)"}
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "imumocap_compare.json").write_text(json.dumps(res, indent=1))
     (out_dir / "imumocap_compare.md").write_text(markdown(res))
@@ -247,7 +335,8 @@ def markdown(res: dict[str, Any]) -> str:
     """The table: RMS per joint and axis for each alignment."""
     r0 = res["reference"]
     md = [f"Segment estimate vs {r0['imumocap']} on the real x-IMU3 lower-body log; imumocap at {r0['fps']} Hz, "
-          f"calibrated on its {r0['calibration']} (heading {r0['heading_deg']:.2f} deg). Angles as imumocap's "
+          f"calibrated on its {r0['calibration']} (heading {r0['heading_deg']:.2f} deg), IMUs applied in {r0['order']} order "
+          f"as x-io's example does ({', '.join(r0['devices'])}). Angles as imumocap's "
           "`Joint.get()` (ZYX Euler of the aligned joint rotation: alpha about z, beta about y, gamma about x), degrees. "
           f"Decomposition check (ours on imumocap's rotations vs its angles): {res['decomposition_check_max_abs_deg']:.2g} deg.",
           "", "| alignment | frames | joint | RMS alpha | RMS beta | RMS gamma | geodesic RMS | mean alpha / beta / gamma | "
@@ -277,17 +366,27 @@ def main() -> None:
     r.add_argument("--log", type=Path, default=LOG)
     r.add_argument("--fps", type=float, default=30.0, help="imumocap's resampling rate (x-io's example: 30)")
     r.add_argument("--out", type=Path, default=Path("/tmp/imumocap_angles.json"))
+    r.add_argument("--samples", type=Path, default=None, help="the rows wearpose used (part samples), no resampling")
+    r.add_argument("--order", choices=("file", "tree"), default="file",
+                   help="IMUs applied per frame in folder order (x-io's example) or parents first")
+    sm = sub.add_parser("samples", help="the raw rows wearpose's grid uses, for reference --samples (wearpose's venv)")
+    sm.add_argument("--log", type=Path, default=LOG)
+    sm.add_argument("--out", type=Path, default=Path("/tmp/wearpose_samples.json"))
     c = sub.add_parser("compare", help="the segment estimate against the reference file (wearpose's venv)")
     c.add_argument("--reference", type=Path, default=Path("/tmp/imumocap_angles.json"))
     c.add_argument("--log", type=Path, default=LOG)
     c.add_argument("--out", type=Path, default=HERE / "results")
+    c.add_argument("--also", type=Path, nargs="*", default=[], help="more reference files (--order tree, --samples): "
+                   "one aligned row each, the diagnostics of the residual")
     a = ap.parse_args()
     if a.part == "reference":
         if sys.version_info < (3, 12):
             sys.exit("the reference part needs Python >= 3.12 with imumocap==1.4.0 and ximu3csv==1.0.5 (module doc)")
-        reference(a.log.resolve(), a.fps, a.out)
+        reference(a.log.resolve(), a.fps, a.out, a.samples, a.order)
+    elif a.part == "samples":
+        samples(a.log.resolve(), a.out)
     else:
-        compare(a.reference, a.log.resolve(), a.out)
+        compare(a.reference, a.log.resolve(), a.out, a.also)
 
 
 if __name__ == "__main__":

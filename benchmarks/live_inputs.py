@@ -1,5 +1,5 @@
-"""Live device inputs end to end (issue 26 acceptance): for each of LSL, OSC (NGIMU profile) and
-the Xsens MVN streamer, ``wearpose stream emulate INPUT`` plays a simulated recording for 60 s
+"""Live device inputs end to end (issue 26 acceptance): for each of LSL, OSC (NGIMU profile),
+the Xsens MVN streamer and x-IMU3 (the ximu3 package over TCP), ``wearpose stream emulate INPUT`` plays a simulated recording for 60 s
 on 127.0.0.1 into ``wearpose serve --input INPUT`` with a shipped model, as a user starts them
 (two processes). A WebSocket subscriber collects every pose; the same model stepping through the
 same frames in this process is the reference. Two runs per input: clean (frames lost, every
@@ -9,6 +9,7 @@ masked). The server runs with ``--max-lag 0`` (never shed): on the shared 2-core
 estimator may fall behind real time, and every frame is then estimated late rather than shed.
 
     nice -n 10 python benchmarks/live_inputs.py            # -> benchmarks/results/live_inputs.{md,json}
+    nice -n 10 python benchmarks/live_inputs.py --inputs ximu3 --merge   # replace those inputs' rows only
 
 Recordings: the test-split clip ``--clip`` simulated with default noise (EM: identity sensor
 offsets, since a device stream carries no subject calibration), looped to 60 s. LSL runs with
@@ -43,6 +44,8 @@ CASES: dict[str, tuple[str, float, str, list[str], list[str]]] = {
             ["--lsl-loopback", "--lsl-stream", "wearpose-bench"]),
     "osc": ("imu6", 60.0, "pip_cpu", ["--osc-profile", "ngimu", "--device-rate", "60"], ["--osc-profile", "ngimu"]),
     "mvn": ("imu6", 60.0, "pip_cpu", ["--mvn-port", "19763", "--device-rate", "60"], ["--port", "19763"]),
+    # x-IMU3 over TCP (the emulated devices listen on 127.0.0.1; the server's ximu3 connections connect)
+    "ximu3": ("imu6", 60.0, "pip_cpu", ["--device-rate", "60", "--ximu3-transport", "tcp"], ["--ximu3-transport", "tcp"]),
 }
 
 
@@ -100,6 +103,10 @@ def run(name: str, rec_path: Path, rec: Any, seconds: float, faults: bool, ref: 
         emu_opts = emu_opts + [x for p in ports for x in ("--osc-sensor", p)]
     if name == "mvn":
         serve_opts = serve_opts + ["--mvn-segments", ",".join(rec.names)]
+    if name == "ximu3":
+        ports = osc_ports(rec.names, 17000)
+        serve_opts = serve_opts + [x for p in ports for x in ("--ximu3-sensor", p)]
+        emu_opts = emu_opts + [x for p in ports for x in ("--ximu3-sensor", p)]
     cmd = [sys.executable, "-m", "wearpose.cli", "serve", "--model", model, "--port", "0", "--stride", "1", "--max-lag", "0",
            "--input", name, *serve_opts, "--log-level", "ERROR"]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
@@ -187,6 +194,7 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--clip", default="cmu_daz/05/05_01", help="a test-split clip (looped)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks/results/live_inputs.json"))
+    ap.add_argument("--merge", action="store_true", help="keep the other inputs' rows of --out (their own meta)")
     args = ap.parse_args()
     from wearpose.stream.inputs.lsl import write_loopback_config
 
@@ -213,10 +221,21 @@ def main() -> None:
     meta = {"started": started, "load_average_start": load0, "load_average_end": os.getloadavg(), "cpu": cpu_model(),
             "clip": args.clip, "seconds": args.seconds, **git_state()}
     out = Path(args.out)
-    out.write_text(json.dumps({"meta": meta, "runs": rows}, indent=1))
-    md = (f"# Live inputs end to end (benchmarks/live_inputs.py)\n\n{args.seconds:g} s per run, clip {args.clip}, "
-          f"started {started}, load average {load0[0]:.1f} at the start and {meta['load_average_end'][0]:.1f} at the end "
-          f"(2 cores, shared), commit {meta['commit'][:7]}.\n\n" + table(rows))
+    names = args.inputs.split(",")
+    what = (f"started {started}, load average {load0[0]:.1f} at the start and {meta['load_average_end'][0]:.1f} at the "
+            f"end (2 cores, shared), commit {meta['commit'][:7]}")
+    if args.merge and out.exists():  # the other inputs' rows stay, with their own meta and header text
+        old = json.loads(out.read_text())
+        kept = [r for r in old["runs"] if r["input"] not in names]
+        doc = {**old, "runs": kept + rows, f"meta_{'_'.join(names)}": meta}
+        old_md = out.with_suffix(".md").read_text()
+        intro = old_md[:old_md.index("| input |")].rstrip("\n")
+        md = f"{intro}\n{', '.join(names)} rows: {what}.\n\n" + table(kept + rows)
+    else:
+        doc = {"meta": meta, "runs": rows}
+        md = (f"# Live inputs end to end (benchmarks/live_inputs.py)\n\n{args.seconds:g} s per run, clip {args.clip}, "
+              f"{what}.\n\n" + table(rows))
+    out.write_text(json.dumps(doc, indent=1))
     out.with_suffix(".md").write_text(md)
     print(md)
 
