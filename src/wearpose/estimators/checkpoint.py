@@ -147,6 +147,25 @@ class NetworkCheckpointing:
     ``data_fingerprint``, ``train_command`` and ``meta``.
     """
 
+    def init_state(self, config: Any, body: Any, device: str | torch.device, kit: str | None = None) -> None:
+        """The state every such estimator starts with (before it builds ``self.model``):
+        ``config``, ``device``, ``body`` moved there (the embedded
+        :class:`~wearpose.body.BodyModel` when None), ``kit_name`` (``kit`` or ``config.kit``)
+        and its ``sensor_names``, ``body_asset_id`` of ``body``, ``fps`` = ``config.rate`` (Hz),
+        and empty provenance (``data_fingerprint``, ``train_command``, ``meta``)."""
+        from wearpose.body import BodyModel  # deferred like check_checkpoint's: the body stack loads on use
+        from wearpose.sensors import get_kit
+
+        self.config = config
+        self.device = torch.device(device)
+        self.body = (body or BodyModel()).to(self.device)
+        self.kit_name = kit or config.kit
+        self.sensor_names = get_kit(self.kit_name).sensor_names
+        self.body_asset_id = self.body.asset_id
+        self.fps = float(config.rate)
+        self.data_fingerprint, self.train_command = "", ""
+        self.meta: dict[str, Any] = {}
+
     def to(self, device: str | torch.device) -> Any:
         """Move the network and the body model to ``device``; returns the estimator."""
         self.device = torch.device(device)

@@ -18,8 +18,9 @@ or :func:`prepare`. In order, they:
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import torch
@@ -164,6 +165,46 @@ def hold_last_valid(x: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
         rot = x.shape[2:] == (3, 3)
         out[:, never] = torch.eye(3, dtype=x.dtype) if rot else torch.zeros(x.shape[2:], dtype=x.dtype)
     return out
+
+
+def held_frame(frame: Any, sensor_names: Sequence[str], channels: Sequence[str],
+               last: Sequence[torch.Tensor] | None, *, who: str = "estimator",
+               nan_to_zero: Sequence[str] = ()) -> tuple[tuple[torch.Tensor, ...], torch.Tensor]:
+    """One :class:`~wearpose.estimators.base.SensorFrame` as input in ``sensor_names`` order,
+    online: the per-frame twin of :func:`hold_last_valid`.
+
+    Args:
+        frame: the newest frame (its ``names``, ``valid`` and ``channels``).
+        sensor_names: the estimator's ``S`` sensors, in its order.
+        channels: the channels to return (``"position"``, ``"acceleration"``, ``"orientation"``, ...).
+        last: the previous call's returned tensors (one per channel), or None at the start.
+        who: the estimator named in the error.
+        nan_to_zero: channels whose NaNs (dropped samples) become 0 before the hold.
+
+    Returns:
+        ``(tensors, valid)``: one float32 ``(S, ...)`` tensor per channel, dropped samples held
+        at ``last``, or neutral before any (identity for ``(3, 3)`` rotations, zeros otherwise);
+        ``valid`` ``(S,)`` bool.
+
+    Raises:
+        ShapeError: the frame lacks one of ``sensor_names``.
+    """
+    names = list(frame.names)
+    try:
+        idx = [names.index(n) for n in sensor_names]
+    except ValueError:
+        raise ShapeError(f"frame has sensors {names}; {who} needs {list(sensor_names)}") from None
+    valid = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
+    out = []
+    for i, ch in enumerate(channels):
+        a = np.asarray(frame.channels[ch])[idx]
+        x = torch.as_tensor(np.nan_to_num(a) if ch in nan_to_zero else a, dtype=torch.float32)
+        if last is not None:
+            hold = last[i]
+        else:
+            hold = torch.eye(3).expand_as(x) if x.shape[1:] == (3, 3) else torch.zeros_like(x)
+        out.append(torch.where(valid.reshape(-1, *([1] * (x.dim() - 1))), x, hold))
+    return tuple(out), valid
 
 
 def nearest_sample_grid(recording: Recording, names: tuple[str, ...], rate: float | None = None) -> Recording:

@@ -56,7 +56,7 @@ from wearpose.estimators.birae.representations import (
 from wearpose.estimators.birae.streaming import StreamState, stream_predict, stream_step
 from wearpose.estimators.birae.uncertainty import combine, mc_predict
 from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
-from wearpose.estimators.inputs import InputSpec, prepare
+from wearpose.estimators.inputs import InputSpec, held_frame, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.body.skeleton import MAJOR_JOINTS, NUM_JOINTS
 
@@ -327,15 +327,8 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
             fps: input rate (default: the trained rate); scales the window and the angular rate.
         """
         fps = float(fps or self.fps)
-        names = list(frame.names)
-        try:
-            idx = [names.index(n) for n in self.sensor_names]
-        except ValueError:
-            raise ShapeError(f"frame has sensors {names}; BiRAE needs {list(self.sensor_names)}") from None
-        v = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
-        R = torch.as_tensor(np.nan_to_num(np.asarray(frame.channels["orientation"])[idx]), dtype=torch.float32)
-        hold = self._last_R if self._last_R is not None else torch.eye(3).expand_as(R)
-        R = torch.where(v[:, None, None], R, hold)
+        (R,), v = held_frame(frame, self.sensor_names, ("orientation",),
+                             None if self._last_R is None else (self._last_R,), who="BiRAE", nan_to_zero=("orientation",))
         self._last_R = R
         Rr = relative_orientations(R)
         rate = None

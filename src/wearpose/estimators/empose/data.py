@@ -28,13 +28,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Sequence
 
-import numpy as np
 import torch
 
 from wearpose.estimators.checkpoint import fingerprint
 from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips
 from wearpose.estimators.empose.config import EmposeConfig
-from wearpose.estimators.inputs import hold_last_valid
+from wearpose.estimators.inputs import held_frame, hold_last_valid
 from wearpose.estimators.seeding import clip_seed
 from wearpose.geometry import matrix_to_rot6d, rot6d_to_matrix
 
@@ -50,7 +49,7 @@ def frame_measurements(frame: Any, sensor_names: Sequence[str],
     """One :class:`~wearpose.estimators.base.SensorFrame` as EM input in kit order, online.
 
     Dropped samples are held at ``last`` (the previous returned values), or neutral (zero
-    position, identity orientation) before any: the online twin of :func:`wearpose.estimators.inputs.hold_last_valid`.
+    position, identity orientation) before any (:func:`wearpose.estimators.inputs.held_frame`).
 
     Returns:
         ``p`` ``(S, 3)`` m, ``R`` ``(S, 3, 3)`` (source frame), ``valid`` ``(S,)`` bool.
@@ -58,18 +57,8 @@ def frame_measurements(frame: Any, sensor_names: Sequence[str],
     Raises:
         ShapeError: the frame lacks one of ``sensor_names``.
     """
-    from wearpose.errors import ShapeError
-
-    names = list(frame.names)
-    try:
-        idx = [names.index(n) for n in sensor_names]
-    except ValueError:
-        raise ShapeError(f"frame has sensors {names}; estimator needs {list(sensor_names)}") from None
-    v = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
-    p = torch.as_tensor(np.asarray(frame.channels["position"])[idx], dtype=torch.float32)
-    R = torch.as_tensor(np.asarray(frame.channels["orientation"])[idx], dtype=torch.float32)
-    hold_p, hold_R = last if last is not None else (torch.zeros_like(p), torch.eye(3).expand_as(R))
-    return torch.where(v[:, None], p, hold_p), torch.where(v[:, None, None], R, hold_R), v
+    (p, R), v = held_frame(frame, sensor_names, ("position", "orientation"), last)
+    return p, R, v
 
 
 def rotation_only_offsets(num_sensors: int, seed: int) -> Any:

@@ -72,23 +72,11 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
     lookahead = 0
 
     def __init__(self, config: EmposeConfig | None = None, body: Any = None, device: str | torch.device = "cpu") -> None:
-        from wearpose.body import BodyModel
-        from wearpose.sensors import get_kit
-
-        self.config = config or EmposeConfig.preset("cpu", 12)
-        self.device = torch.device(device)
-        self.body = (body or BodyModel()).to(self.device)
-        self.kit_name = self.config.kit
-        self.sensor_names = get_kit(self.kit_name).sensor_names
-        self.body_asset_id = self.body.asset_id
-        self.fps = float(self.config.rate)
+        self.init_state(config or EmposeConfig.preset("cpu", 12), body, device)
         sites, src = _sites(self.kit_name, self.body)
         self.sites = {**dict(zip(self.sensor_names, sites)), "<em_source>": src}
         self.sensors = VirtualSensors(self.body, sites, src)
         self.model = LGDRNN(self.config, len(self.sensor_names)).to(self.device)
-        self.data_fingerprint = ""
-        self.train_command = ""
-        self.meta: dict[str, Any] = {}
         self._state: tuple[torch.Tensor, torch.Tensor] | None = None
         self._last: tuple[torch.Tensor, torch.Tensor] | None = None
         self._offsets: tuple[torch.Tensor, torch.Tensor] | None = None

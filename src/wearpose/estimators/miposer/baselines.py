@@ -146,19 +146,11 @@ class ImuPoserEstimator(NetworkCheckpointing, Estimator):
     lookahead = 0
 
     def __init__(self, config: MiposerConfig | None = None, body: Any = None, device: str | torch.device = "cpu") -> None:
-        from wearpose.body import BodyModel
-
-        self.config = config or MiposerConfig.preset("cpu", model="imuposer")
-        if self.config.model != "imuposer":
-            raise ShapeError(f"ImuPoserEstimator needs model='imuposer', got {self.config.model!r}")
-        self.device = torch.device(device)
-        self.body = (body or BodyModel()).to(self.device)
-        self.kit_name = KIT
-        self.sensor_names = get_kit(KIT).sensor_names
-        self.body_asset_id = self.body.asset_id
-        self.fps = float(self.config.rate)
+        config = config or MiposerConfig.preset("cpu", model="imuposer")
+        if config.model != "imuposer":
+            raise ShapeError(f"ImuPoserEstimator needs model='imuposer', got {config.model!r}")
+        self.init_state(config, body, device, kit=KIT)
         self.model = ImuPoserNet(self.config, len(self.sensor_names)).to(self.device)
-        self.data_fingerprint, self.train_command, self.meta = "", "", {}
 
     def build_data(self, split: str, **kw: Any) -> MiposerData:
         return build_imu_split(split, self.config, self.body, **kw)

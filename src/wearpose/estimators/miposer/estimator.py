@@ -142,22 +142,11 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
 
     def __init__(self, config: MiposerConfig | None = None, body: Any = None, device: str | torch.device = "cpu",
                  mim: bool = False, mim_config: Any = None) -> None:
-        from wearpose.body import BodyModel
-        from wearpose.sensors import get_kit
-
-        self.config = config or MiposerConfig.preset("cpu")
-        if self.config.model != "avatarposer":
-            raise ShapeError(f"MiposerEstimator needs model='avatarposer', got {self.config.model!r}")
-        self.device = torch.device(device)
-        self.body = (body or BodyModel()).to(self.device)
-        self.kit_name = self.config.kit
-        self.sensor_names = get_kit(self.kit_name).sensor_names
-        self.body_asset_id = self.body.asset_id
-        self.fps = float(self.config.rate)
+        config = config or MiposerConfig.preset("cpu")
+        if config.model != "avatarposer":
+            raise ShapeError(f"MiposerEstimator needs model='avatarposer', got {config.model!r}")
+        self.init_state(config, body, device)
         self.model = AvatarPoserNet(self.config, 1 + self.config.wrists).to(self.device)
-        self.data_fingerprint = ""
-        self.train_command = ""
-        self.meta: dict[str, Any] = {}
         #: ``(t0, t1)`` s of the wearer's T-pose :meth:`estimate` calibrates from when neither the
         #: call nor the recording gives a calibration (set from a recording's marked T-pose by
         #: :func:`wearpose.estimators.run.use_calibration_window`); None: no such window.

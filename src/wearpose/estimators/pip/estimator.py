@@ -44,7 +44,7 @@ import torch
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
-from wearpose.estimators.inputs import InputSpec, canonical_input, hold_last_valid
+from wearpose.estimators.inputs import InputSpec, canonical_input, held_frame, hold_last_valid
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.data import EDGE_FRAMES, LEAF_JOINTS, imu_features
 from wearpose.estimators.pip.model import NumpyStepper, PipNet
@@ -89,25 +89,13 @@ class PipEstimator(NetworkCheckpointing, Estimator):
     def __init__(self, config: PipConfig | None = None, body: Any = None, *, physics: bool = True, dual_pd: bool = True,
                  learned_init: bool = True, betas: Any = None, calibration_window: tuple[float, float] | None = (0.0, 1.0),
                  device: str | torch.device = "cpu") -> None:
-        from wearpose.body import BodyModel
-        from wearpose.sensors import get_kit
-
-        self.config = config or PipConfig.preset("cpu")
-        self.device = torch.device(device)
-        self.body = (body or BodyModel()).to(self.device)
-        self.kit_name = self.config.kit
-        self.sensor_names = get_kit(self.kit_name).sensor_names
-        self.body_asset_id = self.body.asset_id
-        self.fps = float(self.config.rate)
+        self.init_state(config or PipConfig.preset("cpu"), body, device)
         self.model = PipNet(self.config).to(self.device)
         self.physics = bool(physics)
         self.dual_pd = bool(dual_pd)
         self.learned_init = bool(learned_init)
         self.calibration_window = calibration_window
         self.betas = torch.zeros(10) if betas is None else torch.as_tensor(betas, dtype=torch.float32).reshape(10)
-        self.data_fingerprint = ""
-        self.train_command = ""
-        self.meta: dict[str, Any] = {}
         self._init: dict[str, torch.Tensor] | None = None
         self._optimizer: Any = None
         #: extra :class:`~wearpose.physics.PhysicsConfig` fields for the optimizer (experiments)
@@ -376,16 +364,8 @@ class PipEstimator(NetworkCheckpointing, Estimator):
     def step(self, frame: SensorFrame) -> PoseFrame:
         """One 60 fps frame of bone orientations and free accelerations (calibrated: see
         :meth:`set_initial_state` and the module doc); the LSTM states carry over."""
-        names = list(frame.names)
-        try:
-            idx = [names.index(n) for n in self.sensor_names]
-        except ValueError:
-            raise ShapeError(f"frame has sensors {names}; PIP needs {list(self.sensor_names)}") from None
-        v = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
-        a = torch.as_tensor(np.nan_to_num(np.asarray(frame.channels["acceleration"])[idx]), dtype=torch.float32)
-        R = torch.as_tensor(np.asarray(frame.channels["orientation"])[idx], dtype=torch.float32)
-        hold_a, hold_R = self._last if self._last is not None else (torch.zeros_like(a), torch.eye(3).expand_as(R))
-        a, R = torch.where(v[:, None], a, hold_a), torch.where(v[:, None, None], R, hold_R)
+        (a, R), v = held_frame(frame, self.sensor_names, ("acceleration", "orientation"), self._last, who="PIP",
+                               nan_to_zero=("acceleration",))
         self._last = (a, R)
         return self.step_tensors(a, R, bool(v.all()), frame.timestamp)
 
