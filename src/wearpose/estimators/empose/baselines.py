@@ -98,7 +98,18 @@ class _OmegaHead(nn.Module):
         return self.head(h) + self.omega_rest
 
 
-class ResNetBaseline(nn.Module):
+class _BaselineNet(nn.Module):
+    """What both learned baselines share: ``cfg``, ``rep``, ``num_sensors`` (S), ``in_dim`` (the
+    per-frame features, S * 12), ``omega_dim`` (D of ``rep``) and the input dropout."""
+
+    def __init__(self, cfg: EmposeConfig, num_sensors: int) -> None:
+        super().__init__()
+        self.cfg, self.rep, self.num_sensors = cfg, cfg.rep, num_sensors
+        self.in_dim, self.omega_dim = num_sensors * SENSOR_FEATURES, omega_dim(cfg.rep)
+        self.input_dropout = nn.Dropout(cfg.dropout_input)
+
+
+class ResNetBaseline(_BaselineNet):
     """Frame-wise residual MLP (see module doc).
 
     Args:
@@ -108,11 +119,8 @@ class ResNetBaseline(nn.Module):
     """
 
     def __init__(self, cfg: EmposeConfig, num_sensors: int) -> None:
-        super().__init__()
-        self.cfg, self.rep, self.num_sensors = cfg, cfg.rep, num_sensors
-        F = num_sensors * SENSOR_FEATURES
-        self.in_dim, self.omega_dim = F, omega_dim(cfg.rep)
-        self.input_dropout = nn.Dropout(cfg.dropout_input)
+        super().__init__(cfg, num_sensors)
+        F = self.in_dim
         self.inp = nn.Linear(F, cfg.width)
         self.blocks = nn.ModuleList(nn.Linear(cfg.width, cfg.width) for _ in range(cfg.mlp_layers))
         self.out = _OmegaHead(cfg.width, cfg.rep)
@@ -126,7 +134,7 @@ class ResNetBaseline(nn.Module):
         return self.out(h)
 
 
-class BiRNNBaseline(nn.Module):
+class BiRNNBaseline(_BaselineNet):
     """Bidirectional LSTM over the sequence (see module doc).
 
     Args:
@@ -135,11 +143,8 @@ class BiRNNBaseline(nn.Module):
     """
 
     def __init__(self, cfg: EmposeConfig, num_sensors: int) -> None:
-        super().__init__()
-        self.cfg, self.rep, self.num_sensors = cfg, cfg.rep, num_sensors
-        F = num_sensors * SENSOR_FEATURES
-        self.in_dim, self.omega_dim = F, omega_dim(cfg.rep)
-        self.input_dropout = nn.Dropout(cfg.dropout_input)
+        super().__init__(cfg, num_sensors)
+        F = self.in_dim
         self.rnn = nn.LSTM(F, cfg.hidden, cfg.rnn_layers, batch_first=True, bidirectional=True)
         self.out = _OmegaHead(2 * cfg.hidden, cfg.rep)
 
