@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import json
 import re
+import time
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 import torch
 
 from tests.conftest import make_tiny_asset
+from tests.viewer.chromium import CHROMIUM, Browser
 from wearpose.body import BodyModel
 from wearpose.errors import ShapeError
 from wearpose.geometry import axis_angle_to_matrix
@@ -96,3 +98,37 @@ def test_kit_sites_are_the_kits_sensors(kit: str) -> None:
     assert len(sites) < len(body.site_names)  # not every site of the asset
     first = k.sensors[0].name
     assert kit_sites(kit, body, [first]) == (resolved[first],)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium/chrome executable found (set WEARPOSE_CHROMIUM)")
+@pytest.mark.budget(30)
+def test_page_draws_estimate_and_truth_in_their_colours_in_headless_chromium(tmp_path: Path) -> None:
+    """The page's script runs (legend filled, a frame drawn) and both bodies show their own colour."""
+    from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR
+
+    body = BodyModel()
+    pose = torch.eye(3).expand(3, 24, 3, 3).clone()
+    trans = torch.zeros(3, 3)
+    path = write_html(tmp_path / "v.html", body, pose, torch.zeros(10), trans, fps=30.0, label="estimate",
+                      compare=[("ground truth", pose, torch.zeros(10), trans)], colours=[ESTIMATE_COLOUR, TRUTH_COLOUR],
+                      site_names=["head", "left_wrist"], sites_label="2 EM sensors (test)")
+    browser = Browser(path.as_uri())
+    try:
+        t0, state = time.time(), None
+        while time.time() - t0 < 20:
+            state = browser.call("Runtime.evaluate", returnByValue=True, expression=(
+                "[document.getElementById('legend').innerText, document.getElementById('c').dataset.frame]"))["result"].get("value")
+            if state and int(state[1]) >= 0:
+                break
+            time.sleep(0.5)
+        assert state and int(state[1]) >= 0, f"the page drew no frame (a script error?): {state}"
+        assert state[0].split("\n") == ["estimate", "ground truth", "2 EM sensors (test)"]
+        img = browser.screenshot().astype(int)
+    finally:
+        browser.close()
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    blue = (b > r + 60) & (b > 100)  # the estimate's shaded blue
+    grey = (abs(r - g) < 10) & (abs(g - b) < 12) & (r > 90)  # the truth's shaded grey (the floor is darker)
+    # The estimate stands left of the truth (+X is to the right from the default camera).
+    assert blue.sum() > 500 and grey.sum() > 500, (blue.sum(), grey.sum())
+    assert np.nonzero(blue)[1].mean() < np.nonzero(grey)[1].mean()

@@ -93,7 +93,7 @@ def write_html(path: str | Path, body: BodyModel, pose: torch.Tensor, betas: tor
                fps: float, title: str = "wearpose", site_names: Sequence[str] | None = None,
                info: dict | None = None, label: str = "motion",
                compare: Sequence[tuple[str, torch.Tensor, torch.Tensor, torch.Tensor]] = (),
-               colours: Sequence[Colour] | None = None, sites_label: str = "sensor sites") -> Path:
+               colours: Sequence[Colour] | None = None, sites_label: str | None = None) -> Path:
     """Write a page that plays ``pose``/``trans`` on ``body``; returns the path.
 
     Args:
@@ -106,10 +106,11 @@ def write_html(path: str | Path, body: BodyModel, pose: torch.Tensor, betas: tor
         label: name of the main track; ``compare``: further ``(label, pose, betas, trans)``
             tracks drawn beside it (e.g. ground truth next to an estimate).
         colours: one per track, main first (default :data:`~wearpose.viewer.scene.PALETTE`).
-        sites_label: the sensor dots' legend entry (e.g. "6 IMUs (imu6)").
+        sites_label: the sensor dots' legend entry (e.g. "6 IMUs (imu6)"; default "N sensor sites").
     """
     payload = skinning_payload(body, pose, betas, trans, site_names, compare=compare, label=label, colours=colours)
-    payload.update({"fps": float(fps), "title": title, "info": info or {}, "sites_label": sites_label})
+    label_s = sites_label if sites_label is not None else f"{len(payload['sites'])} sensor sites"
+    payload.update({"fps": float(fps), "title": title, "info": info or {}, "sites_label": label_s})
     html = _TEMPLATE.replace("__PAYLOAD__", json.dumps(payload)).replace("__TITLE__", title)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -147,7 +148,7 @@ const SITE_COL='#ffd21f';
 {const lg=document.getElementById('legend');
  const add=(cls,col,text)=>{const e=document.createElement('span');const i=document.createElement('i');if(cls)i.className=cls;i.style.background=col;e.appendChild(i);e.appendChild(document.createTextNode(text));lg.appendChild(e);};
  for(const tr of TR)add('',`rgb(${tr.col[0]},${tr.col[1]},${tr.col[2]})`,tr.label);
- if(P.sites.length)add('dot',SITE_COL,P.sites_label+' ('+P.sites.length+')');}
+ if(P.sites.length)add('dot',SITE_COL,P.sites_label);}
 document.getElementById('info').textContent=Object.entries(P.info).map(([k,v])=>k+': '+v).join('  ');
 const slider=document.getElementById('t'); slider.max=T-1;
 const cv=document.getElementById('c'), ctx=cv.getContext('2d');
@@ -191,15 +192,15 @@ function drawTrack(tr,proj){
    const ux=sv[b]-sv[a],uy=sv[b+1]-sv[a+1],vx=sv[c]-sv[a],vy=sv[c+1]-sv[a+1];const cr=ux*vy-uy*vx;if(cr>=0)continue;
    const e1=[pv[b]-pv[a],pv[b+1]-pv[a+1],pv[b+2]-pv[a+2]],e2=[pv[c]-pv[a],pv[c+1]-pv[a+1],pv[c+2]-pv[a+2]];
    const n=[e1[1]*e2[2]-e1[2]*e2[1],e1[2]*e2[0]-e1[0]*e2[2],e1[0]*e2[1]-e1[1]*e2[0]];const nl=Math.hypot(n[0],n[1],n[2])||1;
-   const L=0.3+0.7*Math.max(0,(n[0]*0.3+n[1]*0.7+n[2]*0.6)/nl/1.0),c=tr.col;
-   ctx.fillStyle=`rgb(${Math.round(c[0]*L)},${Math.round(c[1]*L)},${Math.round(c[2]*L)})`;ctx.strokeStyle=ctx.fillStyle;
+   const L=0.3+0.7*Math.max(0,(n[0]*0.3+n[1]*0.7+n[2]*0.6)/nl/1.0),tc=tr.col;
+   ctx.fillStyle=`rgb(${Math.round(tc[0]*L)},${Math.round(tc[1]*L)},${Math.round(tc[2]*L)})`;ctx.strokeStyle=ctx.fillStyle;
    ctx.beginPath();ctx.moveTo(sv[a],sv[a+1]);ctx.lineTo(sv[b],sv[b+1]);ctx.lineTo(sv[c],sv[c+1]);ctx.closePath();ctx.fill();ctx.stroke();}}
  if(document.getElementById('skel').checked){ctx.strokeStyle='#ff5050';ctx.lineWidth=3;
   for(let j=1;j<24;j++){const p=P.parents[j];const a=proj(J[j0+3*j],J[j0+3*j+1],J[j0+3*j+2]),b=proj(J[j0+3*p],J[j0+3*p+1],J[j0+3*p+2]);
    ctx.beginPath();ctx.moveTo(a[0],a[1]);ctx.lineTo(b[0],b[1]);ctx.stroke();}}
  if(document.getElementById('site').checked){ctx.fillStyle=SITE_COL;ctx.strokeStyle='#222';ctx.lineWidth=1;
   for(const v of P.sites){ctx.beginPath();ctx.arc(sv[3*v],sv[3*v+1],5,0,7);ctx.fill();ctx.stroke();}}
- if(TR.length>1){const h=proj(J[j0+45],J[j0+46]+0.35,J[j0+47]),c=tr.col;ctx.fillStyle=`rgb(${c[0]},${c[1]},${c[2]})`;ctx.font='bold 14px sans-serif';ctx.textAlign='center';ctx.fillText(tr.label,h[0],h[1]);}}
+ if(TR.length>1){const h=proj(J[j0+45],J[j0+46]+0.35,J[j0+47]),tc=tr.col;ctx.fillStyle=`rgb(${tc[0]},${tc[1]},${tc[2]})`;ctx.font='bold 14px sans-serif';ctx.textAlign='center';ctx.fillText(tr.label,h[0],h[1]);}}
 function tick(now){if(playing){const f=Math.floor((now-t0)*P.fps/1000)%T;if(f!==frame){frame=f;draw();}}requestAnimationFrame(tick);}
 draw();requestAnimationFrame(tick);
 </script></body></html>
