@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import os
 import re
+import resource
 import shlex
 import signal
 import socket
@@ -41,6 +42,8 @@ README = REPO / "README.md"
 
 #: (command prefix, appended arguments, why). ``{serve}``/``{viewer}`` are free ports.
 LIMITS: list[tuple[str, str, str]] = [
+    ("./run.sh demo", "--seconds 2", "the first 2 s of the clip (README's demo uses 10 s)"),
+    ("wearpose demo", "--seconds 2", "the first 2 s of the clip"),
     ("./run.sh test", f"{REPO}/tests/geometry/test_heading.py -q -p no:cacheprovider",
      "one small test file: the whole suite is CI's own run (and would run this test again)"),
     ("wearpose data prepare ~/mocap", "--workers 1", "one process"),
@@ -163,7 +166,7 @@ def test_readme_commands_run_in_written_order(tmp_path: Path) -> None:
     stamp_ok = _stamp_is_current()
     log: list[str] = []
     background: list[tuple[str, subprocess.Popen]] = []
-    t_all = time.perf_counter()
+    t_all, c_all = time.perf_counter(), _children_cpu_s()
     try:
         for lang, block in readme_blocks(README.read_text(encoding="utf-8")):
             if lang == "python":
@@ -181,7 +184,7 @@ def test_readme_commands_run_in_written_order(tmp_path: Path) -> None:
                     sub = full.split(None, 2)
                     rest = sub[2] if len(sub) > 2 else ""
                     full = (f".venv/bin/python -m pytest {rest}" if sub[1] == "test" else f".venv/bin/wearpose {sub[1]} {rest}")
-                    log.append(f"(venv stamp does not match pyproject.toml: ran {full!r} for {cmd!r})")
+                    _note(log, f"(venv stamp does not match pyproject.toml: ran {full!r} for {cmd!r})")
                 bg = next((k for k in BACKGROUND if cmd.startswith(k)), None)
                 if bg is not None:
                     background.append((cmd, _start(prelude + full, work, env, BACKGROUND[bg], log)))
@@ -195,7 +198,8 @@ def test_readme_commands_run_in_written_order(tmp_path: Path) -> None:
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGKILL)
         print("\n".join(log))
-        print(f"README in order: {time.perf_counter() - t_all:.0f} s")
+        print(f"README in order: {time.perf_counter() - t_all:.0f} s, cpu {_children_cpu_s() - c_all:.0f} s of its commands "
+              f"(load average {os.getloadavg()[0]:.1f})")
     # Each command's outputs, where README names one, exist.
     for p in ("out/demo-em12/recording.npz", "out/demo-em6", "out/demo-imu6", "out/demo-mimu6", "out/demo-miposer",
               "out/demo-roundtrip", "sims/em12/cmu_daz/05/05_01.npz", "sims/imu6", "recs/ximu3-lower-body.npz",
@@ -203,13 +207,25 @@ def test_readme_commands_run_in_written_order(tmp_path: Path) -> None:
         assert (work / p).exists(), f"README command output {p} missing"
 
 
+def _children_cpu_s() -> float:
+    """CPU seconds (user + system) of every waited-for child process so far."""
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
+def _note(log: list[str], line: str) -> None:
+    """Keep ``line`` for the summary and show it at once (``pytest -s``: progress of a long run)."""
+    log.append(line)
+    print(line, flush=True)
+
+
 def _run(cmd: str, cwd: Path, env: dict[str, str], log: list[str]) -> None:
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _children_cpu_s()
     try:
         r = subprocess.run(["bash", "-c", cmd], cwd=cwd, env=env, capture_output=True, text=True, timeout=COMMAND_TIMEOUT_S)
     except subprocess.TimeoutExpired as exc:
         pytest.fail(f"README command hung (> {COMMAND_TIMEOUT_S} s): {cmd}\n{exc.stdout}\n{exc.stderr}")
-    log.append(f"{time.perf_counter() - t0:6.1f} s  rc {r.returncode}  {cmd}")
+    _note(log, f"{time.perf_counter() - t0:6.1f} s  cpu {_children_cpu_s() - c0:5.1f} s  rc {r.returncode}  {cmd}")
     assert r.returncode == 0, f"README command failed in README order: {cmd}\n--- stdout\n{r.stdout[-3000:]}\n--- stderr\n{r.stderr[-3000:]}"
 
 
@@ -224,20 +240,21 @@ def _start(cmd: str, cwd: Path, env: dict[str, str], ready: str, log: list[str])
             pytest.fail(f"README command exited before it was ready (rc {proc.returncode}): {cmd}\n{''.join(seen)[-3000:]}")
         seen.append(line)
         if ready in line:
-            log.append(f"{time.perf_counter() - t0:6.1f} s  ready  {cmd}")
+            _note(log, f"{time.perf_counter() - t0:6.1f} s  ready  {cmd}")
             return proc
     os.killpg(proc.pid, signal.SIGKILL)
     pytest.fail(f"README command not ready after {COMMAND_TIMEOUT_S} s: {cmd}\n{''.join(seen)[-3000:]}")
 
 
 def _stop(cmd: str, proc: subprocess.Popen, log: list[str]) -> None:
+    c0 = _children_cpu_s()
     os.killpg(proc.pid, signal.SIGINT)
     try:
         out, _ = proc.communicate(timeout=30)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         pytest.fail(f"README command did not stop on Ctrl-C within 30 s: {cmd}")
-    log.append(f"  stopped rc {proc.returncode}  {cmd}")
+    _note(log, f"  stopped rc {proc.returncode}  cpu {_children_cpu_s() - c0:5.1f} s (its whole run)  {cmd}")
     assert proc.returncode == 0, f"README command ended with {proc.returncode} on Ctrl-C: {cmd}\n{out[-3000:]}"
 
 
