@@ -64,3 +64,21 @@ def test_clip_data_counts_the_frames_of_its_clips():
     assert s.num_frames == s.x.shape[0] == 8 and s.settings == {}
     empty = concat_clips([], lambda T: _clip(T, 1.0), ("x",))
     assert Split(x=empty["x"], starts=empty["starts"], lengths=empty["lengths"], clip_ids=[], fingerprint="").num_frames == 0
+
+
+def test_split_source_ids_fingerprint_and_cache_folder(tmp_path: Path):
+    from wearpose.estimators.checkpoint import fingerprint
+    from wearpose.estimators.clipstore import split_source
+
+    class Store:
+        root = tmp_path / "store"
+
+        def clips(self, split: str) -> list[str]:
+            return [f"{split}/{i}" for i in range(5)]
+
+    st = Store()
+    s, ids, fp, root = split_source("val", {"k": 1}, "m", store=st, limit=2)
+    assert s is st and ids == ["val/0", "val/1"] and root == tmp_path / "store" / "estimators" / "m"
+    assert fp == fingerprint(ids, {"k": 1, "split": "val"})
+    _, ids2, fp2, root2 = split_source("val", {"k": 1}, "m", store=st, cache_root=tmp_path / "c", clip_ids=("x", "y"))
+    assert ids2 == ["x", "y"] and root2 == tmp_path / "c" and fp2 != fp

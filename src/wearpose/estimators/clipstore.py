@@ -20,6 +20,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import torch
 
+from wearpose.estimators.checkpoint import fingerprint
 from wearpose.fileio import atomic_torch_save
 
 
@@ -88,6 +89,34 @@ def concat_clips(clips: Iterable[Any], one: Callable[[Any], dict[str, torch.Tens
     d.update({k: torch.stack(v) for k, v in per_clip.items()})
     d.update(starts=torch.tensor(starts, dtype=torch.long), lengths=torch.tensor(lengths, dtype=torch.long))
     return d
+
+
+def split_source(split: str, settings: dict[str, Any], method: str, *, store: Any = None, limit: int | None = None,
+                 cache_root: str | Path | None = None,
+                 clip_ids: Sequence[str] | None = None) -> tuple[Any, list[str], str, Path]:
+    """Where a method's split comes from and is cached.
+
+    Args:
+        split: ``train`` / ``val`` / ``test``.
+        settings: everything that changes the method's data (fingerprinted with the split).
+        method: the cache folder's name.
+        store: a :class:`~wearpose.motion.CorpusStore` (default: the prepared cache).
+        limit: the first ``limit`` clips (sorted ids) only.
+        cache_root: the cache folder (default ``<store root>/estimators/<method>``).
+        clip_ids: these clips instead of the split's.
+
+    Returns:
+        ``(store, ids, fingerprint, cache folder)``.
+    """
+    from wearpose.motion import CorpusStore  # deferred: the motion stack loads only when data are built
+
+    store = store or CorpusStore()
+    ids = list(clip_ids) if clip_ids is not None else list(store.clips(split=split))
+    if limit:
+        ids = ids[:limit]
+    fp = fingerprint(ids, {**settings, "split": split})
+    root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / method
+    return store, ids, fp, root
 
 
 def cached_clips(path: Path, ids: Sequence[str], fingerprint: str,

@@ -40,8 +40,7 @@ from wearpose.body.kinematics import forward_kinematics
 from wearpose.body.skeleton import JOINT_INDEX, NUM_JOINTS
 from wearpose.estimators.birae.config import BiraeConfig
 from wearpose.estimators.birae.representations import SENSORS, angular_rate, features, pose_to_target, relative_orientations
-from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips
+from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, split_source
 from wearpose.estimators.seeding import clip_seed
 from wearpose.sensors import SITE_SEGMENT, MimuNoise, get_kit, simulate_mimu
 
@@ -248,15 +247,8 @@ def build_from_motions(motions: Iterable[Any], ids: list[str], cfg: BiraeConfig,
 def build_split(split: str, cfg: BiraeConfig, *, store: Any = None, limit: int | None = None,
                 cache_root: str | Path | None = None, progress: Any = None) -> BiraeData:
     """Synthesise (or load from the cache) one corpus split (first ``limit`` sorted clip ids)."""
-    from wearpose.motion import CorpusStore
-
-    store = store or CorpusStore()
-    ids = store.clips(split=split)
-    if limit:
-        ids = ids[:limit]
     settings = data_settings(cfg)
-    fp = fingerprint(ids, {**settings, "split": split})
-    root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "birae"
+    store, ids, fp, root = split_source(split, settings, "birae", store=store, limit=limit, cache_root=cache_root)
     path = root / f"{split}-{fp[:16]}.pt"
     d = cached_clips(path, ids, fp, lambda: build_from_motions((store.load(c) for c in ids), ids, cfg,
                                                                 "train" if split == "train" else split, progress))

@@ -30,8 +30,7 @@ from typing import Any, Iterator, Sequence
 
 import torch
 
-from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips
+from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, split_source
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.inputs import held_frame, hold_last_valid
 from wearpose.estimators.seeding import clip_seed
@@ -197,15 +196,8 @@ def build_split(split: str, cfg: EmposeConfig, body: Any, *, store: Any = None, 
         cache_root: directory of the tensor cache (default ``<corpus cache>/estimators/empose``).
         progress: optional callable ``progress(done, total)``.
     """
-    from wearpose.motion import CorpusStore
-
-    store = store or CorpusStore()
-    ids = store.clips(split=split)
-    if limit:
-        ids = ids[:limit]
     settings = data_settings(cfg, body)
-    fp = fingerprint(ids, {**settings, "split": split})
-    root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "empose"
+    store, ids, fp, root = split_source(split, settings, "empose", store=store, limit=limit, cache_root=cache_root)
 
     def one(cid: str) -> dict[str, torch.Tensor]:
         r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed))

@@ -33,6 +33,7 @@ from wearpose.estimators.base import OfflineOnlyError
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.inputs import InputSpec, prepare
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
+from wearpose.estimators.clipstore import split_source
 from wearpose.estimators.miposer.data import MiposerData, cached_split
 from wearpose.estimators.miposer.model import decode_pose, heading_frame, ik_loss
 from wearpose.estimators.miposer.train import MiposerTask
@@ -99,18 +100,11 @@ def build_imu_split(split: str, cfg: MiposerConfig, body: Any, *, store: Any = N
     """Simulate (or load from the cache) one split for the baseline. The returned
     :class:`~wearpose.estimators.miposer.data.MiposerData` holds orientations in ``R`` and free
     accelerations (m/s^2) in ``p``; there is no T-pose prefix (``in_clip`` all True)."""
-    from wearpose.estimators.checkpoint import fingerprint
     from wearpose.estimators.miposer.data import DATA_VERSION
-    from wearpose.motion import CorpusStore
-
-    store = store or CorpusStore()
-    ids = list(clip_ids) if clip_ids is not None else store.clips(split=split)
-    if limit:
-        ids = ids[:limit]
     settings = {"version": DATA_VERSION, "kit": KIT, "rate": cfg.rate, "noise": cfg.train_noise, "seed": cfg.seed,
                 "body_asset": body.asset_id, "imu_orientation": "segment"}
-    fp = fingerprint(ids, {**settings, "split": split})
-    root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "miposer"
+    store, ids, fp, root = split_source(split, settings, "miposer", store=store, limit=limit, cache_root=cache_root,
+                                        clip_ids=clip_ids)
 
     def one(cid: str) -> dict[str, torch.Tensor]:
         r = simulate_imu_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed, "imuposer"))

@@ -36,8 +36,7 @@ import torch
 
 from wearpose.calibration import CalibrationResult, apply_miposer, calibrate, em_to_world
 from wearpose.errors import ShapeError
-from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips
+from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, split_source
 from wearpose.estimators.empose.data import num_batches
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.inputs import hold_last_valid
@@ -239,15 +238,9 @@ def build_split(split: str, cfg: MiposerConfig, body: Any, *, store: Any = None,
         cache_root: tensor cache directory (default ``<corpus cache>/estimators/miposer``).
         progress: optional ``progress(done, total)``.
     """
-    from wearpose.motion import CorpusStore
-
-    store = store or CorpusStore()
-    ids = list(clip_ids) if clip_ids is not None else store.clips(split=split)
-    if limit:
-        ids = ids[:limit]
     settings = data_settings(cfg, body)
-    fp = fingerprint(ids, {**settings, "split": split})
-    root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "miposer"
+    store, ids, fp, root = split_source(split, settings, "miposer", store=store, limit=limit, cache_root=cache_root,
+                                        clip_ids=clip_ids)
 
     def one(cid: str) -> dict[str, torch.Tensor]:
         r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed, "miposer"))
