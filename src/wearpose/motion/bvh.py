@@ -192,12 +192,7 @@ def _parse_hierarchy(tokens: _Tokens) -> BvhSkeleton:
         if tok != "CHANNELS":
             raise InputFileError(path, f"found {tok!r}", f"'CHANNELS n names...' after the OFFSET of joint {name}", field=f"line {line}")
         ntok, nline = tokens.next("a channel count")
-        try:
-            n = int(ntok)
-            if n < 0:
-                raise ValueError
-        except ValueError:
-            raise InputFileError(path, f"channel count {ntok!r} of joint {name}", "a non-negative integer after CHANNELS", field=f"line {nline}") from None
+        n = _count(path, ntok, nline, f"channel count {ntok!r} of joint {name}", "a non-negative integer after CHANNELS")
         chans = []
         for _ in range(n):
             c, cline = tokens.next(f"{n} channel names for joint {name}")
@@ -232,6 +227,17 @@ def _parse_hierarchy(tokens: _Tokens) -> BvhSkeleton:
                        {k: np.asarray(v, dtype=np.float64) for k, v in end_sites.items()})
 
 
+def _count(path: Path, tok: str, lineno: int, problem: str, expected: str) -> int:
+    """``tok`` as a non-negative integer (a channel or frame count), else InputFileError at ``lineno``."""
+    try:
+        n = int(tok)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise InputFileError(path, problem, expected, field=f"line {lineno}")
+    return n
+
+
 def _header_value(path: Path, line: str, lineno: int, key: str, expected: str) -> str:
     # Accept "Frames: 10" and "Frames:10"; "Frame Time: 0.0333".
     s = line.strip()
@@ -260,12 +266,7 @@ def parse_bvh_text(text: str, path: str | Path = "<string>") -> BvhMotion:
         raise InputFileError(path, "MOTION header ends early", "'Frames: n' and 'Frame Time: dt' after MOTION", field=f"line {len(lines)}")
     (fl, fn), (tl, tn) = header
     fval = _header_value(path, fl, fn, "Frames:", "'Frames: n' (n a non-negative integer)")
-    try:
-        n_frames = int(fval)
-        if n_frames < 0:
-            raise ValueError
-    except ValueError:
-        raise InputFileError(path, f"frame count {fval!r}", "'Frames: n' (n a non-negative integer)", field=f"line {fn}") from None
+    n_frames = _count(path, fval, fn, f"frame count {fval!r}", "'Frames: n' (n a non-negative integer)")
     tval = _header_value(path, tl, tn, "Frame Time:", "'Frame Time: dt' (seconds per frame, > 0)")
     try:
         frame_time = float(tval)
