@@ -634,11 +634,8 @@ class StreamServer:
             return
         if kind == "frame":
             subject = d.get("subject")
-            s = self.subjects.get(subject) if isinstance(subject, int) else None
+            s = await self._frame_subject(ws, subject, "frame")
             if s is None:
-                raise PacketError(f"frame for unknown subject {subject!r} (send a hello first)")
-            if s.owner is not ws:
-                await self._not_owner(ws, s, subject, "frame")
                 return
             try:
                 self._on_frame(s, decode_frame_json(d, s.hello), t_arr)
@@ -672,6 +669,21 @@ class StreamServer:
                                       "`wearpose serve` at start-up) to UDP hello / subscribe / stats messages",
                           d.get("subject") if isinstance(d.get("subject"), int) else None, "token")
         return False
+
+    async def _frame_subject(self, ws: Any, subject: Any, what: str) -> _Subject | None:
+        """The subject a frame (JSON or binary, ``what``) from ``ws`` is for; None when another
+        connection owns it (refused through :meth:`_not_owner`).
+
+        Raises:
+            PacketError: no such subject (no hello yet, or not an integer id).
+        """
+        s = self.subjects.get(subject) if isinstance(subject, int) else None
+        if s is None:
+            raise PacketError(f"{what} for unknown subject {subject!r} (send a hello first)")
+        if s.owner is not ws:
+            await self._not_owner(ws, s, subject, "frame")
+            return None
+        return s
 
     async def _not_owner(self, ws: Any, s: _Subject, subject: int, request: str) -> None:
         """Frames, ``bye`` or ``hello`` for a subject another connection opened: refused, counted
@@ -741,11 +753,8 @@ class StreamServer:
 
     async def _on_binary(self, ws: Any, msg: bytes, t_arr: float) -> None:
         subject = peek_subject(msg)
-        s = self.subjects.get(subject)
+        s = await self._frame_subject(ws, subject, "binary frame")
         if s is None:
-            raise PacketError(f"binary frame for unknown subject {subject} (send a hello first)")
-        if s.owner is not ws:
-            await self._not_owner(ws, s, subject, "frame")
             return
         try:
             self._on_frame(s, decode_frame_binary(msg, s.hello), t_arr)
