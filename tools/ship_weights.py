@@ -4,8 +4,8 @@
         --eval benchmarks/results/empose_table2.json --eval-row LGD-RNN
 
 The optimiser state is dropped (weights + config + kit + body asset + data fingerprint + train
-command stay). The card records the training command, data (split, clip count, sources and
-licences from the prepared store), validation figures from the checkpoint, test figures from an
+command stay). The card records the training command, data (split, clip count, sources,
+licences and the corpus record from the prepared store), validation figures from the checkpoint, test figures from an
 evaluation JSON if given, and the file size. Weights trained on CC BY-NC clips are marked
 non-commercial.
 
@@ -77,7 +77,8 @@ def build_card(ck: dict[str, Any], name: str, *, size_bytes: int, storage: str, 
         "train_command": ck.get("train_command", ""),
         "training_data": {"split": "train", "clips": len(train), "clips_per_source": sources,
                           "licences": licences, "data_fingerprint": ck.get("data_fingerprint", ""),
-                          "simulation": sim},
+                          # which corpus and version the store holds (name, folder, manifest SHA-1)
+                          "corpus": store.provenance().get("corpus"), "simulation": sim},
         "licence": ("non-commercial use only: trained on CC BY-NC 4.0 motion (Bandai Namco) and CMU mocap "
                     "(research terms)") if "CC-BY-NC-4.0" in licences else "see training_data.licences",
         "validation": {k: v for k, v in ck.get("meta", {}).items() if k.startswith("val_") or k == "epoch"},

@@ -93,7 +93,7 @@ def test_empose_sentence() -> None:
 
 
 class FakeStore:
-    """The two CorpusStore methods build_card reads."""
+    """The three CorpusStore methods build_card reads."""
 
     ENTRIES = {"a": {"split": "train", "source": "bandai", "licence": "CC-BY-NC-4.0"},
                "b": {"split": "train", "source": "cmu_daz", "licence": "CMU-mocap-terms"},
@@ -104,6 +104,10 @@ class FakeStore:
 
     def entry(self, clip: str) -> dict[str, Any]:
         return self.ENTRIES[clip]
+
+    def provenance(self) -> dict[str, Any]:
+        return {"path": "/s", "converter": "motion-4",
+                "corpus": {"kind": "manifest", "name": "data-v2", "path": "/d", "manifest_sha1": "9" * 40}}
 
 
 def _checkpoint(method: str, config: dict[str, Any]) -> dict[str, Any]:
@@ -121,6 +125,7 @@ def test_build_card() -> None:
     assert td["simulation"] == get_estimator("pip").training_data_description(config)
     assert "mirror" in td["simulation"]
     assert td["clips"] == 2 and td["clips_per_source"] == {"bandai": 1, "cmu_daz": 1}
+    assert td["corpus"]["name"] == "data-v2" and td["corpus"]["manifest_sha1"] == "9" * 40
     assert card["licence"].startswith("non-commercial") and card["validation"] == {"epoch": 3, "val_loss": 0.5}
     assert card["name"] == "pip_test" and "notes" not in card
     card = ship_weights.build_card(_checkpoint("pip", config), "pip_test", simulation="by hand", notes="n", **kw)
