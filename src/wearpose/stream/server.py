@@ -149,21 +149,23 @@ class ReorderBuffer:
         self.buf[seq] = item
         out = self._drain()
         while self.buf and max(self.buf) - self.next >= self.window:
-            first = min(self.buf)
-            self.lost += first - self.next
-            self.next = first
-            out += self._drain()
+            out += self._skip_gap()
         return out
 
     def flush(self) -> list[Any]:
         """Release everything buffered (end of stream); gaps count as lost."""
         out: list[Any] = []
         while self.buf:
-            first = min(self.buf)
-            self.lost += first - self.next
-            self.next = first
-            out += self._drain()
+            out += self._skip_gap()
         return out
+
+    def _skip_gap(self) -> list[Any]:
+        """Give up the missing sequence numbers before the first buffered one (counted lost) and
+        release what then follows in order."""
+        first = min(self.buf)
+        self.lost += first - self.next
+        self.next = first
+        return self._drain()
 
     def _drain(self) -> list[Any]:
         out = []
