@@ -84,12 +84,14 @@ def test_the_gradient_turns_a_twisted_spine_back(dtype: torch.dtype) -> None:
 
 def test_old_configs_keep_the_old_loss() -> None:
     """A stored config without the new fields (the v1 weights') is the raw-6D L1, as trained."""
-    d = OLD.to_dict()
-    for k in ("rot_loss", "spine_rot_weight", "lambda_twist", "twist_limit_deg"):
-        d.pop(k)
+    d = OLD.to_dict()  # the v1 loss: the four loss fields are left out, as in a v1 checkpoint
+    assert not {"rot_loss", "spine_rot_weight", "lambda_twist", "twist_limit_deg"} & set(d)
     old = MiposerConfig.from_dict(d)
     assert old.rot_loss == "l1_6d" and old.lambda_twist == 0.0
     g = torch.Generator().manual_seed(1)
     a, b = torch.randn(3, 21, 6, generator=g), torch.randn(3, 21, 6, generator=g)
     assert torch.equal(rotation_term(a, b, old), (a - b).abs().mean())
     assert NEW.rot_loss == "geodesic" and MiposerConfig.preset("paper").rot_loss == "l1_6d"
+    # ... and writes back the dict it was read from (a v1 checkpoint re-saves identically).
+    assert old.to_dict() == d and MiposerConfig.from_dict(NEW.to_dict()) == NEW
+    assert NEW.to_dict()["rot_loss"] == "geodesic" and NEW.to_dict()["twist_limit_deg"] == 40.0  # all four kept

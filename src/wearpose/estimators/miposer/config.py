@@ -37,6 +37,8 @@ PREDICTED_JOINTS = 22
 #: The rotation loss of the ``cpu`` and ``tiny`` presets (issue 22): geodesic per joint, the spine
 #: (SMPL 3, 6, 9) 5x, their twist about the bone hinged beyond 40 deg (the training targets' range).
 FIXED_LOSS: dict[str, Any] = {"rot_loss": "geodesic", "spine_rot_weight": 5.0, "lambda_twist": 1.0}
+#: The loss fields' defaults (the v1 weights' loss), which :meth:`MiposerConfig.to_dict` leaves out.
+LATER_LOSS: dict[str, Any] = {"rot_loss": "l1_6d", "spine_rot_weight": 1.0, "lambda_twist": 0.0, "twist_limit_deg": 40.0}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -106,6 +108,16 @@ class MiposerConfig(TrainConfig):
             raise ConfigError(f"MiposerConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
         if self.rot_loss not in ("l1_6d", "geodesic"):
             raise ConfigError(f"MiposerConfig.rot_loss: expected 'l1_6d' or 'geodesic', got {self.rot_loss!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The config as a dict; the loss fields added after the v1 weights (:data:`LATER_LOSS`)
+        are left out when all are at those defaults (the v1 loss), so a checkpoint stored before
+        them re-saves identically (``from_dict`` fills them in again: the same config)."""
+        d = super().to_dict()
+        if all(d[k] == v for k, v in LATER_LOSS.items()):
+            for k in LATER_LOSS:
+                del d[k]
+        return d
 
     @property
     def kit(self) -> str:
