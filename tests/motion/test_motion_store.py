@@ -123,6 +123,22 @@ def test_prepare_folders_without_manifest(tmp_path: Path) -> None:
     assert _hash_split("subjA") == _hash_split("subjA") and {_hash_split(f"s{i}") for i in range(50)} == {"train", "val", "test"}
 
 
+def test_one_corpus_folder_given_as_a_list_is_the_corpus(corpus: Path, tmp_path: Path) -> None:
+    # `wearpose data prepare ../shared/data-v2` passes [folder]: the manifest's splits, sources and
+    # licences hold (it was prepared as "your own folders": hash splits, licence "unknown").
+    r = prepare_corpus([corpus], tmp_path / "cache", progress=False, workers=1, rest_joints=REST)
+    assert r["converted"] == 2 and r["store"]["corpus"]["kind"] == "manifest"
+    e = CorpusStore(tmp_path / "cache").entry("bandai/s2/wave")
+    assert e["split"] == "test" and e["licence"] == "CC-BY-NC-4.0"
+
+
+def test_a_corpus_folder_among_other_folders_is_refused(corpus: Path, tmp_path: Path) -> None:
+    other = tmp_path / "mine"
+    write_gz(other / "subjA" / "a.bvh.gz", bandai_like_bvh(3))
+    with pytest.raises(ConfigError, match="manifest.csv.*on its own"):
+        prepare_corpus([other, corpus], tmp_path / "cache", progress=False, workers=1, rest_joints=REST)
+
+
 def test_store_errors(tmp_path: Path) -> None:
     with pytest.raises(InputFileError, match="prepare_corpus"):
         CorpusStore(tmp_path)

@@ -299,6 +299,16 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
         skipped. A failing file is recorded (in the index too) and the rest carries on.
     """
     t0 = time.perf_counter()
+    if data_dir is not None and not isinstance(data_dir, (str, Path)):
+        given = [Path(d) for d in data_dir]
+        with_manifest = [d for d in given if (d / "manifest.csv").is_file()]
+        if len(given) == 1:
+            # `wearpose data prepare ../shared/data-v2` names one folder: a corpus folder stays a
+            # corpus (its manifest's splits, sources and licences), not "your own folders".
+            data_dir = given[0]
+        elif with_manifest:
+            raise ConfigError(f"{with_manifest[0]} is a corpus folder (it has manifest.csv): prepare it on its own "
+                              f"(wearpose data prepare {with_manifest[0]}), not together with other folders")
     if data_dir is None or isinstance(data_dir, (str, Path)):
         data: Path | None = default_data_dir(data_dir)
         folders = [data]
