@@ -6,7 +6,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 from torch import nn
 
@@ -14,30 +13,27 @@ from wearpose.body import BodyModel
 from wearpose.errors import ConfigError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import NetworkCheckpointing
-from wearpose.estimators.configio import ConfigIO
-from wearpose.estimators.inputs import InputSpec, prepare
+from wearpose.estimators.inputs import InputSpec, held_frame, prepare
 from wearpose.estimators.registry import register_estimator
+from wearpose.estimators.trainconfig import TrainConfig
 from wearpose.geometry import rot6d_to_matrix
 from wearpose.sensors import get_kit
 
 
-@dataclass(frozen=True)
-class TinyConfig(ConfigIO):
-    """Network width, training-loop fields (:func:`wearpose.estimators.train.loop_settings`),
-    data (``max_frames`` per clip at ``rate`` Hz, so a test trains in seconds)."""
+@dataclass(frozen=True, kw_only=True)
+class TinyConfig(TrainConfig):
+    """The shared training fields (:class:`~wearpose.estimators.trainconfig.TrainConfig`, three
+    defaults restated), the kit and rate, the network width, the epochs, and ``max_frames`` per
+    clip (so a test trains in seconds)."""
 
     kit: str = "imu6"
     rate: float = 60.0
     hidden: int = 32
     epochs: int = 2
-    batch_size: int = 64
-    lr: float = 3e-3
-    lr_schedule: str = "constant"
-    lr_min_factor: float = 0.1
-    grad_clip: float = 1.0
-    val_clips: int = 1
     max_frames: int = 120
-    seed: int = 0
+    val_clips: int = 1
+    lr: float = 3e-3
+    batch_size: int = 64
 
     @classmethod
     def preset(cls, name: str) -> TinyConfig:
@@ -60,7 +56,8 @@ class TinyNet(nn.Module):
 @register_estimator("tiny")
 class TinyEstimator(NetworkCheckpointing, Estimator):
     """Per frame: the kit's six IMU orientations ``R_WS`` -> 24 local joint rotations. Masked
-    samples are held at the sensor's last valid one (``inputs.prepare``); a frame is valid
+    samples are held at the sensor's last valid one (``inputs.prepare``, online
+    ``inputs.held_frame``); a frame is valid
     when every sensor is. Poses are in the IMU world (``extras["frame"] == "world"``), no
     translation."""
 
@@ -100,14 +97,9 @@ class TinyEstimator(NetworkCheckpointing, Estimator):
                          extras={"frame": "world", "method": self.name})
 
     def reset(self) -> None:
-        self._index: list[int] | None = None
-        self._last = torch.eye(3).repeat(len(self.sensor_names), 1, 1)
+        self._last: tuple[torch.Tensor, ...] | None = None
 
     def step(self, frame: SensorFrame) -> PoseFrame:
-        if self._index is None:  # the sensor index map, once per stream
-            self._index = [frame.names.index(n) for n in self.sensor_names]
-        valid = torch.as_tensor(np.asarray(frame.valid)[self._index])
-        R = torch.as_tensor(np.asarray(frame.channels["orientation"])[self._index], dtype=torch.float32)
-        self._last = torch.where(valid[:, None, None], R, self._last)  # hold the last valid sample
-        return PoseFrame(self.rotations(self._last[None])[0], torch.zeros(10), None, bool(valid.all()),
+        self._last, valid = held_frame(frame, self.sensor_names, ("orientation",), self._last, who="tiny")
+        return PoseFrame(self.rotations(self._last[0][None])[0], torch.zeros(10), None, bool(valid.all()),
                          frame.timestamp, extras={"frame": "world"})
