@@ -48,10 +48,10 @@ from wearpose.geometry import matrix_to_quat
 if TYPE_CHECKING:
     from wearpose.estimators.run import ModelSource
 
+from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR
+
 VALID = np.array([40, 190, 80], np.uint8)
 DROPPED = np.array([230, 40, 40], np.uint8)
-ESTIMATE_COLOUR = (90, 170, 250)
-TRUTH_COLOUR = (200, 200, 200)
 BONES = [(j, p) for j, p in enumerate(PARENTS) if p >= 0]
 
 
@@ -81,11 +81,20 @@ def joint_colours(uncertainty: np.ndarray | None, scale: float | None = None) ->
 class BodyLayer:
     """One body in a viser scene: skinned mesh, skeleton, joints and sensor sites.
 
+    Why transforms: the browser applies the mesh's bone poses and scene-node poses as they
+    arrive, but rebuilds a line or point geometry whose points change (a React re-render), so a
+    skeleton drawn from new points every frame lagged the mesh under load. Here every joint is a
+    frame node posed like its bone (global rotation, joint position); each bone is a fixed
+    segment in its parent joint's frame (``J_j = J_p + R_p (J^rest_j - J^rest_p)``), each joint
+    dot, sensor dot and the label hang from nodes that only move, so all of them change in the
+    same kind of message as the mesh, in the same atomic batch.
+
     Args:
         server: a ``viser.ViserServer``.
         body: the body model whose mesh/skinning weights are drawn.
         name: scene node prefix and label.
         betas: ``(10,)`` shape of this body.
+        colour: mesh colour (:mod:`wearpose.viewer.scene`).
         offset: ``(3,)`` m, display shift (side-by-side bodies).
         sites: body site names of the sensors drawn on this body (``()``: none).
     """
@@ -106,20 +115,30 @@ class BodyLayer:
             bone_wxyzs=np.tile(np.array([1.0, 0, 0, 0], np.float32), (24, 1)), bone_positions=J,
             skin_weights=body.weights.cpu().numpy().astype(np.float32), color=colour, opacity=opacity,
             position=tuple(self.offset), cast_shadow=False, receive_shadow=False)  # shadows cost a pass per light
-        self.skeleton = server.scene.add_line_segments(f"/{name}/skeleton", self._bone_points(J),
-                                                       colors=(30, 30, 30), thickness=0.012, position=tuple(self.offset))
-        self.joints = server.scene.add_point_cloud(f"/{name}/joints", J, colors=joint_colours(None), point_size=0.035,
-                                                   point_shape="circle", position=tuple(self.offset))
-        self.sensors = None
+        self.frames = [server.scene.add_frame(f"/{name}/joint{j}", show_axes=False, position=tuple(J[j] + self.offset))
+                       for j in range(24)]
+        for j, p in BONES:  # bone j -> p, fixed in the parent's frame
+            server.scene.add_line_segments(f"/{name}/joint{p}/bone{j}", np.stack([np.zeros(3, np.float32), J[j] - J[p]])[None],
+                                           colors=(30, 30, 30), thickness=0.012)
+        self._joint_cols = joint_colours(None)
+        self.joint_dots = [server.scene.add_point_cloud(f"/{name}/joint{j}/dot", np.zeros((1, 3), np.float32),
+                                                        colors=self._joint_cols[j:j + 1], point_size=0.035,
+                                                        point_shape="circle") for j in range(24)]
+        self.sensor_frames, self.sensor_dots = [], []
+        self._sensor_cols = np.zeros((0, 3), np.uint8)
         if self.sites:
             sp = body.sites(None, b, None, self.sites).positions.cpu().numpy().astype(np.float32)
-            self.sensors = server.scene.add_point_cloud(f"/{name}/sensors", sp, colors=sensor_colours(np.ones(len(sp), bool)),
-                                                        point_size=0.045, point_shape="circle", position=tuple(self.offset))
-        self.label = server.scene.add_label(f"/{name}/label", name, position=tuple(self.offset + np.array([0, 1.0, 0], np.float32)))
-
-    @staticmethod
-    def _bone_points(J: np.ndarray) -> np.ndarray:
-        return np.stack([np.stack([J[j], J[p]]) for j, p in BONES]).astype(np.float32)  # (23, 2, 3)
+            self._sensor_cols = sensor_colours(np.ones(len(sp), bool))
+            for k, site in enumerate(self.sites):
+                self.sensor_frames.append(server.scene.add_frame(f"/{name}/sensor{k}", show_axes=False,
+                                                                 position=tuple(sp[k] + self.offset)))
+                self.sensor_dots.append(server.scene.add_point_cloud(
+                    f"/{name}/sensor{k}/dot", np.zeros((1, 3), np.float32), colors=self._sensor_cols[k:k + 1],
+                    point_size=0.045, point_shape="circle"))
+        self.label_anchor = server.scene.add_frame(f"/{name}/label_anchor", show_axes=False,
+                                                   position=tuple(J[15] + self.offset + np.array([0, 0.35, 0], np.float32)))
+        self.label = server.scene.add_label(f"/{name}/label_anchor/label", name)
+        self.root = J[0] + self.offset  # (3,) m, world position of the root shown last
 
     @torch.no_grad()
     def show(self, local_rot: torch.Tensor, trans: torch.Tensor | None = None, sensor_valid: np.ndarray | None = None,
@@ -132,19 +151,30 @@ class BodyLayer:
         J = J + t
         q = matrix_to_quat(G).cpu().numpy()
         Jn = J.cpu().numpy().astype(np.float32)
+        Jw = Jn + self.offset
+        cols = joint_colours(uncertainty, uncertainty_scale)
+        sp = sc = None
+        if self.sites:
+            sp = self.body.sites(R[None], self.betas, t[None], self.sites).positions[0].cpu().numpy().astype(np.float32)
+            v = np.ones(len(self.sites), bool) if sensor_valid is None else np.asarray(sensor_valid, bool)
+            sc = sensor_colours(v, interference)
         with self.server.atomic():
             for j in range(24):
                 self.mesh.bones[j].wxyz = q[j]
                 self.mesh.bones[j].position = Jn[j]
-            self.skeleton.points = self._bone_points(Jn)
-            self.joints.points = Jn
-            self.joints.colors = joint_colours(uncertainty, uncertainty_scale)
-            if self.sensors is not None:
-                sp = self.body.sites(R[None], self.betas, t[None], self.sites).positions[0].cpu().numpy()
-                self.sensors.points = sp.astype(np.float32)
-                v = np.ones(len(self.sites), bool) if sensor_valid is None else np.asarray(sensor_valid, bool)
-                self.sensors.colors = sensor_colours(v, interference)
-            self.label.position = tuple(Jn[15] + self.offset + np.array([0, 0.35, 0], np.float32))
+                self.frames[j].wxyz = q[j]
+                self.frames[j].position = Jw[j]
+                if not np.array_equal(cols[j], self._joint_cols[j]):  # a colour message only when it changes
+                    self.joint_dots[j].colors = cols[j:j + 1]
+            self._joint_cols = cols
+            if sp is not None:
+                for k, f in enumerate(self.sensor_frames):
+                    f.position = sp[k] + self.offset
+                    if not np.array_equal(sc[k], self._sensor_cols[k]):
+                        self.sensor_dots[k].colors = sc[k:k + 1]
+                self._sensor_cols = sc
+            self.label_anchor.position = tuple(Jw[15] + np.array([0, 0.35, 0], np.float32))
+        self.root = Jw[0]
 
 
 #: Seconds the viewer waits for its WebSocket to close cleanly before it exits anyway.
@@ -277,6 +307,9 @@ class _Timeline:
         self.server, self.fps = server, fps
         server.gui.add_markdown(f"**{title}**")
         self.follow = server.gui.add_checkbox("follow live", True) if live else None
+        # Offline: the camera moves with the first body, keeping the user's orbit around it. Off by
+        # default: in headless Chromium (viser 1.1) the view it gave was not the initial camera's.
+        self.camera_follows = None if live else server.gui.add_checkbox("camera follows", False)
         self.slider = server.gui.add_slider("frame", min=0, max=max(1, num_frames - 1), step=1, initial_value=0)
         self.playing = server.gui.add_checkbox("play", not live)
         self.speed = server.gui.add_slider("speed", min=0.1, max=4.0, step=0.1, initial_value=1.0)
@@ -344,6 +377,7 @@ class RecordingViewer:
         self.timeline.playing.value = autoplay
         self.timeline.slider.on_update(self._on_slider)
         self._stop = threading.Event()
+        self._camera_root = next(iter(self.layers.values())).root.copy()
         self.show(0)
         self._player = threading.Thread(target=self._play, daemon=True, name="wearpose-viewer-play")
         self._player.start()
@@ -381,6 +415,20 @@ class RecordingViewer:
         if valid is not None:
             text.append(f"sensors valid: {int(valid.sum())} / {len(valid)}")
         self.timeline.info.content = "  \n".join(text)
+        self._follow_camera()
+
+    def _follow_camera(self) -> None:
+        """Move every client's camera (position and look-at) by how far the first body's root
+        moved since the last frame shown, when "camera follows" is ticked."""
+        lead = next(iter(self.layers.values()))
+        d = lead.root - self._camera_root
+        self._camera_root = lead.root.copy()
+        if not self.timeline.camera_follows.value or not np.any(d):
+            return
+        for client in self.server.get_clients().values():
+            if not client.camera.update_timestamp:  # no camera reported yet: moving viser's default would undo initial_camera
+                continue
+            client.camera.position = tuple(np.asarray(client.camera.position) + d)  # viser moves look_at with it
 
     def _play(self) -> None:
         last = time.perf_counter()
