@@ -125,7 +125,8 @@ def test_loop_settings_take_the_config_optimisation_fields(tmp_path: Path) -> No
     cfg = TOY.override(lr=3e-3, lr_schedule="cosine", lr_min_factor=0.2, grad_clip=0.5)
     s = loop_settings(cfg, str(tmp_path), 7, resume=True, threads=1, max_steps=4)
     assert s == TrainSettings(out_dir=tmp_path, epochs=7, lr=3e-3, lr_schedule="cosine", lr_min_factor=0.2, grad_clip=0.5,
-                              resume=True, threads=1, max_steps=4)
+                              resume=True, threads=1, max_steps=4, seed=cfg.seed)
+    assert loop_settings(cfg.override(seed=5), tmp_path, 1).seed == 5  # dropout draws follow the config's seed
     assert loop_settings(cfg, tmp_path, 1, lr=1e-5).lr == 1e-5
     s = loop_settings(BiraeConfig.preset("tiny").override(lr_schedule="exp", lr_decay=0.5, lr_decay_steps=10), tmp_path, 1)
     assert (s.lr_schedule, s.lr_decay, s.lr_decay_steps) == ("exp", 0.5, 10)  # configs without them: TrainSettings' defaults

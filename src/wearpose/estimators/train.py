@@ -37,6 +37,7 @@ import torch
 from torch import nn
 
 from wearpose.estimators.checkpoint import load_checkpoint, save_checkpoint
+from wearpose.estimators.seeding import step_seed
 from wearpose.estimators.trainconfig import TrainConfig
 
 
@@ -67,7 +68,11 @@ class TrainTask(Protocol):
 class TrainSettings:
     """Loop settings. ``threads``: torch CPU threads (None = torch default); ``device``:
     ``"auto"`` (CUDA if available) or a device string; ``max_steps``: stop after this many
-    optimiser steps in total (tests); ``log_every``: steps between log lines. ``lr_schedule``:
+    optimiser steps in total (tests); ``log_every``: steps between log lines. ``seed``: base
+    seed of the network's own draws during training (dropout): torch's global generator is
+    seeded with :func:`~wearpose.estimators.seeding.step_seed` before every step, so a run is a
+    function of its seed and a resumed run draws what the uninterrupted one drew (None: torch's
+    generator is left alone, the run is not reproducible). ``lr_schedule``:
     ``"constant"``, ``"cosine"`` (to ``lr_min_factor * lr`` over all epochs) or ``"exp"``
     (``lr * lr_decay ** (step / lr_decay_steps)``, continuous; independent of the run length,
     so a resumed or extended run keeps the same curve)."""
@@ -87,6 +92,7 @@ class TrainSettings:
     quiet: bool = False
     lr_decay: float = 0.9
     lr_decay_steps: int = 5000
+    seed: int | None = None
 
 
 def resolve_device(device: str) -> torch.device:
@@ -238,6 +244,8 @@ def train(task: TrainTask, s: TrainSettings, console: Any = None) -> dict[str, A
             for k, batch in enumerate(task.batches(epoch, skip), start=skip):
                 for g in opt.param_groups:
                     g["lr"] = _lr_at(s, gstep, total)
+                if s.seed is not None:  # dropout masks: a function of the seed and the step (issue 24)
+                    torch.manual_seed(step_seed(s.seed, gstep))
                 weight = 1.0
                 if distributed:
                     batch, weight = shard_batch(batch, rank, world)
@@ -369,12 +377,12 @@ def loop_settings(cfg: TrainConfig, out_dir: str | Path, epochs: int, *, lr: flo
                   **loop: Any) -> TrainSettings:
     """:class:`TrainSettings` from a method config's optimisation fields (its
     :class:`~wearpose.estimators.trainconfig.TrainConfig` ``lr``, ``lr_schedule``,
-    ``lr_min_factor``, ``grad_clip``, and ``lr_decay`` / ``lr_decay_steps`` where the config has
-    them) and the run's ``loop`` options (``resume``, ``threads``, ``device``,
+    ``lr_min_factor``, ``grad_clip``, ``seed``, and ``lr_decay`` / ``lr_decay_steps`` where the
+    config has them) and the run's ``loop`` options (``resume``, ``threads``, ``device``,
     ``checkpoint_every``, ``max_steps``, ``quiet``). ``lr`` overrides ``cfg.lr``."""
     decay = {k: getattr(cfg, k) for k in ("lr_decay", "lr_decay_steps") if hasattr(cfg, k)}
     return TrainSettings(out_dir=Path(out_dir), epochs=epochs, lr=lr or cfg.lr, lr_schedule=cfg.lr_schedule,
-                         lr_min_factor=cfg.lr_min_factor, grad_clip=cfg.grad_clip, **decay, **loop)
+                         lr_min_factor=cfg.lr_min_factor, grad_clip=cfg.grad_clip, seed=cfg.seed, **decay, **loop)
 
 
 def resume_provenance(est: Any, last: Path, *, resume: bool, train_command: str, console: Any) -> None:

@@ -59,6 +59,7 @@ from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, loa
 from wearpose.estimators.inputs import InputSpec, held_frame, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.body.skeleton import MAJOR_JOINTS, NUM_JOINTS
+from wearpose.estimators.seeding import init_seed, seeded
 
 
 @register_estimator("birae")
@@ -85,7 +86,8 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
         self.sensor_names = SENSORS
         self.body_asset_id = "none"  # joint rotations only: no body asset in the model or its data
         self.fps = float(self.config.rate)
-        self.model = BiRAE(self.config).to(self.device)
+        with seeded(init_seed(self.config.seed)):  # initial weights: a function of the seed (issue 24)
+            self.model = BiRAE(self.config).to(self.device)
         self.sigma_scale = 1.0
         self.calibration: dict[str, Any] = {}
         self.data_fingerprint = ""

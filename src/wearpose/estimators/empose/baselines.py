@@ -52,6 +52,7 @@ from wearpose.estimators.empose.model import (
     NUM_BETAS, SENSOR_FEATURES, decode_omega, encode_pose, omega_dim, sensor_features,
 )
 from wearpose.estimators.registry import register_estimator
+from wearpose.estimators.seeding import init_seed, seeded
 
 #: Config model name -> registry name of the estimator.
 ESTIMATOR_NAMES: dict[str, str] = {"lgd": "empose", "resnet": "empose-resnet", "birnn": "empose-birnn",
@@ -215,7 +216,8 @@ class BaselineEstimator(EmposeEstimator):
         if config.model != self.model_name:
             raise ConfigError(f"{type(self).__name__} needs EmposeConfig.model={self.model_name!r}, got {config.model!r}")
         super().__init__(config, body=body, device=device)
-        self.model = build_baseline(self.config, len(self.sensor_names)).to(self.device)
+        with seeded(init_seed(self.config.seed)):  # initial weights: a function of the seed (issue 24)
+            self.model = build_baseline(self.config, len(self.sensor_names)).to(self.device)
 
     def make_task(self, train_data: EmposeData, val_data: EmposeData | None) -> Any:
         """The training task for :func:`~wearpose.estimators.empose.train.train_empose`."""

@@ -30,6 +30,7 @@ from wearpose.estimators.empose.data import frame_measurements
 from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, module_version, sensor_features
 from wearpose.estimators.inputs import InputSpec, prepare
 from wearpose.estimators.registry import register_estimator
+from wearpose.estimators.seeding import init_seed, seeded
 
 
 def _sites(kit_name: str, body: Any) -> tuple[list[str], str]:
@@ -76,7 +77,8 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         sites, src = _sites(self.kit_name, self.body)
         self.sites = {**dict(zip(self.sensor_names, sites)), "<em_source>": src}
         self.sensors = VirtualSensors(self.body, sites, src)
-        self.model = LGDRNN(self.config, len(self.sensor_names)).to(self.device)
+        with seeded(init_seed(self.config.seed)):  # initial weights: a function of the seed (issue 24)
+            self.model = LGDRNN(self.config, len(self.sensor_names)).to(self.device)
         self._state: tuple[torch.Tensor, torch.Tensor] | None = None
         self._last: tuple[torch.Tensor, torch.Tensor] | None = None
         self._offsets: tuple[torch.Tensor, torch.Tensor] | None = None

@@ -63,6 +63,7 @@ from wearpose.estimators.empose.model import (
 )
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import axis_angle_to_matrix, matrix_to_rot6d, rot6d_to_matrix
+from wearpose.estimators.seeding import init_seed, seeded
 
 NUM_MAPPED = len(PRED_JOINTS)  # 20 joints: positions + orientations from the mapper
 JOINT_NOISE_M = 0.015  #: std of the position perturbation of stage-2 training inputs, m
@@ -393,7 +394,8 @@ class TwoStageEstimator(EmposeEstimator):
         if config.model != "twostage":
             raise ConfigError(f"TwoStageEstimator needs EmposeConfig.model='twostage', got {config.model!r}")
         super().__init__(config, body=body, device=device)
-        self.model = TwoStageNet(self.config, len(self.sensor_names), self.body.rest_joints().cpu()).to(self.device)
+        with seeded(init_seed(self.config.seed)):  # initial weights: a function of the seed (issue 24)
+            self.model = TwoStageNet(self.config, len(self.sensor_names), self.body.rest_joints().cpu()).to(self.device)
         self.joint_sensors = JointSensors(self.body)
 
     def make_task(self, train_data: EmposeData, val_data: EmposeData | None) -> Any:

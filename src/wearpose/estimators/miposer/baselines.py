@@ -30,7 +30,7 @@ from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.base import OfflineOnlyError
-from wearpose.estimators.seeding import clip_seed
+from wearpose.estimators.seeding import clip_seed, init_seed, seeded
 from wearpose.estimators.inputs import InputSpec, prepare
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.estimators.clipstore import split_source
@@ -144,7 +144,8 @@ class ImuPoserEstimator(NetworkCheckpointing, Estimator):
         if config.model != "imuposer":
             raise ShapeError(f"ImuPoserEstimator needs model='imuposer', got {config.model!r}")
         self.init_state(config, body, device, kit=KIT)
-        self.model = ImuPoserNet(self.config, len(self.sensor_names)).to(self.device)
+        with seeded(init_seed(self.config.seed)):  # initial weights: a function of the seed (issue 24)
+            self.model = ImuPoserNet(self.config, len(self.sensor_names)).to(self.device)
 
     def build_data(self, split: str, **kw: Any) -> MiposerData:
         return build_imu_split(split, self.config, self.body, **kw)

@@ -45,6 +45,7 @@ from wearpose.estimators.miposer.data import calibrated_inputs, kit_streams, raw
 from wearpose.estimators.miposer.model import AvatarPoserNet, decode_pose, head_anchored_translation, window_features
 from wearpose.estimators.registry import register_estimator
 from wearpose.sensors import get_kit
+from wearpose.estimators.seeding import init_seed, seeded
 
 
 def resolve_calibration(recording: Any, calibration: Any, window: tuple[float, float] | None, body: Any) -> Any:
@@ -146,7 +147,8 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
         if config.model != "avatarposer":
             raise ShapeError(f"MiposerEstimator needs model='avatarposer', got {config.model!r}")
         self.init_state(config, body, device)
-        self.model = AvatarPoserNet(self.config, 1 + self.config.wrists).to(self.device)
+        with seeded(init_seed(self.config.seed)):  # initial weights: a function of the seed (issue 24)
+            self.model = AvatarPoserNet(self.config, 1 + self.config.wrists).to(self.device)
         #: ``(t0, t1)`` s of the wearer's T-pose :meth:`estimate` calibrates from when neither the
         #: call nor the recording gives a calibration (set from a recording's marked T-pose by
         #: :func:`wearpose.estimators.run.use_calibration_window`); None: no such window.

@@ -51,6 +51,7 @@ from wearpose.estimators.pip.model import NumpyStepper, PipNet
 from wearpose.estimators.pip.sitting import SIT_HOLD_S
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import rot6d_to_matrix
+from wearpose.estimators.seeding import init_seed, seeded
 
 
 def physics_available() -> bool:
@@ -90,7 +91,8 @@ class PipEstimator(NetworkCheckpointing, Estimator):
                  learned_init: bool = True, betas: Any = None, calibration_window: tuple[float, float] | None = (0.0, 1.0),
                  device: str | torch.device = "cpu") -> None:
         self.init_state(config or PipConfig.preset("cpu"), body, device)
-        self.model = PipNet(self.config).to(self.device)
+        with seeded(init_seed(self.config.seed)):  # initial weights: a function of the seed (issue 24)
+            self.model = PipNet(self.config).to(self.device)
         self.physics = bool(physics)
         self.dual_pd = bool(dual_pd)
         self.learned_init = bool(learned_init)
