@@ -78,9 +78,17 @@ def osc_ports(names: tuple[str, ...], base: int = 19000) -> list[str]:
     return [f"{n}={base + i}" for i, n in enumerate(names)]
 
 
-def get_stats(url: str) -> dict[str, Any]:
-    with urllib.request.urlopen(url.replace("ws://", "http://") + "/stats", timeout=10) as r:
-        return json.loads(r.read())
+def get_stats(url: str, tries: int = 6) -> dict[str, Any]:
+    """The server's /stats; a busy server (estimator backlog on a loaded machine) may answer
+    late: up to ``tries`` attempts of 30 s each."""
+    for k in range(tries):
+        try:
+            with urllib.request.urlopen(url.replace("ws://", "http://") + "/stats", timeout=30) as r:
+                return json.loads(r.read())
+        except TimeoutError:
+            if k == tries - 1:
+                raise
+    raise AssertionError("unreachable")
 
 
 async def collect(url: str, poses: dict[int, np.ndarray], ready: asyncio.Event, stop: asyncio.Event) -> None:
@@ -95,7 +103,8 @@ async def collect(url: str, poses: dict[int, np.ndarray], ready: asyncio.Event, 
         await stop.wait()
 
 
-def run(name: str, rec_path: Path, rec: Any, seconds: float, faults: bool, ref: np.ndarray | None) -> dict[str, Any]:
+def run(name: str, rec_path: Path, rec: Any, seconds: float, faults: bool, ref: np.ndarray | None,
+        wait_s: float = 600.0) -> dict[str, Any]:
     kit, rate, model, serve_opts, emu_opts = CASES[name]
     if name == "osc":
         ports = osc_ports(rec.names)
@@ -130,7 +139,7 @@ def run(name: str, rec_path: Path, rec: Any, seconds: float, faults: bool, ref: 
         out, _ = await emu.communicate()
         res = json.loads(out)
         # every received frame estimated (or shed) and its pose delivered, then stop
-        t_end = time.time() + 600
+        t_end = time.time() + wait_s
         while time.time() < t_end:
             st = get_stats(url)["subjects"].get("0", {})
             done = st.get("estimated", 0) + st.get("shed", 0) + st.get("estimator_errors", 0)
@@ -194,7 +203,9 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--clip", default="cmu_daz/05/05_01", help="a test-split clip (looped)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks/results/live_inputs.json"))
-    ap.add_argument("--merge", action="store_true", help="keep the other inputs' rows of --out (their own meta)")
+    ap.add_argument("--merge", action="store_true", help="keep the other rows of --out (their own meta)")
+    ap.add_argument("--runs", choices=("both", "clean", "faults"), default="both")
+    ap.add_argument("--wait", type=float, default=600.0, help="s to wait after the emulator for queued frames")
     args = ap.parse_args()
     from wearpose.stream.inputs.lsl import write_loopback_config
 
@@ -214,8 +225,8 @@ def main() -> None:
             print(f"{name}: reference ({n} frames of {model}) ...", flush=True)
             refs[(kit, rate, model)] = reference(model, rec, n)
         ref = refs[(kit, rate, model)]
-        for faults in (False, True):
-            r = run(name, path, rec, args.seconds, faults, ref)
+        for faults in {"both": (False, True), "clean": (False,), "faults": (True,)}[args.runs]:
+            r = run(name, path, rec, args.seconds, faults, ref, args.wait)
             print(json.dumps({k: v for k, v in r.items() if k != "input_stats"}), flush=True)
             rows.append(r)
     meta = {"started": started, "load_average_start": load0, "load_average_end": os.getloadavg(), "cpu": cpu_model(),
@@ -226,11 +237,13 @@ def main() -> None:
             f"end (2 cores, shared), commit {meta['commit'][:7]}")
     if args.merge and out.exists():  # the other inputs' rows stay, with their own meta and header text
         old = json.loads(out.read_text())
-        kept = [r for r in old["runs"] if r["input"] not in names]
-        doc = {**old, "runs": kept + rows, f"meta_{'_'.join(names)}": meta}
+        new_keys = {(r["input"], r["faults"]) for r in rows}
+        kept = [r for r in old["runs"] if (r["input"], r["faults"]) not in new_keys]
+        tag = "_".join(names) + ("" if args.runs == "both" else f"_{args.runs}")
+        doc = {**old, "runs": kept + rows, f"meta_{tag}": meta}
         old_md = out.with_suffix(".md").read_text()
         intro = old_md[:old_md.index("| input |")].rstrip("\n")
-        md = f"{intro}\n{', '.join(names)} rows: {what}.\n\n" + table(kept + rows)
+        md = f"{intro}\n{', '.join(names)} {'' if args.runs == 'both' else args.runs + ' '}rows: {what}.\n\n" + table(kept + rows)
     else:
         doc = {"meta": meta, "runs": rows}
         md = (f"# Live inputs end to end (benchmarks/live_inputs.py)\n\n{args.seconds:g} s per run, clip {args.clip}, "
