@@ -18,6 +18,7 @@ from wearpose.estimators.registry import register_estimator
 from wearpose.estimators.trainconfig import TrainConfig
 from wearpose.geometry import rot6d_to_matrix
 from wearpose.sensors import get_kit
+from wearpose.estimators.seeding import init_seed, seeded
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -71,7 +72,8 @@ class TinyEstimator(NetworkCheckpointing, Estimator):
         self.body_asset_id = self.body.asset_id
         self.fps = float(self.config.rate)
         self.spec = InputSpec.from_kit("tiny", self.kit_name, ("orientation",), rates={"imu": self.fps})
-        self.model = TinyNet(9 * len(self.sensor_names), self.config.hidden)
+        with seeded(init_seed(self.config.seed)):  # initial weights: a function of the seed
+            self.model = TinyNet(9 * len(self.sensor_names), self.config.hidden)
         self.data_fingerprint, self.train_command, self.meta = "", "", {}
         self.reset()
 
