@@ -10,7 +10,7 @@ import pytest
 from wearpose.errors import ConfigError
 from wearpose.estimators.base import OfflineOnlyError
 
-from wearpose.evaluate.latency import cost_settings, step_latency
+from wearpose.evaluate.latency import apply_settings, cost_settings, step_latency
 from wearpose.estimators.run import ModelSource
 from wearpose.recording import Recording, SensorInfo, SensorStream
 
@@ -32,6 +32,9 @@ class _Counting:
 
     def reset(self) -> None:
         self.resets += 1
+
+    def set_window(self, past: int, future: int) -> None:
+        self.window = (past, future)
 
     def step(self, frame):
         self.steps += 1
@@ -83,3 +86,14 @@ def test_an_offline_only_estimator_is_refused_naming_the_model(monkeypatch) -> N
     monkeypatch.setattr(ModelSource, "make", lambda self: _Offline())
     with pytest.raises(ConfigError, match="bi has no online step: bidirectional"):
         step_latency(ModelSource(name="bi", method="c"), _rec(6), frames=2, warmup=0)
+
+
+def test_settings_go_through_the_setter_or_the_attribute_and_unknown_ones_are_refused() -> None:
+    est = _Counting()
+    est.mc_samples = 10
+    apply_settings(est, {"window": "8,3", "mc_samples": "0"})
+    assert est.window == (8, 3) and est.mc_samples == 0
+    with pytest.raises(ConfigError, match="no setting 'lr'.*it has: mc_samples, window"):
+        apply_settings(est, {"lr": "0.1"})
+    with pytest.raises(ConfigError, match="no setting 'iterations'"):  # in the config only: not changeable here
+        apply_settings(est, {"iterations": "4"})

@@ -74,6 +74,9 @@ def latency_cmd(
     warmup: int = typer.Option(10, min=0, help="Steps run first and not timed (tracing, first allocations)."),
     threads: int = typer.Option(1, min=1, help="torch CPU threads."),
     seed: int = typer.Option(0, help="Seed of the procedural clip and its simulation."),
+    settings: Optional[list[str]] = typer.Option(None, "--set", help="KEY=VALUE: change a cost setting the "
+                                                 "estimator has (repeatable), e.g. --set online=stream, "
+                                                 "--set window=130,30, --set mc_samples=0."),
     out: Optional[Path] = typer.Option(None, help="Write OUT.json and OUT.md (the table, settings, machine)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
@@ -83,6 +86,7 @@ def latency_cmd(
 
     Example: wearpose bench latency empose12_cpu --frames 300 --threads 1 --json
     A recording of your own: wearpose bench latency pip_cpu --recording recs/imu6.npz
+    BiRAE's streaming mode: wearpose bench latency birae6_cpu --set online=stream
     """
     import torch
 
@@ -101,7 +105,10 @@ def latency_cmd(
             raise ConfigError(f"--model {model!r} has no kit of its own: give --kit (the kit to simulate) or --recording")
         rec, rec_name = _procedural_recording(use_kit, motion, seed), f"procedural {motion} (eval seed {seed}), kit {use_kit}"
     machine = machine_info()
-    res = step_latency(source, rec, frames=frames, warmup=warmup, path=recording or "<procedural>")
+    pairs = dict(s.split("=", 1) for s in settings or [] if "=" in s)
+    if len(pairs) != len(settings or []):
+        raise typer.BadParameter(f"{settings}: expected KEY=VALUE", param_hint="--set")
+    res = step_latency(source, rec, frames=frames, warmup=warmup, path=recording or "<procedural>", settings=pairs)
     machine_end = machine_info()
     res.update({"threads": threads, "recording": rec_name, "reference": reference_timing(),
                 "machine": {**machine, "load_average_end": machine_end["load_average"]},

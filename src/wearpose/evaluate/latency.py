@@ -132,11 +132,47 @@ def cost_settings(est: Any) -> dict[str, Any]:
     return out
 
 
+def _parse(value: str) -> Any:
+    if "," in value:
+        return tuple(int(v) for v in value.split(","))
+    for kind in (int, float):
+        try:
+            return kind(value)
+        except ValueError:
+            pass
+    return value
+
+
+def apply_settings(est: Any, settings: dict[str, str]) -> None:
+    """Change an estimator's cost settings before it runs: ``{"online": "stream", "window":
+    "130,30", "mc_samples": "0"}``. A setting goes through the estimator's ``set_<key>`` method
+    when it has one (which checks and resets), else its attribute of that name.
+
+    Raises:
+        ConfigError: a key that is not a :data:`COST_SETTINGS` name, or one the estimator does
+            not have as an attribute (names what it has).
+    """
+    from wearpose.errors import ConfigError
+
+    for key, raw in settings.items():
+        value = _parse(raw)
+        setter = getattr(est, f"set_{key}", None)
+        if key in COST_SETTINGS and callable(setter):
+            setter(*value) if isinstance(value, tuple) else setter(value)
+        elif key in COST_SETTINGS and getattr(est, key, None) is not None:
+            setattr(est, key, value)
+        else:
+            have = [k for k in COST_SETTINGS if getattr(est, k, None) is not None]
+            raise ConfigError(f"--set {key}={raw}: {type(est).__name__} has no setting {key!r} that can be changed "
+                              f"after loading (it has: {', '.join(have) or 'none'})")
+
+
 def step_latency(source: Any, recording: Any, *, frames: int = 300, warmup: int = 10,
-                 path: str | Path = "<recording>") -> dict[str, Any]:
+                 path: str | Path = "<recording>", settings: dict[str, str] | None = None) -> dict[str, Any]:
     """Online step latency of one model on one recording, as the stream server runs it.
 
-    The recording is brought to the model's rate (:func:`wearpose.estimators.run.fit_rate`), the
+    The recording is brought to the model's rate (:func:`wearpose.estimators.run.fit_rate`, every
+    sensor, by integer decimation; a rate that does not decimate is an error), the
     estimator is made once (:meth:`ModelSource.make`), given the recording's subject calibration
     and T-pose window (:func:`wearpose.estimators.run.start_online`), reset, and stepped through
     ``warmup + frames`` frames in order; the first ``warmup`` steps (first allocations, lazy
@@ -147,6 +183,7 @@ def step_latency(source: Any, recording: Any, *, frames: int = 300, warmup: int 
         source: a :class:`wearpose.estimators.run.ModelSource` (:func:`~wearpose.estimators.run.open_model`).
         recording: a :class:`wearpose.recording.Recording` with the model's sensors.
         frames: steps timed (fewer when the recording is shorter: ``frames`` in the result says).
+        settings: cost settings changed before the run (:func:`apply_settings`).
 
     Returns:
         ``model``, ``method``, ``kit``, ``rate_hz``, ``frame_period_ms``, ``settings``
@@ -161,11 +198,14 @@ def step_latency(source: Any, recording: Any, *, frames: int = 300, warmup: int 
     from wearpose.errors import ConfigError
     from wearpose.estimators.base import OfflineOnlyError
 
-    rec, note = fit_rate(source, path, recording, None)
+    # resample=True: kits mixing rates by design (MI-Poser: 60 Hz headset, 120 Hz EM) are stepped
+    # at the trained rate too, as a stream at that rate delivers them (integer decimation only).
+    rec, note = fit_rate(source, path, recording, True)
     est = source.make()
     if not est.sensor_names:
         raise ConfigError(f"{source.name}: the estimator names its sensors only once it sees a whole recording "
                           "(offline only, e.g. segments); the latency bench times online steps")
+    apply_settings(est, settings or {})
     start_online(est, rec)
     wall: list[float] = []
     cpu: list[float] = []
@@ -195,4 +235,4 @@ def step_latency(source: Any, recording: Any, *, frames: int = 300, warmup: int 
 
 
 __all__ = ["reference_timing", "latency_stats", "machine_info", "time_calls", "import_baseline",
-           "COST_SETTINGS", "cost_settings", "step_latency"]
+           "COST_SETTINGS", "cost_settings", "apply_settings", "step_latency"]
