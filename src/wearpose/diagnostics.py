@@ -50,7 +50,10 @@ def _pins() -> dict[str, tuple[str, str | None]]:
         m = re.match(r"^\s*([A-Za-z0-9_.\-]+)\s*==\s*([^;\s]+)\s*(;.*)?$", req)
         if m:
             extra = re.search(r"""extra\s*==\s*['"]([^'"]+)['"]""", m.group(3) or "")
-            pins[m.group(1).lower()] = (m.group(2), extra.group(1) if extra else None)
+            name, x = m.group(1).lower(), (extra.group(1) if extra else None)
+            if name in pins and x == "test":  # a user's extra (ximu3) is the one to name, not the test extra
+                continue
+            pins[name] = (m.group(2), x)
     return pins
 
 
