@@ -144,7 +144,9 @@ def _stamp_is_current() -> bool:
 # for under 3 minutes: not met yet, so the budget states what it takes. With demo --seconds 2
 # (2026-12-02, load 8-14): 303 s CPU over all commands (the log prints each command's CPU); a
 # demo's cost is mostly fixed (miposer 18.4 s CPU at 2 s of clip vs 21.7 s at 10 s, load 3-4).
-@pytest.mark.budget(300)
+# The fresh-machine CI run of 2c8556c (quiet machine) took 289.6 s: 10 s under the old 300 s
+# budget, so the budget is 360 s (README unchanged; the commands themselves got slower: not measured per command).
+@pytest.mark.budget(360)
 def test_readme_commands_run_in_written_order(tmp_path: Path) -> None:
     try:
         shared = _shared_dir()
