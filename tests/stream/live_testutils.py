@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import socket
 import warnings
 from typing import Any, Callable
 
@@ -101,20 +102,20 @@ def _input_and_emulator(name: str, rec: Recording) -> tuple[Any, Callable[..., A
     if name == "osc":
         from wearpose.stream.inputs.osc import OscInput, emulate_osc
 
-        port = _free_udp_ports(len(rec.names))
+        port = _free_ports(len(rec.names), socket.SOCK_DGRAM)
         src = OscInput("ngimu", dict(zip(rec.names, port)), _rate(rec))
         return src, lambda s, f, sp, d: emulate_osc(rec, "ngimu", "127.0.0.1", ports=s.ports, faults=f, speed=sp,
                                                     duration=d)
     if name == "osc-generic":
         from wearpose.stream.inputs.osc import OscInput, emulate_osc
 
-        port = _free_udp_ports(1)[0]
+        port = _free_ports(1, socket.SOCK_DGRAM)[0]
         src = OscInput("generic", list(rec.names), _rate(rec), port=port)
         return src, lambda s, f, sp, d: emulate_osc(rec, "generic", "127.0.0.1", port, faults=f, speed=sp, duration=d)
     if name == "ximu3":  # TCP: the emulated devices listen on 127.0.0.1, the input connects (nothing else listens)
         from wearpose.stream.inputs.ximu3 import Ximu3Input, emulate_ximu3
 
-        ports = dict(zip(rec.names, _free_tcp_ports(len(rec.names))))
+        ports = dict(zip(rec.names, _free_ports(len(rec.names), socket.SOCK_STREAM)))
         src = Ximu3Input(ports, _rate(rec), "127.0.0.1", "tcp", timeout=30.0)
         return src, lambda s, f, sp, d: emulate_ximu3(rec, "127.0.0.1", ports=ports, transport="tcp", faults=f, speed=sp,
                                                       duration=d, connect_timeout=30.0)
@@ -134,10 +135,10 @@ def _rate(rec: Recording) -> float:
     return float(round(rec.sensors[0].info.rate, 6))
 
 
-def _free_udp_ports(n: int) -> list[int]:
-    import socket
-
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
+def _free_ports(n: int, kind: int) -> list[int]:
+    """``n`` distinct free 127.0.0.1 ports of socket ``kind`` (SOCK_DGRAM or SOCK_STREAM), all
+    held open together so that none is handed out twice."""
+    socks = [socket.socket(socket.AF_INET, kind) for _ in range(n)]
     for s in socks:
         s.bind(("127.0.0.1", 0))
     ports = [s.getsockname()[1] for s in socks]
@@ -145,14 +146,3 @@ def _free_udp_ports(n: int) -> list[int]:
         s.close()
     return ports
 
-
-def _free_tcp_ports(n: int) -> list[int]:
-    import socket
-
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_STREAM) for _ in range(n)]
-    for s in socks:
-        s.bind(("127.0.0.1", 0))
-    ports = [s.getsockname()[1] for s in socks]
-    for s in socks:
-        s.close()
-    return ports
