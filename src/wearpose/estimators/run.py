@@ -159,13 +159,23 @@ def use_calibration_window(estimator: Any, recording: Recording) -> tuple[float,
     return window
 
 
+def use_subject_calibration(estimator: Any, recording: Any) -> bool:
+    """Give ``estimator`` the subject calibration ``recording.subject`` holds (EM-POSE sensor
+    offsets, read exactly as offline); ``recording`` needs only a ``subject`` dict (the stream
+    server passes a subject's hello). Returns whether anything was applied."""
+    if not ((recording.subject or {}).get("offsets") and hasattr(estimator, "set_offsets")
+            and hasattr(estimator, "_offsets_from")):
+        return False
+    estimator.set_offsets(*estimator._offsets_from(recording))
+    return True
+
+
 def start_online(estimator: Any, recording: Recording) -> None:
     """Ready ``estimator`` to :meth:`~wearpose.estimators.base.Estimator.step` through
     ``recording``'s frames as the stream server readies one per subject: the subject's
-    calibration (EM-POSE sensor offsets, read exactly as offline), the marked T-pose window
+    calibration (:func:`use_subject_calibration`), the marked T-pose window
     (:func:`use_calibration_window`), then ``reset()``."""
-    if hasattr(estimator, "set_offsets") and hasattr(estimator, "_offsets_from") and (recording.subject or {}).get("offsets"):
-        estimator.set_offsets(*estimator._offsets_from(recording))
+    use_subject_calibration(estimator, recording)
     use_calibration_window(estimator, recording)
     estimator.reset()
 

@@ -878,10 +878,9 @@ class StreamServer:
             raise PacketError(f"hello.sensors lacks {missing} needed by estimator {est.name!r} "
                               f"(it needs {list(est.sensor_names)})")
         stride = self._stride_for(hello, est)  # before the warm-up: a refusal costs no steps
-        offsets = hello.subject_info.get("offsets")
-        if offsets and hasattr(est, "set_offsets") and hasattr(est, "_offsets_from"):
-            # Subject calibration (EM-POSE sensor offsets), read exactly as from a Recording.
-            est.set_offsets(*est._offsets_from(_SubjectOnly(hello.subject_info)))
+        from wearpose.estimators.run import use_subject_calibration  # as estimator_factory imports the runner
+
+        use_subject_calibration(est, _SubjectOnly(hello.subject_info))  # EM-POSE offsets, as from a Recording
         if self.warmup > 0:
             _warm_up(est, hello, self.warmup)
         est.reset()
