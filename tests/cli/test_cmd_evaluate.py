@@ -71,6 +71,9 @@ def test_every_shipped_pose_model_evaluates(model: str, corpus_store: Path) -> N
     assert res.exit_code == 0, res.output
     r = json.loads(res.stdout[res.stdout.index("{"):])
     m = r["models"][model]
+    # Every method's result names the store and the corpus version its clips came from.
+    prov = m.get("store") or r["store"]
+    assert prov["converter"] and prov["corpus"]["manifest_sha1"], prov
     key, lo, hi = SHIPPED[model]
     value = m[key] if key in m else m["metrics"][key]
     assert lo < value < hi, (model, key, value)

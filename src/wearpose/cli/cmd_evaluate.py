@@ -193,7 +193,7 @@ def evaluate(
         else:
             from wearpose.evaluate.protocols import evaluate_model
 
-            res = {"split": split, "store": str(store.root),
+            res = {"split": split, "store": store.provenance(),
                    "models": {n: evaluate_model(src, split=split, clips=clips, seed=seed, noise=noise,
                                                 store=store, progress=tick, frame_stride=frame_stride)
                               for n, src in sources.items()}}

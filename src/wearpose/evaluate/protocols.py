@@ -17,8 +17,9 @@ figures:
 - ``imuposer``: the IMU-only baseline's upper-body MPJPE on the same clips.
 
 Every result has the same top-level keys: ``model``, ``method``, ``kit``, ``split``, ``clips``,
-``clip_ids``, ``frames``, ``seed``, ``noise``, ``protocol``, ``metrics`` (flat, report units, the
-unit in the key) and ``detail`` (the protocol's own result).
+``clip_ids``, ``frames``, ``seed``, ``noise``, ``protocol``, ``store`` (which store and corpus
+version the clips came from: :meth:`wearpose.motion.CorpusStore.provenance`), ``metrics`` (flat,
+report units, the unit in the key) and ``detail`` (the protocol's own result).
 """
 
 from __future__ import annotations
@@ -71,7 +72,7 @@ def evaluate_model(source: ModelSource, *, split: str = "test", clips: int | Non
     out = resolve(known[source.method])(source.make(), store, split, clips, seed, noise, progress, frame_stride)
     return {"model": source.name, "method": source.method, "kit": source.kit, "split": split,
             "clips": len(out["clip_ids"]), "seed": seed, "noise": noise, "frame_stride": frame_stride,
-            "store": str(store.root),
+            "store": store.provenance(),
             "checkpoint": str(source.path) if source.path else None, **out}
 
 
