@@ -140,8 +140,10 @@ def test_lsl_outlet_of_poses_reads_back() -> None:
     assert tuple(labels) == LABELS
     inlet.open_stream(5.0)
     time.sleep(0.3)
+    # Even frames carry a root translation and a per-joint uncertainty, odd ones neither.
+    roots = {k: np.array([0.1 * k, 0.9, -0.2 * k], np.float32) for k in (2, 4)}
     for k in range(1, 5):
-        out.pose(_pose(R[k], k, None, None), 60.0)
+        out.pose(_pose(R[k], k, roots.get(k), unc * k if k in roots else None), 60.0)
     rows, t = [], time.time() + 5
     while len(rows) < 4 and time.time() < t:
         chunk, _ = inlet.pull_chunk(timeout=0.5)
@@ -153,5 +155,8 @@ def test_lsl_outlet_of_poses_reads_back() -> None:
     for k, row in zip(range(1, 5), rows):
         q = torch.tensor(row[:96], dtype=torch.float64).reshape(24, 4)
         assert np.allclose(quat_to_matrix(q).numpy(), R[k], atol=1e-5)
-        assert np.isnan(row[96:99]).all() and np.isnan(row[99:123]).all()  # no translation / uncertainty
+        if k in roots:
+            assert np.allclose(row[96:99], roots[k]) and np.allclose(row[99:123], unc * k, rtol=1e-6)
+        else:
+            assert np.isnan(row[96:99]).all() and np.isnan(row[99:123]).all()  # no translation / uncertainty
         assert row[123] == 1.0 and row[124] == k
