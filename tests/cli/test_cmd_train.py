@@ -4,6 +4,7 @@ the help at 80 columns, a refused value reported as that option's error."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -35,6 +36,23 @@ BEFORE: dict[str, dict[str, Any]] = {
 }
 
 
+#: The library's former argparse ``main()``s (``python -m wearpose.estimators.empose.twostage``,
+#: ``... .empose.optimization``, ``wearpose.interference.nbeats``), now ``wearpose train`` commands:
+#: every former option with its default; added: ``--json`` to all, and to empose-twostage the shared
+#: ``--device`` / ``--checkpoint-every`` at the defaults the old main passed on implicitly.
+#: ``--out`` of empose-twostage was required there and still is (checked below).
+FORMER_MAINS: dict[str, dict[str, Any]] = {
+    "empose-twostage": {"--sensors": 12, "--config": "cpu", "--ik": "lgd", "--mapper-input": "raw", "--init": None,
+                        "--epochs": None, "--lr": None, "--out": None, "--resume": False, "--threads": None,
+                        "--limit": None, "--limit-val": None, "--max-steps": None, "--fk-weight": None,
+                        "--device": "auto", "--checkpoint-every": 100, "--json": False},
+    "poseprior": {"--out": Path("runs/poseprior_cpu"), "--epochs": 4, "--threads": 1, "--limit": None, "--json": False},
+    "nbeats": {"--ship": None, "--name": "nbeats_cpu", "--config": "cpu", "--out": Path("runs/nbeats_cpu"),
+               "--resume": False, "--threads": 1, "--epochs": None, "--max-train-clips": None, "--json": False},
+}
+BEFORE.update(FORMER_MAINS)
+
+
 def _options(method: str) -> dict[str, Any]:
     group = typer.main.get_command(app).get_command(None, "train")  # type: ignore[union-attr, arg-type]
     cmd = group.get_command(None, method)
@@ -50,10 +68,73 @@ def test_every_former_option_keeps_its_name_and_default(method: str) -> None:
 def test_help_at_80_columns_has_its_example_and_no_broken_sentence(method: str) -> None:
     res = CliRunner().invoke(app, ["train", method, "--help"], env={"COLUMNS": "80", "TERM": "dumb"})
     assert res.exit_code == 0, res.output
-    assert f"Example: wearpose train {method}" in res.output
+    assert f"Example: wearpose train {method}" in res.output.replace("\n", " ")
     assert _broken_lines(res.output) == [], res.output
 
 
 def test_a_refused_value_is_that_options_error(tmp_path) -> None:  # noqa: ANN001
     res = CliRunner().invoke(app, ["train", "birae", "--rep", "9param", "--out", str(tmp_path / "r")])
     assert res.exit_code == 2 and "Invalid value for --rep" in res.output and "9param" in res.output, res.output
+
+
+def _train(args: list[str]) -> dict[str, Any]:
+    """``wearpose train ARGS --json`` (sys.argv as the command line would set it: the recorded
+    ``train_command`` is made from it)."""
+    import json
+    import sys
+
+    import torch
+
+    n, argv = torch.get_num_threads(), sys.argv
+    sys.argv = ["wearpose", "train", *args, "--json"]
+    try:
+        res = CliRunner().invoke(app, sys.argv[1:])
+    finally:
+        torch.set_num_threads(n)
+        sys.argv = argv
+    assert res.exit_code == 0, (args, res.output, res.exception)
+    return json.loads(res.output[res.output.index("{"):])
+
+
+def test_empose_twostage_requires_out_and_warm_starts_from_its_own_run(corpus_store: Path, tmp_path: Path) -> None:
+    res = CliRunner().invoke(app, ["train", "empose-twostage", "--config", "tiny"])
+    assert res.exit_code == 2 and "Invalid value for --out" in res.output, res.output
+    first = _train(["empose-twostage", "--config", "tiny", "--limit", "2", "--limit-val", "1", "--max-steps", "2",
+                    "--threads", "1", "--out", str(tmp_path / "a")])
+    assert first["method"] == "empose-twostage" and first["config"]["ik"] == "lgd" and first["steps"] == 2, first
+    warm = _train(["empose-twostage", "--config", "tiny", "--ik", "closed", "--mapper-input", "site", "--init",
+                   str(tmp_path / "a" / "last.pt"), "--limit", "2", "--limit-val", "1", "--max-steps", "1",
+                   "--fk-weight", "50", "--threads", "1", "--out", str(tmp_path / "b")])
+    assert warm["config"]["ik"] == "closed" and warm["config"]["mapper_input"] == "site", warm
+    from wearpose.estimators.checkpoint import load_checkpoint
+    from wearpose.estimators.empose import twostage
+
+    meta = load_checkpoint(tmp_path / "b" / "last.pt").meta
+    assert meta["warm_start"]["optimizer"] is True and meta["fk_joint_weight"] == 50.0, meta
+    assert twostage.FK_JOINT_WEIGHT == 100.0  # the override lasted the run only
+    assert load_checkpoint(tmp_path / "b" / "last.pt").train_command.startswith("wearpose train empose-twostage --config")
+
+
+def test_poseprior_writes_the_lbfgs_prior(corpus_store: Path, tmp_path: Path) -> None:
+    r = _train(["poseprior", "--limit", "2", "--epochs", "1", "--out", str(tmp_path / "p")])
+    assert r["method"] == "empose-lbfgs" and len(r["history"]) == 1 and r["best_val_rec"] > 0, r
+    from wearpose.estimators.checkpoint import load_checkpoint
+
+    ck = load_checkpoint(tmp_path / "p" / "prior.pt")
+    assert ck.method == "empose-lbfgs" and ck.train_command.startswith("wearpose train poseprior"), ck.train_command
+
+
+def test_nbeats_trains_then_ships_with_its_test_figures(corpus_store: Path, tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    import wearpose.weights
+
+    r = _train(["nbeats", "--config", "tiny", "--max-train-clips", "2", "--epochs", "1", "--out", str(tmp_path / "n")])
+    assert r["method"] == "nbeats" and r["epochs"] == 1 and r["best_val_mae_cm"] > 0, r
+    monkeypatch.setattr(wearpose.weights, "WEIGHTS_DIR", tmp_path / "w")
+    (tmp_path / "w").mkdir()
+    s = _train(["nbeats", "--ship", str(tmp_path / "n" / "best.pt"), "--name", "nb_test"])
+    assert s["shipped"] == str(tmp_path / "w" / "nb_test.pt") and s["test"]["mae_cm"] > 0, s
+    import json
+
+    card = json.loads((tmp_path / "w" / "nb_test.json").read_text())
+    assert card["train_command"].startswith("wearpose train nbeats") and card["test"]["mae_cm"] == s["test"]["mae_cm"]

@@ -26,25 +26,25 @@ from wearpose.cli.app import _emit, app, console
 from wearpose.cli.helptext import reflow
 
 if TYPE_CHECKING:
-    from wearpose.estimators.method import MethodSpec, TrainOption
+    from wearpose.estimators.method import TrainOption, Training
 
 
 class MethodCommands(TyperGroup):
-    """The ``train`` group: a command for every declared method with a training entry."""
+    """The ``train`` group: a command for every declared training (a method's own and its
+    further ones, :meth:`~wearpose.estimators.method.MethodSpec.training_commands`)."""
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        from wearpose.estimators.registry import list_methods
+        from wearpose.estimators.registry import list_trainings
 
-        return sorted(set(super().list_commands(ctx)) | set(list_methods(trainable=True)))
+        return sorted(set(super().list_commands(ctx)) | set(list_trainings()))
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        from wearpose.estimators.registry import list_methods
+        from wearpose.estimators.registry import list_trainings
 
         cmd = super().get_command(ctx, cmd_name)
-        if cmd is None and cmd_name in list_methods(trainable=True):
-            from wearpose.estimators.registry import get_method
-
-            cmd = training_command(get_method(cmd_name))
+        trainings = list_trainings() if cmd is None else {}
+        if cmd_name in trainings:
+            cmd = training_command(cmd_name, trainings[cmd_name])
         return cmd
 
 
@@ -65,15 +65,13 @@ def _parameter(o: TrainOption) -> inspect.Parameter:
                              annotation=Optional[kind] if o.default is None else kind)
 
 
-def training_command(spec: MethodSpec) -> click.Command:
-    """``wearpose train <spec.name>``: the declared options parsed, the training entry called
+def training_command(name: str, training: Training) -> click.Command:
+    """``wearpose train <name>``: the declared options parsed, the training entry called
     with them (:meth:`~wearpose.estimators.method.Training.run_options`), the result printed
     (the declaration's ``done`` line, or JSON with ``--json``). An option value the method
     refuses (:class:`~wearpose.estimators.method.OptionError`) is that option's usage error."""
     from wearpose.estimators.method import OptionError, resolve
 
-    training = spec.training
-    assert training is not None, spec.name
     params = [_parameter(o) for o in training.all_options()]
 
     def command(**values: Any) -> None:
@@ -90,7 +88,7 @@ def training_command(spec: MethodSpec) -> click.Command:
     command.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
     command.__annotations__ = {p.name: p.annotation for p in params}
     command.__doc__ = reflow(training.doc)  # the same paragraph joining as every other command's help
-    command.__name__ = f"train_{spec.name.replace('-', '_')}"
+    command.__name__ = f"train_{name.replace('-', '_')}"
     one = typer.Typer(add_completion=False)
-    one.command(spec.name)(command)
+    one.command(name)(command)
     return typer.main.get_command(one)

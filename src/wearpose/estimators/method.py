@@ -163,7 +163,8 @@ class Training:
             (``"done: best val MPJPE {best:.1f} mm; checkpoints in {out_dir}"``).
         options: the method's own options, in ``--help`` order (after ``--config``).
         defaults / help: the shared options' defaults and help texts this method changes.
-        omit: shared options this method does not take (BiRAE: ``epochs``, ``limit``).
+        omit: shared options this method does not take (BiRAE: ``epochs``, ``limit``; a
+            training with no presets: ``config``).
     """
 
     entry: str
@@ -190,7 +191,8 @@ class Training:
             return replace(o, default=self.defaults.get(name, o.default), help=self.help.get(name, o.help))
 
         rest = [shared_option(o.name) for o in SHARED_OPTIONS[1:] if o.name not in self.omit]
-        return (shared_option("config"), *self.options, *rest)
+        first = () if "config" in self.omit else (shared_option("config"),)
+        return (*first, *self.options, *rest)
 
     def run_options(self, values: Mapping[str, Any]) -> tuple[dict[str, Any], TrainRun]:
         """Split parsed option ``values`` into the method's own options and the :class:`TrainRun`
@@ -237,6 +239,10 @@ class MethodSpec:
         presets: the config presets (``tiny`` finishes in under a minute, ``cpu`` ships).
         kits: the sensor kits it reads (:func:`wearpose.sensors.get_kit`).
         training: how ``wearpose train <name>`` trains it; None for a method with nothing to train.
+        trainings: further training commands, ``wearpose train <key>``: the networks the method's
+            estimators load besides their own weights or a variant trained its own way
+            (EM-POSE: ``empose-twostage`` warm-started, ``poseprior`` of ``empose-lbfgs``;
+            MI-Poser: ``nbeats``, MIM's trajectory forecaster).
         demos: kit -> ``"module:function"`` of ``wearpose demo --kit <kit>``
             (``fn(clip, out) -> dict``, see :mod:`wearpose.cli.demo`).
     """
@@ -248,7 +254,14 @@ class MethodSpec:
     presets: tuple[str, ...] = ()
     kits: tuple[str, ...] = ()
     training: Training | None = None
+    trainings: Mapping[str, Training] = field(default_factory=dict)
     demos: Mapping[str, str] = field(default_factory=dict)
+
+    def training_commands(self) -> dict[str, Training]:
+        """``wearpose train`` command name -> :class:`Training`: :attr:`training` under the
+        method's name, then :attr:`trainings`."""
+        own = {self.name: self.training} if self.training is not None else {}
+        return {**own, **self.trainings}
 
     def estimator(self, name: str) -> EstimatorEntry:
         for e in self.estimators:

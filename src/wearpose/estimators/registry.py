@@ -21,7 +21,7 @@ from importlib.metadata import entry_points
 from typing import Callable, TypeVar
 
 from wearpose.errors import ConfigError
-from wearpose.estimators.method import EstimatorEntry, MethodSpec, resolve, target_available
+from wearpose.estimators.method import EstimatorEntry, MethodSpec, Training, resolve, target_available
 
 T = TypeVar("T")
 
@@ -50,6 +50,10 @@ def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
         clash = sorted(taken & {e.name for e in spec.estimators})
         if clash:
             raise ConfigError(f"method {spec.name!r}: estimator names {clash} belong to another method")
+        taken = {c for m in _METHODS.values() if m.name != spec.name for c in m.training_commands()}
+        clash = sorted(taken & set(spec.training_commands()))
+        if clash:
+            raise ConfigError(f"method {spec.name!r}: training commands {clash} belong to another method")
     old = _METHODS.get(spec.name)
     for e in old.estimators if old else ():
         _REGISTRY.pop(e.name, None)
@@ -88,6 +92,14 @@ def list_methods(trainable: bool = False) -> tuple[str, ...]:
     """Names of the declared methods (only those with a training entry when ``trainable``)."""
     _discover()
     return tuple(sorted(n for n, m in _METHODS.items() if m.training is not None or not trainable))
+
+
+def list_trainings() -> dict[str, Training]:
+    """``wearpose train`` command name -> its :class:`Training`, of every declared method
+    (:meth:`MethodSpec.training_commands`), sorted by name."""
+    _discover()
+    out = {c: t for m in _METHODS.values() for c, t in m.training_commands().items()}
+    return dict(sorted(out.items()))
 
 
 def get_method(name: str) -> MethodSpec:

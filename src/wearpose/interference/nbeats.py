@@ -26,12 +26,10 @@ The corpus motion is interference-free by construction; a white measurement nois
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
-import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -341,7 +339,7 @@ def ship(checkpoint: Path, name: str, test: dict[str, Any] | None = None) -> Pat
         "validation": {k: v for k, v in meta.items() if k.startswith("val_") or k == "epoch"},
         "test": test or {},
         "size_bytes": out.stat().st_size,
-        "shipped_with": f"python -m wearpose.interference.nbeats --ship {checkpoint} --name {name}",
+        "shipped_with": f"wearpose train nbeats --ship {checkpoint} --name {name}",
         "notes": "MI-Poser reports 1.26 cm validation MAE on its own ~40 min of free sensor motion; ours is on "
                  "corpus motion (dance, sports, walking included), a harder set.",
     }
@@ -349,34 +347,15 @@ def ship(checkpoint: Path, name: str, test: dict[str, Any] | None = None) -> Pat
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``python -m wearpose.interference.nbeats --config cpu --out runs/nbeats_cpu [--resume]``"""
-    ap = argparse.ArgumentParser(description="Train MI-Poser's N-BEATS trajectory forecaster on the corpus train split.")
-    ap.add_argument("--ship", type=Path, default=None, help="ship this checkpoint as package weights instead of training")
-    ap.add_argument("--name", default="nbeats_cpu", help="name of the shipped weights (with --ship)")
-    ap.add_argument("--config", default="cpu", help="paper | cpu | tiny")
-    ap.add_argument("--out", type=Path, default=Path("runs/nbeats_cpu"))
-    ap.add_argument("--resume", action="store_true")
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--epochs", type=int, default=None)
-    ap.add_argument("--max-train-clips", type=int, default=None)
-    a = ap.parse_args(argv)
-    if a.ship is not None:
-        torch.set_num_threads(a.threads)
-        model, _ = load_forecaster(a.ship)
-        va, _ = split_windows("test", model.cfg)
-        test = {"split": "test", **evaluate_forecaster(model, va), "baselines": baseline_errors(va, model.cfg)}
-        print(json.dumps({"shipped": str(ship(a.ship, a.name, test)), "test": test}))
-        return 0
-    cfg = NBeatsConfig.preset(a.config)
-    if a.epochs is not None:
-        cfg = replace(cfg, epochs=a.epochs)
-    cmd = "python -m wearpose.interference.nbeats " + " ".join(sys.argv[1:] if argv is None else argv)
-    res = train(cfg, a.out, resume=a.resume, threads=a.threads, command=cmd, max_train_clips=a.max_train_clips,
-                log=lambda s: print(s, flush=True))
-    print(json.dumps(res))
-    return 0
+def ship_tested(checkpoint: Path, name: str) -> dict[str, Any]:
+    """Measure ``checkpoint`` on the corpus test split's windows (MAE and the constant /
+    constant-velocity baselines, :func:`evaluate_forecaster`, :func:`baseline_errors`), then
+    :func:`ship` it as ``name`` with those figures on its card.
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+    Returns:
+        ``{"shipped": path of the weights, "test": the figures}``.
+    """
+    model, _ = load_forecaster(checkpoint)
+    windows, _ = split_windows("test", model.cfg)
+    test = {"split": "test", **evaluate_forecaster(model, windows), "baselines": baseline_errors(windows, model.cfg)}
+    return {"shipped": str(ship(checkpoint, name, test)), "test": test}

@@ -9,6 +9,7 @@ This file is the method's declaration (:data:`METHOD`); the names below are impo
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from wearpose.estimators.method import EstimatorEntry, MethodSpec, TrainOption, Training, lazy_exports
@@ -62,6 +63,40 @@ METHOD = MethodSpec(
                         "(CPU-sized), paper (supp. Table 5).",
               "out": "Run directory (default runs/<method><sensors>_<config>)."},
     ),
+    trainings={
+        "empose-twostage": Training(
+            entry=f"{_P}.twostage:train_from_options",
+            doc="""Train the EM-POSE two-stage model (supp. Sec. 9), optionally warm-started from another two-stage checkpoint.
+
+            Trains the empose-twostage weights; wearpose train empose --model twostage trains the default (LGD IK) from scratch.
+
+            Example: wearpose train empose-twostage --ik closed --init runs/twostage12_long/best.pt --epochs 8 --lr 2e-4 --threads 1 --out runs/twostage12_closed
+            """,
+            done="done: best val MPJPE {best:.1f} mm; checkpoints in {out_dir}",
+            options=(
+                TrainOption("sensors", 12, "Number of sensors: 12 (kit em12) or 6 (kit em6)."),
+                TrainOption("ik", "lgd", "Stage 2 (EmposeConfig.ik): lgd or closed."),
+                TrainOption("mapper_input", "raw", "EmposeConfig.mapper_input: raw or site."),
+                TrainOption("init", None, "Two-stage checkpoint to warm-start from (matching tensors).", Path),
+                TrainOption("lr", None, "Override the learning rate.", float),
+                TrainOption("limit_val", None, "Use only the first N validation clips.", int, min=1),
+                TrainOption("max_steps", None, "Stop after N optimiser steps.", int, min=1),
+                TrainOption("fk_weight", None, "ik=closed: FK_JOINT_WEIGHT (default 100).", float),
+            ),
+            help={"out": "Run directory (required).", "resume": "Continue <out>/last.pt (--init is then ignored)."},
+        ),
+        "poseprior": Training(
+            entry=f"{_P}.optimization:train_from_options",
+            doc="""Train the pose-prior VAE of the L-BFGS baseline (empose-lbfgs): <out>/prior.pt.
+
+            Example: wearpose train poseprior --out runs/poseprior_cpu --epochs 4
+            """,
+            done="done: best val reconstruction {best_val_rec:.5f}; prior in {out_dir}/prior.pt",
+            defaults={"epochs": 4, "threads": 1, "out": Path("runs/poseprior_cpu")},
+            help={"epochs": "Number of epochs.", "threads": "torch CPU threads."},
+            omit=frozenset({"config", "resume", "device", "checkpoint_every"}),
+        ),
+    },
     demos={"em12": "wearpose.cli.demo:run_sensor_demo", "em6": "wearpose.cli.demo:run_sensor_demo_em6"},
 )
 

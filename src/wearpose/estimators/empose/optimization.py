@@ -13,15 +13,14 @@ which rides on the body), so the root is set after the fit so that the body's so
 coincides with the source frame. Every frame is warm-started from the previous one (tracking). ``torch.optim.LBFGS(line_search_fn="strong_wolfe")``, ``max_iter`` iterations per
 frame. Slow by nature (an optimisation per frame): evaluate on a subset.
 
-Train the prior: ``python -m wearpose.estimators.empose.optimization --out runs/poseprior_cpu``
+Train the prior: ``wearpose train poseprior --out runs/poseprior_cpu``
 (writes ``prior.pt``, an ``empose-lbfgs`` checkpoint for kit ``em12`` holding the VAE).
 """
 
 from __future__ import annotations
 
-import argparse
 import math
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import torch
 from torch import nn
@@ -29,6 +28,7 @@ from torch import nn
 from wearpose.estimators.base import PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.empose.estimator import EmposeEstimator
+from wearpose.estimators.method import TrainRun
 from wearpose.estimators.empose.model import PRED_JOINTS, decode_omega, reconstruction_loss
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import matrix_to_rot6d
@@ -69,9 +69,12 @@ class PosePriorVAE(nn.Module):
 
 
 def train_pose_prior(out_dir: str, epochs: int = 4, batch: int = 256, lr: float = 1e-3, seed: int = 0,
-                     limit: int | None = None, store: Any = None, cache_root: Any = None) -> dict[str, Any]:
+                     limit: int | None = None, store: Any = None, cache_root: Any = None, train_command: str = "",
+                     log: Callable[[str], None] = print) -> dict[str, Any]:
     """Train :class:`PosePriorVAE` on the train split's poses (the EM-POSE cached data), pick the
-    epoch with the lowest validation reconstruction error, save ``<out>/prior.pt``."""
+    epoch with the lowest validation reconstruction error, save ``<out>/prior.pt`` (its
+    ``train_command``: ``train_command``, else the equivalent ``wearpose train poseprior``);
+    ``log`` receives one line per epoch."""
     from pathlib import Path
 
     from wearpose.body import BodyModel
@@ -104,11 +107,11 @@ def train_pose_prior(out_dir: str, epochs: int = 4, batch: int = 256, lr: float 
             mu, _ = vae.encode(xv)
             val = float(((vae.decode(mu) - xv) ** 2).sum(-1).mean())
         hist.append({"epoch": ep + 1, "val_rec": val})
-        print(f"epoch {ep + 1}: val reconstruction {val:.5f}", flush=True)
+        log(f"epoch {ep + 1}: val reconstruction {val:.5f}")
         if val < best:
             best = val
             est.data_fingerprint = tr.fingerprint
-            est.train_command = f"python -m wearpose.estimators.empose.optimization --out {out_dir} --epochs {epochs}"
+            est.train_command = train_command or f"wearpose train poseprior --out {out_dir} --epochs {epochs}"
             est.meta.update({"epoch": ep + 1, "val_rec": val, "prior": "PosePriorVAE (ours; VPoser unavailable)"})
             est.save(out / "prior.pt")
     return {"best_val_rec": best, "history": hist}
@@ -224,18 +227,17 @@ class LbfgsEstimator(EmposeEstimator):
                          extras={"frame": "em_source", "rec_loss": rec})
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description="Train the pose-prior VAE of the L-BFGS baseline.")
-    ap.add_argument("--out", default="runs/poseprior_cpu")
-    ap.add_argument("--epochs", type=int, default=4)
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--limit", type=int, default=None)
-    a = ap.parse_args(argv)
-    torch.set_num_threads(a.threads)
-    res = train_pose_prior(a.out, epochs=a.epochs, limit=a.limit)
-    print(res)
-    return 0
+def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]:
+    """``wearpose train poseprior``: :func:`train_pose_prior` with ``--epochs`` on ``--limit``
+    training clips (all when not given), ``--threads`` torch CPU threads; writes
+    ``<out>/prior.pt``, the ``empose-lbfgs`` checkpoint that holds the VAE.
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+    Returns:
+        :func:`train_pose_prior`'s result with ``method`` and ``out_dir``.
+    """
+    if run.threads is not None:
+        torch.set_num_threads(run.threads)
+    out = run.out if run.out is not None else "runs/poseprior_cpu"
+    log = (lambda s: None) if run.quiet else (lambda s: print(s, flush=True))
+    res = train_pose_prior(str(out), epochs=run.epochs, limit=run.limit, train_command=run.train_command, log=log)
+    return {"method": "empose-lbfgs", "out_dir": str(out), **res}

@@ -46,7 +46,7 @@ returns a pose for every frame, including those with missing sensors (``valid`` 
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
+from typing import Any, Mapping
 
 import torch
 from torch import nn
@@ -58,6 +58,7 @@ from wearpose.estimators.base import PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.empose.data import EmposeData
 from wearpose.estimators.empose.estimator import EmposeEstimator
+from wearpose.estimators.method import OptionError, TrainRun
 from wearpose.estimators.empose.model import (
     LGDRNN, NUM_BETAS, PRED_JOINTS, SENSOR_FEATURES, lgd_loss, sensor_features,
 )
@@ -490,62 +491,53 @@ def warm_start(est: TwoStageEstimator, path: Any) -> dict[str, Any] | None:
     return {"state": state, "param_groups": [group]}
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Train a two-stage model, optionally warm-started (``python -m wearpose.estimators.empose.twostage
-    --help``); ``wearpose train empose --model twostage`` trains the default (``ik="lgd"``) from scratch."""
-    import argparse
+def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]:
+    """``wearpose train empose-twostage``: train a two-stage model for ``--sensors`` sensors with
+    stage 2 ``--ik`` and mapper input ``--mapper-input``, optionally warm-started from ``--init``
+    (:func:`warm_start`; a ``last.pt`` there carries its Adam moments into the new run, which
+    then starts as a resume at step 0). ``wearpose train empose --model twostage`` trains the
+    default (``ik="lgd"``) from scratch.
+
+    Returns:
+        :func:`~wearpose.estimators.empose.train.train_empose`'s result with ``method``,
+        ``sensors`` and ``config``.
+    """
     import math
-    import shlex
     import sys
     from pathlib import Path
 
-    ap = argparse.ArgumentParser(description="Train the EM-POSE two-stage model (supp. Sec. 9), optionally warm-started.",
-                                 epilog="Example: python -m wearpose.estimators.empose.twostage --ik closed --init "
-                                        "runs/twostage12_long/best.pt --epochs 8 --lr 2e-4 --threads 1 --out runs/twostage12_closed")
-    ap.add_argument("--sensors", type=int, default=12)
-    ap.add_argument("--config", default="cpu", help="preset: tiny, cpu, paper")
-    ap.add_argument("--ik", default="lgd", choices=("lgd", "closed"), help="stage 2 (EmposeConfig.ik)")
-    ap.add_argument("--mapper-input", default="raw", choices=("raw", "site"), help="EmposeConfig.mapper_input")
-    ap.add_argument("--init", default=None, help="two-stage checkpoint to warm-start from (matching tensors)")
-    ap.add_argument("--epochs", type=int, default=None)
-    ap.add_argument("--lr", type=float, default=None)
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--resume", action="store_true", help="continue <out>/last.pt (--init is then ignored)")
-    ap.add_argument("--threads", type=int, default=None)
-    ap.add_argument("--limit", type=int, default=None, help="first N training clips")
-    ap.add_argument("--limit-val", type=int, default=None)
-    ap.add_argument("--max-steps", type=int, default=None)
-    ap.add_argument("--fk-weight", type=float, default=None, help=f"ik=closed: FK_JOINT_WEIGHT (default {FK_JOINT_WEIGHT:g})")
-    a = ap.parse_args(argv)
-    from wearpose.estimators.empose import twostage as mod
-    from wearpose.estimators.empose.twostage import TwoStageEstimator as Est, twostage_config as tcfg, warm_start as ws
-
-    if a.fk_weight is not None:
-        mod.FK_JOINT_WEIGHT = a.fk_weight  # read by the task's loss at every step
+    from wearpose.estimators.checkpoint import save_checkpoint
     from wearpose.estimators.empose.train import train_empose
 
-    cfg = tcfg(a.config, a.sensors).override(ik=a.ik, mapper_input=a.mapper_input, lr=a.lr, epochs=a.epochs)
-    est = Est(cfg)
-    est.meta["fk_joint_weight"] = mod.FK_JOINT_WEIGHT
-    command = "python -m wearpose.estimators.empose.twostage " + shlex.join(argv if argv is not None else sys.argv[1:])
-    resume = a.resume
-    if a.init and not (a.resume and (Path(a.out) / "last.pt").is_file()):
-        opt = ws(est, a.init)
-        print(f"warm start from {a.init}: {est.meta['warm_start']}")
-        if opt is not None:
-            # Start the run as a resume at step 0 carrying the old Adam moments (warm_start doc).
-            from wearpose.estimators.checkpoint import save_checkpoint
-
-            est.train_command = command
-            Path(a.out).mkdir(parents=True, exist_ok=True)
-            save_checkpoint(est.checkpoint({}, {"epoch": 0, "step_in_epoch": 0, "global_step": 0, "optimizer": opt,
-                                                "best": math.inf, "history": []}), Path(a.out) / "last.pt")
-            resume = True
-    res = train_empose(est, a.out, epochs=a.epochs, resume=resume, threads=a.threads, limit_train=a.limit,
-                       limit_val=a.limit_val, max_steps=a.max_steps, train_command=command)
-    print({k: v for k, v in res.items() if isinstance(v, (int, float, str))})
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+    if run.out is None:
+        raise OptionError("--out", "the run directory is required (a warm start writes its last.pt there)")
+    if opts["ik"] not in ("lgd", "closed"):
+        raise OptionError("--ik", f"expected lgd or closed, got {opts['ik']!r}")
+    if opts["mapper_input"] not in ("raw", "site"):
+        raise OptionError("--mapper-input", f"expected raw or site, got {opts['mapper_input']!r}")
+    mod = sys.modules[__name__]
+    fk_was = mod.FK_JOINT_WEIGHT
+    if opts["fk_weight"] is not None:
+        mod.FK_JOINT_WEIGHT = opts["fk_weight"]  # read by the task's loss at every step; restored below
+    try:
+        cfg = twostage_config(run.config, opts["sensors"]).override(
+            ik=opts["ik"], mapper_input=opts["mapper_input"], lr=opts["lr"], epochs=run.epochs)
+        est = TwoStageEstimator(cfg)
+        est.meta["fk_joint_weight"] = mod.FK_JOINT_WEIGHT
+        loop = {**run.loop(), "limit_val": opts["limit_val"], "max_steps": opts["max_steps"]}
+        out = Path(run.out)
+        if opts["init"] and not (run.resume and (out / "last.pt").is_file()):
+            opt = warm_start(est, opts["init"])
+            if run.console is not None:
+                run.console.print(f"warm start from {opts['init']}: {est.meta['warm_start']}")
+            if opt is not None:
+                # Start the run as a resume at step 0 carrying the old Adam moments (warm_start doc).
+                est.train_command = run.train_command
+                out.mkdir(parents=True, exist_ok=True)
+                save_checkpoint(est.checkpoint({}, {"epoch": 0, "step_in_epoch": 0, "global_step": 0, "optimizer": opt,
+                                                    "best": math.inf, "history": []}), out / "last.pt")
+                loop["resume"] = True
+        res = train_empose(est, out, **loop)
+    finally:
+        mod.FK_JOINT_WEIGHT = fk_was
+    return {"method": est.name, "sensors": opts["sensors"], "config": cfg.to_dict(), **res}

@@ -14,6 +14,7 @@ This file is the method's declaration (:data:`METHOD`); the names above are impo
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from wearpose.estimators.method import EstimatorEntry, MethodSpec, TrainOption, Training, lazy_exports
@@ -52,6 +53,27 @@ METHOD = MethodSpec(
                         "(CPU-sized), paper (AvatarPoser / MI-Poser Sec. 4.2).",
               "out": "Run directory (default runs/miposer<wrists>_<config> or runs/imuposer_<config>)."},
     ),
+    trainings={"nbeats": Training(
+        entry=f"{_P}.entry:train_nbeats_from_options",
+        doc="""Train MIM's N-BEATS trajectory forecaster (MI-Poser Sec. 3.3 / 4.3) on the corpus train split, or ship a trained one.
+
+        Wrist trajectories relative to the head-worn source at 120 Hz, 1 s in, 0.5 s out (wearpose.interference.nbeats).
+
+        Example: wearpose train nbeats --config cpu --threads 1 --out runs/nbeats_cpu
+        Ship it: wearpose train nbeats --ship runs/nbeats_cpu/best.pt --name nbeats_cpu
+        """,
+        done="done: {summary}",
+        options=(
+            TrainOption("ship", None, "Ship this checkpoint as package weights (measured on the test split) instead "
+                                      "of training.", Path),
+            TrainOption("name", "nbeats_cpu", "Name of the shipped weights (with --ship)."),
+            TrainOption("max_train_clips", None, "Use only the first N training clips.", int, min=1),
+        ),
+        defaults={"out": Path("runs/nbeats_cpu"), "threads": 1},
+        help={"config": "Preset: tiny (smoke test), cpu (2 x 2 x 256, shipped as nbeats_cpu), paper (2 x 2 x 512).",
+              "out": "Run directory.", "threads": "torch CPU threads."},
+        omit=frozenset({"device", "limit", "checkpoint_every"}),
+    )},
     demos={"miposer": "wearpose.viewer.demos.miposer:run_demo"},
 )
 

@@ -41,6 +41,40 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     return {"method": est.name, "model": model, "wrists": wrists, "config": cfg.to_dict(), **res}
 
 
+def train_nbeats_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]:
+    """``wearpose train nbeats``: MIM's N-BEATS trajectory forecaster
+    (:func:`wearpose.interference.nbeats.train`) with the ``--config`` preset (``--epochs``
+    overriding it) on at most ``--max-train-clips`` train clips; or, with ``--ship CHECKPOINT``,
+    no training: that checkpoint measured on the test split and shipped as package weights
+    ``--name`` (:func:`~wearpose.interference.nbeats.ship_tested`).
+
+    Returns:
+        ``{"method": "nbeats", "best_val_mae_cm", "epochs", "out_dir", "summary"}``, or with
+        ``--ship`` ``{"method": "nbeats", "shipped", "test", "summary"}`` (``summary``: the
+        line printed when done).
+    """
+    import dataclasses
+
+    import torch
+
+    from wearpose.interference import nbeats
+
+    torch.set_num_threads(run.threads or 1)
+    if opts["ship"] is not None:
+        res = nbeats.ship_tested(opts["ship"], opts["name"])
+        return {"method": "nbeats", "summary": f"shipped {res['shipped']} (test MAE {res['test']['mae_cm']:.3f} cm)",
+                **res}
+    cfg = nbeats.NBeatsConfig.preset(run.config)
+    if run.epochs is not None:
+        cfg = dataclasses.replace(cfg, epochs=run.epochs)
+    out = Path(run.out) if run.out is not None else Path("runs/nbeats_cpu")
+    log = (lambda s: None) if run.quiet else (lambda s: print(s, flush=True))
+    res = nbeats.train(cfg, out, resume=run.resume, threads=run.threads or 1, command=run.train_command,
+                       max_train_clips=opts["max_train_clips"], log=log)
+    return {"method": "nbeats", "out_dir": str(out), **res,
+            "summary": f"best val MAE {res['best_val_mae_cm']:.3f} cm after {res['epochs']} epochs; checkpoints in {out}"}
+
+
 def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noise: str,
              progress: Callable[[int, int], None] | None, frame_stride: int = 1) -> dict[str, Any]:
     """MI-Poser's protocol: simulated headset VIO + wrist EM after a 1 s T-pose, calibrated and
