@@ -17,6 +17,9 @@ the source on the head (MI-Poser's deployment), cached separately.
 Thresholds are chosen on the **val** split and applied on **test** (the paper searched them on
 its evaluation data; that "oracle" figure is reported beside, labelled as such).
 
+The sessions, simulation, detection and correction are :mod:`wearpose.interference.study`;
+this script parses the options, calls it and writes the tables.
+
 Outputs (``benchmarks/results/``):
 
 - ``interference_conditions.{md,json}``: per-session error statistics beside MI-Poser Table 1;
@@ -34,17 +37,13 @@ import json
 import os
 import platform
 import sys
-import time
-import zlib
 from pathlib import Path
 
-import numpy as np
 import torch
 from rich.console import Console
-from rich.table import Table
 
-from wearpose.interference import CONDITIONS, MIM, MIMConfig, binary_metrics, detect, rotation_error, simulate_condition
-from wearpose.motion import CorpusStore
+from wearpose.interference import CONDITIONS, study
+from wearpose.interference.study import E_P_SWEEP_CM, MAX_RANGE, SOURCE_DOWN, SOURCE_FORWARD
 
 RESULTS = Path(__file__).parent / "results"
 #: MI-Poser Table 1 (mean +- SD over sessions), Table 3, and Sec. 6.3 figures.
@@ -59,198 +58,12 @@ PAPER_TABLE3 = {
     "extreme": {"positive_ratio": 0.258, "mcc": 0.56, "f1": 0.68, "precision": 0.59, "recall": 0.80},
 }
 PAPER_ROT_WINDOW = {"open-space": (6.92, 2.01), "standard": (8.88, 3.81)}
-E_P_SWEEP_CM = (0.5, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0)
-THRESHOLDS_DEG = (1.0, 2.0, 3.0, 5.0, 8.0, 10.0, 12.0, 15.0)
-CORRECTION_THRESHOLDS_DEG = (2.0, 3.0, 5.0, 8.0, 10.0)
-#: position methods compared (rotation is corrected by the gyro in all of them): "fusion-eq3" is
-#: the literal reading of MI-Poser Eq. 3, "fusion" our Kalman blend (``wearpose.interference.mim``).
-METHODS = ("none", "hold", "odometry", "nbeats", "fusion-eq3", "fusion")
-#: the paper-literal anchor (the previous frame) for the ablation rows
-LITERAL = {"anchor_frames": 1, "position_anchor_frames": 1}
-
-
-def sessions(split: str, seconds: float, limit: int | None) -> list[list[str]]:
-    """Head-source sessions: consecutive clips (sorted ids) grouped until >= ``seconds``."""
-    store = CorpusStore()
-    out, cur, acc = [], [], 0.0
-    for c in sorted(store.clips(split=split)):
-        e = store.entry(c)
-        if e["frames"] / e["fps"] < 1.5:  # shorter than the N-BEATS input window + a bit
-            continue
-        cur.append(c)
-        acc += e["frames"] / e["fps"]
-        if acc >= seconds:
-            out.append(cur)
-            cur, acc = [], 0.0
-    return out[:limit] if limit else out
-
-
-#: Room-fixed source of MI-Poser User Study 2 ("the EMF source is fixed to the environment";
-#: participants moved "within a roughly 1.5-meter range from the EMF source"): placed in front of
-#: the subject's first-frame head by SOURCE_FORWARD m (horizontal facing) and SOURCE_DOWN m lower
-#: (a desk-top / shelf source at chest height); clips whose sensor leaves MAX_RANGE are skipped.
-SOURCE_FORWARD, SOURCE_DOWN, MAX_RANGE = 1.1, 0.1, 1.5
-
-
-def world_source_trajectories(motion, body, site: str):
-    """``(SiteTrajectories, ranges (T,) m)`` of ``site`` with the room-fixed Study 2 source."""
-    from wearpose.interference import body_trajectories
-
-    tr = body_trajectories(motion, body, (site, "head"), source="world")
-    hR, hp = tr.R[0, 1].numpy(), tr.p[0, 1].numpy()
-    f = hR[:, 2].copy()  # the head's facing axis (SMPL +Z), horizontal part
-    f[1] = 0.0
-    f /= max(np.linalg.norm(f), 1e-9)
-    src = hp + SOURCE_FORWARD * f - np.array([0.0, SOURCE_DOWN, 0.0])
-    tr = body_trajectories(motion, body, (site,), source="world", source_pose=(torch.eye(3, dtype=torch.float64), torch.from_numpy(src)))
-    ranges = np.linalg.norm(tr.p[:, 0].numpy() - src, axis=1)
-    return tr, ranges
-
-
-def world_sessions(split: str, seconds: float, limit: int | None, body) -> list[list[tuple[str, str, object]]]:
-    """Study 2 sessions: clips of the split in a seeded random order (varied motion per session);
-    each wrist of a clip is a separate candidate, kept when it stays within ``MAX_RANGE`` of the
-    room-fixed source; one session holds one wrist's clips (MI-Poser's sessions had one sensor),
-    grouped until >= ``seconds``; left- and right-wrist sessions are built in parallel."""
-    store = CorpusStore()
-    clips = [c for c in sorted(store.clips(split=split)) if store.entry(c)["frames"] / store.entry(c)["fps"] >= 1.5]
-    np.random.default_rng(zlib.crc32(split.encode())).shuffle(clips)
-    out: list = []
-    cur = {"left_wrist": ([], 0.0), "right_wrist": ([], 0.0)}
-    for c in clips:
-        m = store.load(c)
-        for site in cur:
-            tr, r = world_source_trajectories(m, body, site)
-            if r.max() > MAX_RANGE:
-                continue
-            lst, acc = cur[site]
-            lst.append((c, site, tr))
-            acc += tr.num_frames / tr.fps
-            if acc >= seconds:
-                out.append(lst)
-                lst, acc = [], 0.0
-            cur[site] = (lst, acc)
-        if limit and len(out) >= limit:
-            break
-    return out[:limit] if limit else out
-
-
 #: simulation cache; per source (``main`` sets it from ``--source``).
 CACHE = Path("runs/interference_cache_world")
 
 
 def cache_path(split: str, cond: str) -> Path:
-    return CACHE / f"{split}_{cond}.npz"
-
-
-def simulate_split(split: str, seconds: float, limit: int | None, conds: list[str], source: str = "world") -> None:
-    from wearpose.body import BodyModel
-
-    body = BodyModel()
-    store = CorpusStore()
-    if source == "world":
-        sess = world_sessions(split, seconds, limit, body)
-    else:
-        sess = [[(c, "left_wrist" if si % 2 == 0 else "right_wrist", None) for c in clips]
-                for si, clips in enumerate(sessions(split, seconds, limit))]
-    for cond in conds:
-        path = cache_path(split, cond)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        arrays: dict[str, list[np.ndarray]] = {k: [] for k in ("R_true", "p_true", "R", "p", "gyro", "acc", "carried")}
-        index = []
-        t0 = time.time()
-        frames = 0
-        for si, clips in enumerate(sess):
-            for cid, site, tr in clips:
-                key = f"{split}:{cond}:{cid}" + (f":{site}" if source == "world" else "")
-                seed = zlib.crc32(key.encode()) % (2 ** 31)
-                src = tr if tr is not None else store.load(cid)
-                sim = simulate_condition(src, cond, sensors=(site,), seed=seed, body=body)
-                s = sim[site]
-                for k in arrays:
-                    arrays[k].append(getattr(s, k))
-                index.append((si, cid, site, s.num_frames))
-                frames += s.num_frames
-            print(f"{cond} {split} session {si + 1}/{len(sess)}: {frames} frames, {time.time() - t0:.0f} s", flush=True)
-        np.savez_compressed(path, **{k: np.concatenate(v) for k, v in arrays.items()},
-                            session=np.array([i[0] for i in index]), clip=np.array([i[1] for i in index]),
-                            site=np.array([i[2] for i in index]), frames=np.array([i[3] for i in index]),
-                            source=np.array(source))
-
-
-def load_cache(split: str, cond: str) -> list[dict[str, np.ndarray]]:
-    """Per clip dicts (with ``session``)."""
-    z = np.load(cache_path(split, cond))
-    out, o = [], 0
-    for si, cid, site, n in zip(z["session"], z["clip"], z["site"], z["frames"]):
-        d = {k: z[k][o:o + n] for k in ("R_true", "p_true", "R", "p", "gyro", "acc", "carried")}
-        d.update(session=int(si), clip=str(cid), site=str(site))
-        d["pos_error"] = np.linalg.norm(d["p"] - d["p_true"], axis=1)
-        d["rot_error"] = rotation_error(d["R"], d["R_true"])
-        out.append(d)
-        o += n
-    return out
-
-
-def _ms(x: np.ndarray) -> tuple[float, float]:
-    return float(np.mean(x)), float(np.std(x))
-
-
-def condition_stats(clips: list[dict]) -> dict:
-    ses = sorted({c["session"] for c in clips})
-    per = {k: [] for k in ("mean_pos_cm", "max_pos_cm", "mean_rot_deg", "max_rot_deg")}
-    for s in ses:
-        pe = np.concatenate([c["pos_error"] for c in clips if c["session"] == s])
-        re = np.concatenate([c["rot_error"] for c in clips if c["session"] == s])
-        per["mean_pos_cm"].append(100 * pe.mean())
-        per["max_pos_cm"].append(100 * pe.max())
-        per["mean_rot_deg"].append(np.degrees(re.mean()))
-        per["max_rot_deg"].append(np.degrees(re.max()))
-    frames = sum(len(c["pos_error"]) for c in clips)
-    return {"sessions": len(ses), "frames": frames, "minutes": frames / 120 / 60,
-            **{k: _ms(np.array(v)) for k, v in per.items()},
-            "carried_fraction": float(np.concatenate([c["carried"] for c in clips]).mean())}
-
-
-def detection_flags(clips: list[dict], thresholds=THRESHOLDS_DEG, **config) -> dict[float, np.ndarray]:
-    return {th: np.concatenate([detect(c["R"], c["gyro"], 120.0, th, **config)[0] for c in clips]) for th in thresholds}
-
-
-def detect_all(clips: list[dict], th: float, **config) -> np.ndarray:
-    return np.concatenate([detect(c["R"], c["gyro"], 120.0, th, **config)[0] for c in clips])
-
-
-def run_mim(clips: list[dict], cfg: MIMConfig, timing: bool = False) -> dict[str, np.ndarray]:
-    mim = MIM(cfg)
-    out = {k: [] for k in ("rot_error", "pos_error", "interfered", "corrected", "degraded")}
-    times, corr_times = [], []
-    for c in clips:
-        mim.reset()
-        T = len(c["p"])
-        R_o, p_o = np.empty((T, 3, 3)), np.empty((T, 3))
-        fl, co, de = np.zeros(T, bool), np.zeros(T, bool), np.zeros(T, bool)
-        for t in range(T):
-            t0 = time.perf_counter()
-            o = mim.step(c["R"][t], c["p"][t], c["gyro"][t], c["acc"][t], 1 / 120.0)
-            dtm = time.perf_counter() - t0
-            if timing:
-                (corr_times if o["corrected"] else times).append(dtm)
-            R_o[t], p_o[t], fl[t], co[t], de[t] = o["R"], o["p"], o["interfered"], o["corrected"], o["degraded"]
-        out["rot_error"].append(rotation_error(R_o, c["R_true"]))
-        out["pos_error"].append(np.linalg.norm(p_o - c["p_true"], axis=1))
-        out["interfered"].append(fl)
-        out["corrected"].append(co)
-        out["degraded"].append(de)
-    res = {k: np.concatenate(v) for k, v in out.items()}
-    if timing:
-        res["times"] = np.array(times)
-        res["corr_times"] = np.array(corr_times)
-    return res
-
-
-def _per_session(clips, values) -> list[np.ndarray]:
-    sess = np.concatenate([np.full(len(c["p"]), c["session"]) for c in clips])
-    return [values[sess == s] for s in sorted(set(sess.tolist()))]
+    return study.cache_path(CACHE, split, cond)
 
 
 def part_path(cond: str) -> Path:
@@ -262,9 +75,12 @@ def report(forecaster: str, window_cm: float, table_e_p_cm: float, conds: list[s
     for cond in conds:
         res: dict = {"command": "python " + " ".join(sys.argv), "forecaster": forecaster, "window_e_p_cm": window_cm,
                      "machine": {"platform": platform.platform(), "load_average_1m": os.getloadavg()[0]}}
-        cond_rows, det_rows, sweep_rows, corr_rows = {}, {}, {}, {}
-        _report_condition(cond, forecaster, window_cm, table_e_p_cm, res, cond_rows, det_rows, sweep_rows, corr_rows)
-        res.update(conditions=cond_rows, detection_table=det_rows, detection_sweep=sweep_rows, correction=corr_rows)
+        test = study.load_sessions(cache_path("test", cond))
+        val = study.load_sessions(cache_path("val", cond)) if cache_path("val", cond).exists() else None
+        out = study.evaluate_condition(test, val, forecaster, window_cm, table_e_p_cm, timing=(cond == "standard"))
+        if "latency_ms" in out:
+            res["latency_ms"] = out["latency_ms"]
+        res.update({k: {cond: out[k]} for k in ("conditions", "detection_table", "detection_sweep", "correction")})
         part_path(cond).write_text(json.dumps(res, indent=1, default=float))
 
 
@@ -293,80 +109,6 @@ def tables(table_e_p_cm: float) -> None:
     con.print((RESULTS / "interference_conditions.md").read_text())
     con.print((RESULTS / "interference_detection.md").read_text())
     con.print((RESULTS / "interference_correction.md").read_text())
-
-
-def _report_condition(cond, forecaster, window_cm, table_e_p_cm, res, cond_rows, det_rows, sweep_rows, corr_rows) -> None:
-    """One condition: statistics, detection (val-chosen threshold on test) and correction per method."""
-    test = load_cache("test", cond)
-    val = load_cache("val", cond) if cache_path("val", cond).exists() else None
-    cond_rows[cond] = condition_stats(test)
-    err_t = np.concatenate([c["pos_error"] for c in test])
-    flags_t = detection_flags(test)
-    flags_v = detection_flags(val) if val else None
-    err_v = np.concatenate([c["pos_error"] for c in val]) if val else None
-    sweep = []
-    for e in E_P_SWEEP_CM:
-        y_t = err_t > e / 100
-        oracle = max(((th, binary_metrics(f, y_t)) for th, f in flags_t.items()), key=lambda x: x[1]["mcc"])
-        row = {"e_p_cm": e, "oracle_threshold_deg": oracle[0], "oracle": oracle[1]}
-        if val:
-            y_v = err_v > e / 100
-            th_v = max(flags_v, key=lambda th: binary_metrics(flags_v[th], y_v)["mcc"])
-            row["val_threshold_deg"] = th_v
-            row["test"] = binary_metrics(flags_t[th_v], y_t)
-        sweep.append(row)
-    sweep_rows[cond] = sweep
-    det_rows[cond] = next(r for r in sweep if abs(r["e_p_cm"] - table_e_p_cm) < 1e-9)
-    if val:
-        # ablation: the paper-literal detector (anchor = previous frame), same threshold selection
-        y_v, y_t = err_v > table_e_p_cm / 100, err_t > table_e_p_cm / 100
-        lv = detection_flags(val, **LITERAL)
-        th_l = max(lv, key=lambda th: binary_metrics(lv[th], y_v)["mcc"])
-        lt = detect_all(test, th_l, **LITERAL)
-        det_rows[cond]["literal_anchor"] = {"val_threshold_deg": th_l, "test": binary_metrics(lt, y_t)}
-    # correction: threshold chosen on val to minimise the in-window rotation error
-    w_t = err_t > window_cm / 100
-    rot_raw = np.concatenate([c["rot_error"] for c in test])
-    best_th = MIMConfig().threshold_deg  # when val has no interference window to choose it on
-    if val:
-        w_v = err_v > window_cm / 100
-        if w_v.any():
-            scores = {}
-            for th in CORRECTION_THRESHOLDS_DEG:
-                r = run_mim(val, MIMConfig(threshold_deg=th, position="none"))
-                scores[th] = float(r["rot_error"][w_v].mean())
-            best_th = min(scores, key=scores.get)
-    methods = {}
-    for m in METHODS:
-        r = run_mim(test, MIMConfig(threshold_deg=best_th, position=m, forecaster=forecaster), timing=(cond == "standard"))
-        ps = _per_session(test, r["pos_error"])
-        rs = _per_session(test, r["rot_error"])
-        methods[m] = {
-            "mean_pos_cm": _ms(np.array([100 * x.mean() for x in ps])), "max_pos_cm": _ms(np.array([100 * x.max() for x in ps])),
-            "mean_rot_deg": _ms(np.array([np.degrees(x.mean()) for x in rs])), "max_rot_deg": _ms(np.array([np.degrees(x.max()) for x in rs])),
-            "window_pos_cm": float(100 * r["pos_error"][w_t].mean()) if w_t.any() else None,
-            "window_rot_deg": float(np.degrees(r["rot_error"][w_t].mean())) if w_t.any() else None,
-            "corrected_fraction": float(r["corrected"].mean()), "degraded_fraction": float(r["degraded"].mean()),
-        }
-        if "times" in r:
-            res.setdefault("latency_ms", {})[m] = {
-                "all_frames_mean": float(1e3 * np.concatenate([r["times"], r["corr_times"]]).mean()),
-                "uncorrected_mean": float(1e3 * r["times"].mean()), "uncorrected_p99": float(1e3 * np.percentile(r["times"], 99)),
-                "corrected_mean": float(1e3 * r["corr_times"].mean()) if len(r["corr_times"]) else None,
-                "corrected_p99": float(1e3 * np.percentile(r["corr_times"], 99)) if len(r["corr_times"]) else None,
-                "corrected_frames": int(len(r["corr_times"]))}
-    raw_w_rot = float(np.degrees(rot_raw[w_t].mean())) if w_t.any() else None
-    literal = None
-    if w_t.any():
-        r = run_mim(test, MIMConfig(threshold_deg=best_th, position="none", **LITERAL))
-        literal = {"window_rot_deg": float(np.degrees(r["rot_error"][w_t].mean()))}
-        r = run_mim(test, MIMConfig(threshold_deg=best_th, position="fusion", forecaster=forecaster, **LITERAL))
-        literal["fusion_window_pos_cm"] = float(100 * r["pos_error"][w_t].mean())
-    corr_rows[cond] = {"threshold_deg": best_th, "window_frames": int(w_t.sum()), "window_raw_rot_deg": raw_w_rot,
-                       "window_raw_pos_cm": float(100 * err_t[w_t].mean()) if w_t.any() else None,
-                       "rotation_reduction": (1 - methods["none"]["window_rot_deg"] / raw_w_rot) if raw_w_rot else None,
-                       "methods": methods, "literal_anchor": literal,
-                       "mim_config": {k: v for k, v in MIMConfig().__dict__.items()}}
 
 
 def _lit(r: dict) -> str:
@@ -465,24 +207,11 @@ def windows(conds: list[str], window_cms: tuple[float, ...] = (5.0, 10.0)) -> No
          "| condition | window e_P cm | frames | rot ° raw → ours → literal anchor | pos cm raw → odometry → fusion |",
          "|---|---|---|---|---|"]
     for cond in conds:
-        test = load_cache("test", cond)
+        test = study.load_sessions(cache_path("test", cond))
         th = json.loads(part_path(cond).read_text())["correction"][cond]["threshold_deg"] if part_path(cond).exists() else 5.0
-        err = np.concatenate([c["pos_error"] for c in test])
-        rot = np.concatenate([c["rot_error"] for c in test])
-        runs = {"rotation": MIMConfig(threshold_deg=th, position="none"),
-                "rotation_literal_anchor": MIMConfig(threshold_deg=th, position="none", **LITERAL),
-                "odometry": MIMConfig(threshold_deg=th, position="odometry"), "fusion": MIMConfig(threshold_deg=th, position="fusion")}
-        outs = {k: run_mim(test, v) for k, v in runs.items()}
-        for e in window_cms:
-            w = err > e / 100
-            if not w.any():
-                continue
-            row = {"threshold_deg": th, "window_frames": int(w.sum()), "raw_rot_deg": float(np.degrees(rot[w].mean())),
-                   "raw_pos_cm": float(100 * err[w].mean())}
-            row.update({k: {"rot_deg": float(np.degrees(o["rot_error"][w].mean())), "pos_cm": float(100 * o["pos_error"][w].mean())}
-                        for k, o in outs.items()})
-            res.setdefault(cond, {})[f"{e:g}"] = row
-            L.append(f"| {cond} | {e:g} | {row['window_frames']} | {row['raw_rot_deg']:.2f} → {row['rotation']['rot_deg']:.2f} → "
+        for e, row in study.correction_windows(test, th, window_cms).items():
+            res.setdefault(cond, {})[e] = row
+            L.append(f"| {cond} | {e} | {row['window_frames']} | {row['raw_rot_deg']:.2f} → {row['rotation']['rot_deg']:.2f} → "
                      f"{row['rotation_literal_anchor']['rot_deg']:.2f} | {row['raw_pos_cm']:.2f} → {row['odometry']['pos_cm']:.2f} → "
                      f"{row['fusion']['pos_cm']:.2f} |")
     (RESULTS / "interference_correction_windows.json").write_text(json.dumps(res, indent=1))
@@ -509,7 +238,7 @@ def main() -> None:
     global CACHE
     CACHE = Path("runs/interference_cache_world" if a.source == "world" else "runs/interference_cache")
     if a.stage == "simulate":
-        simulate_split(a.split, a.session_s, a.sessions, a.conditions.split(","), a.source)
+        study.simulate_sessions(a.split, a.session_s, a.sessions, a.conditions.split(","), CACHE, a.source)
     elif a.stage == "report":
         report(a.forecaster, a.window_cm, a.table_cm, a.conditions.split(","))
     elif a.stage == "windows":

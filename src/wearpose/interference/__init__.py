@@ -10,6 +10,9 @@
   position correction by IMU odometry, N-BEATS forecasting or their fusion; "degraded" flag.
 - :mod:`.nbeats`: the N-BEATS trajectory forecaster and its training on the corpus.
 - :mod:`.metrics`: detection metrics (MCC, F1, precision, recall) and threshold sweeps.
+- :mod:`.study`: MI-Poser's study on simulated sessions (Table 1 statistics, Table 3 / Fig. 8
+  detection with val-chosen thresholds, Figs. 9-10 correction per method), what
+  ``benchmarks/interference.py`` tabulates.
 
 Docs: ``docs/interference.md``.
 """

@@ -33,6 +33,7 @@ import torch
 from wearpose.body.skeleton import JOINT_NAMES
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.miposer.config import UPPER_BODY
+from wearpose.interference.study import SOURCE_DOWN, SOURCE_FORWARD
 
 #: Metres -> report centimetres (MI-Poser reports cm).
 CM = 100.0
@@ -174,8 +175,9 @@ def _to_head(rec: Any, kit: str, em_name: str, R_src: np.ndarray, p_src: np.ndar
     return np.einsum("tji,tjk->tik", hR, Rw), np.einsum("tji,tj->ti", hR, pw - hp)
 
 
-def world_source_pose(motion: Any, body: Any, forward: float = 1.1, down: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
-    """The room-fixed source of :mod:`benchmarks.interference` (MI-Poser User Study 2): ``forward``
+def world_source_pose(motion: Any, body: Any, forward: float = SOURCE_FORWARD,
+                      down: float = SOURCE_DOWN) -> tuple[np.ndarray, np.ndarray]:
+    """The room-fixed source of :mod:`wearpose.interference.study` (MI-Poser User Study 2): ``forward``
     m in front of the first-frame head (its horizontal facing), ``down`` m lower, world-aligned."""
     import warnings
 
