@@ -73,6 +73,7 @@ def _spiky_clip(session: int, seed: int) -> dict[str, Any]:
             "carried": np.zeros(len(R), bool), "pos_error": err, "rot_error": np.zeros(len(R))}
 
 
+@pytest.mark.budget(30)  # MIM / the interference simulator per frame on a shared 2-core machine
 def test_detection_sweep_finds_the_spike_with_a_val_chosen_threshold() -> None:
     test, val = [_spiky_clip(0, 0)], [_spiky_clip(0, 1)]
     ths = (1.0, 5.0, 15.0)
@@ -94,6 +95,7 @@ def test_run_mim_corrects_the_spiked_rotation() -> None:
     assert len(r["times"]) + len(r["corr_times"]) == 360
 
 
+@pytest.mark.budget(30)  # MIM / the interference simulator per frame on a shared 2-core machine
 def test_simulate_load_round_trip_on_the_corpus(corpus_store: Path, tmp_path: Path) -> None:
     from wearpose.motion import CorpusStore
 
@@ -112,3 +114,27 @@ def test_simulate_load_round_trip_on_the_corpus(corpus_store: Path, tmp_path: Pa
     assert all(np.array_equal(a["p"], b["p"]) for a, b in zip(clips, again))  # seeded per clip
     stats = study.condition_stats(clips)
     assert stats["sessions"] == 1 and stats["mean_pos_cm"][0] < 2.0  # open space: small errors
+
+
+def test_detection_metrics_score_the_spike_and_leave_undefined_ratios_undefined() -> None:
+    clips = [_spiky_clip(0, 0)]
+    m = study.detection_metrics(clips, 2.0, 10.0)
+    assert m["frames"] == 360 and m["positive_ratio"] == pytest.approx(20 / 360) and m["mcc"] > 0.7, m
+    none = study.detection_metrics(clips, 2.0, 30.0)  # nothing above 30 cm: MCC undefined, not 0
+    assert none["mcc"] is None and none["positive_ratio"] == 0.0
+    assert study.detection_metrics([], 2.0, 10.0)["frames"] == 0
+
+
+@pytest.mark.budget(30)  # MIM / the interference simulator per frame on a shared 2-core machine
+def test_world_clips_match_the_cached_sessions(corpus_store: Path) -> None:
+    from wearpose.body import BodyModel
+    from wearpose.motion import CorpusStore
+
+    store, body = CorpusStore(corpus_store), BodyModel()
+    cid = store.clips(split="test")[0]
+    clips, skipped = study.world_clips([(cid, store.load(cid))], "test", "standard", body)
+    assert len(clips) + skipped == 2 and [c["session"] for c in clips] == list(range(len(clips)))
+    for c in clips:  # the same seed key as simulate_sessions: the same streams
+        tr, _ = study.world_source_trajectories(store.load(cid), body, c["site"])
+        s = study.simulate_clip(tr, "test", "standard", cid, c["site"], body)
+        assert np.array_equal(s.p, c["p"]) and c["pos_error"].shape == (s.num_frames,)

@@ -25,7 +25,7 @@ from __future__ import annotations
 import time
 import zlib
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 import torch
@@ -133,6 +133,68 @@ def world_sessions(split: str, seconds: float, limit: int | None, body: Any, sto
     return out[:limit] if limit else out
 
 
+def simulate_clip(motion_or_trajectories: Any, split: str, cond: str, clip: str, site: str, body: Any,
+                  source: str = "world", seed: int = 0) -> Any:
+    """One clip's wrist ``site`` under condition ``cond`` (:func:`simulate_condition`), seeded by
+    the CRC-32 of ``"<split>:<cond>:<clip>[:<site>]"`` (the site with ``source="world"``;
+    ``":<seed>"`` appended when ``seed`` is not 0), so a session is reproducible clip by clip.
+
+    Returns:
+        the site's :class:`~wearpose.interference.simulate.SensorStreams`.
+    """
+    key = f"{split}:{cond}:{clip}" + (f":{site}" if source == "world" else "") + (f":{seed}" if seed else "")
+    sim = simulate_condition(motion_or_trajectories, cond, sensors=(site,), seed=zlib.crc32(key.encode()) % (2 ** 31),
+                             body=body)
+    return sim[site]
+
+
+def as_clip(streams: Mapping[str, np.ndarray], session: int, clip: str, site: str) -> Clip:
+    """A per-clip dict (module doc) of ``streams`` (:data:`STREAMS` by name, a cache's slice or a
+    :class:`~wearpose.interference.simulate.SensorStreams`' attributes) with its errors."""
+    d: Clip = {k: streams[k] for k in STREAMS}
+    d.update(session=int(session), clip=str(clip), site=str(site))
+    d["pos_error"] = np.linalg.norm(d["p"] - d["p_true"], axis=1)
+    d["rot_error"] = rotation_error(d["R"], d["R_true"])
+    return d
+
+
+def world_clips(motions: Iterable[tuple[str, Any]], split: str, cond: str, body: Any,
+                seed: int = 0) -> tuple[list[Clip], int]:
+    """Each wrist of each ``(clip id, motion)`` with the room-fixed Study 2 source
+    (:func:`world_source_trajectories`), simulated under ``cond`` as :func:`simulate_sessions`
+    does (:func:`simulate_clip`); a wrist that leaves :data:`MAX_RANGE` is left out. Every
+    kept wrist is its own session.
+
+    Returns:
+        ``(clips, wrists left out of range)``.
+    """
+    out: list[Clip] = []
+    skipped = 0
+    for cid, motion in motions:
+        for site in ("left_wrist", "right_wrist"):
+            tr, r = world_source_trajectories(motion, body, site)
+            if r.max() > MAX_RANGE:
+                skipped += 1
+                continue
+            s = simulate_clip(tr, split, cond, cid, site, body, "world", seed)
+            out.append(as_clip({k: getattr(s, k) for k in STREAMS}, len(out), cid, site))
+    return out, skipped
+
+
+def detection_metrics(clips: list[Clip], threshold_deg: float, e_p_cm: float, **config: Any) -> dict[str, Any]:
+    """MI-Poser Table 3 of ``clips`` at one detection threshold: :func:`binary_metrics` of the
+    :func:`detect_all` flags against "position error above ``e_p_cm``". MCC, F1, precision and
+    recall are None (undefined, not 0) when no frame is interfered or none is flagged."""
+    if not clips:
+        return {"mcc": None, "f1": None, "precision": None, "recall": None, "positive_ratio": None, "frames": 0}
+    flags = detect_all(clips, threshold_deg, **config)
+    truth = _errors(clips) > e_p_cm / 100
+    m: dict[str, Any] = binary_metrics(flags, truth)
+    if not truth.any() or not flags.any():
+        m.update(mcc=None, f1=None, precision=None, recall=None)
+    return m
+
+
 def cache_path(cache_dir: str | Path, split: str, cond: str) -> Path:
     """The session cache of ``split`` under condition ``cond``: ``<cache_dir>/<split>_<cond>.npz``."""
     return Path(cache_dir) / f"{split}_{cond}.npz"
@@ -168,11 +230,7 @@ def simulate_sessions(split: str, seconds: float, limit: int | None, conds: list
         frames = 0
         for si, clips in enumerate(sess):
             for cid, site, tr in clips:
-                key = f"{split}:{cond}:{cid}" + (f":{site}" if source == "world" else "")
-                seed = zlib.crc32(key.encode()) % (2 ** 31)
-                sim = simulate_condition(tr if tr is not None else store.load(cid), cond, sensors=(site,), seed=seed,
-                                         body=body)
-                s = sim[site]
+                s = simulate_clip(tr if tr is not None else store.load(cid), split, cond, cid, site, body, source)
                 for k in arrays:
                     arrays[k].append(getattr(s, k))
                 index.append((si, cid, site, s.num_frames))
@@ -192,11 +250,7 @@ def load_sessions(path: str | Path) -> list[Clip]:
     z = np.load(path)
     out, o = [], 0
     for si, cid, site, n in zip(z["session"], z["clip"], z["site"], z["frames"]):
-        d = {k: z[k][o:o + n] for k in STREAMS}
-        d.update(session=int(si), clip=str(cid), site=str(site))
-        d["pos_error"] = np.linalg.norm(d["p"] - d["p_true"], axis=1)
-        d["rot_error"] = rotation_error(d["R"], d["R_true"])
-        out.append(d)
+        out.append(as_clip({k: z[k][o:o + n] for k in STREAMS}, si, cid, site))
         o += n
     return out
 

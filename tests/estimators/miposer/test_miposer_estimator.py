@@ -241,3 +241,23 @@ def test_room_fixed_source_reaches_the_estimator_through_the_headset(trained, bo
     T = raw["p"].shape[0]
     pw = cs["left_wrist"].p_true[: 2 * T: 2] + sp[1]  # world-aligned source: world = source offset
     np.testing.assert_allclose(raw["p"][:, 1].numpy()[: len(pw)], pw[: T], atol=1e-4)
+
+
+@pytest.mark.budget(30)  # MIM / the interference simulator per frame on a shared 2-core machine
+def test_the_protocol_reports_interference_detection(corpus_store) -> None:  # noqa: ANN001
+    """``wearpose evaluate miposer_cpu``'s detection part (MI-Poser Table 3) on one clip."""
+    from wearpose.estimators.miposer.entry import DETECTION_E_P_CM, protocol
+    from wearpose.interference import study
+    from wearpose.motion import CorpusStore
+
+    store = CorpusStore(corpus_store)
+    est = MiposerEstimator(MiposerConfig.preset("tiny"))
+    ids = store.clips(split="test")[:1]
+    res = protocol(est, store, "test", 1, 0, "default", None, frame_stride=8)
+    d = res["detail"]["detection"]
+    assert res["metrics"]["detection_positive_ratio_at_10cm"] == d["metrics"]["10"]["positive_ratio"]
+    assert "Table 3" in res["protocol"]
+    assert d["threshold_deg"] == 5.0 and d["condition"] == "standard" and d["wrists"] + d["out_of_range"] == 2, d
+    clips, _ = study.world_clips(((c, store.load(c)) for c in ids), "test", "standard", est.body)
+    assert d["metrics"] == {f"{e:g}": study.detection_metrics(clips, 5.0, e) for e in DETECTION_E_P_CM}
+    assert d["metrics"]["2"]["frames"] == sum(len(c["p"]) for c in clips) > 0
