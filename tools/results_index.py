@@ -14,13 +14,31 @@ from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
 
+#: Producers of results whose file does not record one, from the commit that wrote the file
+#: (``git log -- benchmarks/results/<stem>.json``); re-running the benchmark records it in the file.
+PRODUCERS = {
+    "birae_stream_latency": "python benchmarks/birae_stream.py --skip-eval (commit 45d3452)",
+    "birae_stream_test": "python benchmarks/birae_stream.py (evaluate mode='stream', noise scenario, test split, "
+                         "every 10th frame; commit 0d23f7c)",
+    "body": "python benchmarks/body.py --baseline <a checkout of e726f1e>/src (commit 0e330e5)",
+    "body_vs_smplx": "python benchmarks/body_vs_smplx.py --threads 1 (commit 9d01953)",
+    "card_reproduction": "python benchmarks/card_reproduction.py (commit 2c8556c)",
+    "convention_checks": "python benchmarks/convention_checks.py (80 clips per kit x 2 noise settings; commit d2f963b)",
+    "foot_skate": "python benchmarks/foot_skate.py (60 clips per source x motion; commit 0a8dbc3)",
+    "live_inputs": "python benchmarks/live_inputs.py --wait 2400 (commit 521ba91)",
+    "recording_fuzz": "python benchmarks/recording_fuzz.py --examples 1250 (commit 2906dca)",
+    "simulate": "python benchmarks/simulate.py (em12, val split, 1 and 2 workers; commit eb3a866)",
+    "up_axis": "python benchmarks/up_axis.py (commit 94ede4c)",
+    "ximu3_noise": "python benchmarks/ximu3_noise.py (commit d7799b5)",
+}
 
-def _producer(js: dict | None, md: str | None) -> str:
+
+def _producer(stem: str, js: dict | None, md: str | None) -> str:
     for k in ("command", "produced_by", "cmd"):
         if isinstance(js, dict) and isinstance(js.get(k), str):
             return js[k]
     m = re.search(r"Produced by `([^`]+)`", md or "")
-    return m.group(1) if m else "(not recorded in the file)"
+    return m.group(1) if m else PRODUCERS.get(stem, "(not recorded in the file)")
 
 
 def _weights(js: dict | None) -> str:
@@ -50,7 +68,7 @@ def rows() -> list[tuple[str, str, str, str]]:
             js = None
         title = next((ln.lstrip("# ").strip() for ln in (md or "").splitlines() if ln.startswith("#")), "")
         files = " ".join(f"[{p.suffix[1:]}]({p.name})" for p in (md_path, js_path) if p.is_file())
-        out.append((f"`{stem}` {files}", title.replace("|", "/"), _producer(js, md).replace("|", "/"), _weights(js)))
+        out.append((f"`{stem}` {files}", title.replace("|", "/"), _producer(stem, js, md).replace("|", "/"), _weights(js)))
     return out
 
 
@@ -58,7 +76,8 @@ def main() -> None:
     lines = ["# Benchmark results", "",
              "Written by `python tools/results_index.py` from the files themselves: each result's title, the "
              "command that produced it (as recorded in the file) and the weights it names. A result whose "
-             "producer is not recorded says so; re-running its benchmark records it.", "",
+             "producer is not recorded in it is given from the commit that wrote it (`PRODUCERS` in the tool); "
+             "superseded variants are removed from the tree (git keeps them).", "",
              "| result | title | produced by | weights |", "| --- | --- | --- | --- |"]
     lines += [f"| {a} | {b} | `{c}` | {d} |" for a, b, c, d in rows()]
     (RESULTS / "README.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
