@@ -166,6 +166,36 @@ def data_info(
     _emit(summary, as_json, lambda r: console.print(_kv_table("corpus", shown)))
 
 
+@data_app.command("procedural")
+def data_procedural(
+    out: Optional[Path] = typer.Option(None, help="Store folder (default: where `wearpose evaluate --protocol "
+                                                  "unseen-motion` looks, <cache>/protocols/unseen-motion-n6-s0)."),
+    per_family: int = typer.Option(6, "--per-family", min=1, help="Clips of each of the seven families."),
+    seed: int = typer.Option(0, help="Base seed of the eval namespace's clips."),
+    family: Optional[list[str]] = typer.Option(None, "--family", help="Only this family (repeatable; default all)."),
+    shapes: bool = typer.Option(False, "--shapes", help="Draw a body shape per clip (default: the mean body, as "
+                                                        "the corpus's test clips)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+) -> None:
+    """Build the held-out unseen-motion store: procedural clips of every family (squat, kneel,
+    pickup, sit, lie, crawl, reach) from the eval seed namespace, never a training draw; source
+    procedural, split test, class = family (docs/procedural-motion.md). Idempotent.
+
+    Example: wearpose data procedural --per-family 3 --out stores/unseen3 && wearpose evaluate birae6_cpu --cache stores/unseen3
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from wearpose.motion.procedural import FAMILIES
+    from wearpose.motion.procedural_store import build_procedural_store
+
+    columns = (TextColumn("[bold]procedural clips"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns, console=err_console, transient=True, disable=as_json) as bar:
+        task = bar.add_task("", total=None)
+        res = build_procedural_store(out, per_family=per_family, seed=seed, families=tuple(family or FAMILIES),
+                                     body_shape=shapes, progress=lambda d, t: bar.update(task, completed=d, total=t))
+    _emit(res, as_json, lambda r: console.print(_kv_table("procedural store", {**r, "seconds": round(r["seconds"], 1)})))
+
+
 @app.command()
 def view(
     clip: str = typer.Argument(..., help="A clip id of the prepared store, or a .bvh/.bvh.gz/.npz (MotionSequence or AMASS) file."),

@@ -10,6 +10,7 @@ Clip ids are ``"<source>/<subject>/<clip>"`` (clip names repeat across subjects,
 
 from __future__ import annotations
 
+import copy
 import csv
 import hashlib
 import re
@@ -252,6 +253,39 @@ def _write_json(path: Path, obj: Any) -> None:
     atomic_write_text(path, json.dumps(obj, indent=1, sort_keys=True))
 
 
+def write_index(cache: Path, clips: dict[str, Any], failures: dict[str, str], *, corpus: dict[str, Any],
+                converter: str, fps: float | None, rest_joints: list[list[float]], rest_source: str) -> Path:
+    """Write ``<cache>/index.json`` (atomically), the one index format :class:`CorpusStore` reads.
+
+    Args:
+        clips: clip id -> entry (``id``, ``clip``, ``subject``, ``source``, ``split``, ``licence``,
+            ``description``, ``file`` relative to ``cache``, ``frames``, ``fps``, ``seconds``; an
+            optional ``class``, the clip's motion class, :func:`motion_class`).
+        failures: clip id -> why it is not in the store.
+        corpus: where the clips came from (:meth:`CorpusStore.provenance`'s ``corpus``).
+        converter: the version of the code that made the clip files (a changed one rebuilds them).
+        fps: the rate every clip was resampled to, or None (each clip's own).
+        rest_joints: ``(24, 3)`` rest joints the clips were made for, metres; ``rest_source`` where
+            they came from.
+    """
+    index = {"format": "wearpose.motion.index", "version": INDEX_VERSION, "converter": converter,
+             "fps": fps, "rest_joints_source": rest_source, "rest_joints": rest_joints, "corpus": corpus,
+             "clips": dict(sorted(clips.items())), "failures": dict(sorted(failures.items()))}
+    path = Path(cache) / INDEX_NAME
+    _write_json(path, index)
+    return path
+
+
+def motion_class(entry: dict[str, Any]) -> str:
+    """The motion class of a store entry: its ``class`` when the store gives one (procedural
+    clips: the family), else the corpus description without its ``(style: ...)`` suffix
+    (``"wave-left-hand (style: angry)"`` -> ``"wave-left-hand"``), else the clip name."""
+    if entry.get("class"):
+        return str(entry["class"])
+    d = (entry.get("description") or entry.get("clip") or "?").split(" (")[0].strip()
+    return d or "?"
+
+
 def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, cache_dir: str | Path | None = None,
                    fps: float | None = None, progress: bool = True, workers: int | None = None,
                    rest_joints: torch.Tensor | None = None, limit: int | None = None,
@@ -413,10 +447,8 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
                     finish(fut.result())
                     bar.advance(task)
 
-    index = {"format": "wearpose.motion.index", "version": INDEX_VERSION, "converter": CONVERTER_VERSION,
-             "fps": fps, "rest_joints_source": rest_source, "rest_joints": rest_list, "corpus": provenance,
-             "clips": dict(sorted(clips.items())), "failures": dict(sorted(failures.items()))}
-    _write_json(index_path, index)
+    write_index(cache, clips, failures, corpus=provenance, converter=CONVERTER_VERSION, fps=fps,
+                rest_joints=rest_list, rest_source=rest_source)
     return {"converted": len(todo) - sum(1 for j in todo if j["id"] in failures), "skipped": skipped,
             "failed": len(failures), "failures": failures, "seconds": time.perf_counter() - t0, "index": str(index_path),
             "store": {"path": str(cache.resolve()), "converter": CONVERTER_VERSION, "corpus": provenance}}
@@ -447,6 +479,8 @@ class CorpusStore:
         self.index = index
         self.entries: dict[str, dict[str, Any]] = index["clips"]
         self.failures: dict[str, str] = index.get("failures", {})
+        #: The sources this store is restricted to (:meth:`subset`), None for the whole store.
+        self.sources_only: tuple[str, ...] | None = None
 
     def __len__(self) -> int:
         return len(self.entries)
@@ -458,6 +492,28 @@ class CorpusStore:
             return f is None or (value == f if isinstance(f, str) else value in set(f))
         return sorted(cid for cid, e in self.entries.items()
                       if ok(e["split"], split) and ok(e["source"], source) and ok(e["licence"], licence))
+
+    def sources(self) -> list[str]:
+        """The sources of the clips, sorted (``["bandai", "cmu_asf", "cmu_daz"]``)."""
+        return sorted({e["source"] for e in self.entries.values()})
+
+    def subset(self, source: str | Iterable[str]) -> CorpusStore:
+        """This store restricted to the clips of ``source`` (one name or several): the same
+        files, an index of only those clips, so every reader of the store (training data,
+        evaluation protocols) sees one lab's clips. Its :meth:`provenance` names the sources.
+
+        Raises:
+            ConfigError: a source the store does not hold (the message lists those it does).
+        """
+        want = {source} if isinstance(source, str) else set(source)
+        unknown = sorted(want - set(self.sources()))
+        if unknown:
+            raise ConfigError(f"corpus store {self.root}: no clips of source {', '.join(map(repr, unknown))}; "
+                              f"expected one of {', '.join(self.sources())}")
+        view = copy.copy(self)
+        view.entries = {cid: e for cid, e in self.entries.items() if e["source"] in want}
+        view.sources_only = tuple(sorted(want))
+        return view
 
     def entry(self, clip_id: str) -> dict[str, Any]:
         """The index row of ``clip_id`` (KeyError naming the id if absent)."""
@@ -474,10 +530,13 @@ class CorpusStore:
         """Which store and which corpus version results come from: ``{"path"`` (the store),
         ``"converter"`` (its conversion version), ``"corpus"`` (:func:`prepare_corpus`'s record:
         a manifest corpus's path, name and manifest SHA-1, or users' folders with their split and
-        source; ``None`` for stores prepared before it was recorded)``}``. Evaluation results
-        carry it."""
-        return {"path": str(self.root.resolve()), "converter": self.index.get("converter"),
-                "corpus": self.index.get("corpus")}
+        source; ``None`` for stores prepared before it was recorded)``}``, and ``"sources"`` for a
+        :meth:`subset`. Evaluation results carry it."""
+        out = {"path": str(self.root.resolve()), "converter": self.index.get("converter"),
+               "corpus": self.index.get("corpus")}
+        if self.sources_only is not None:
+            out["sources"] = list(self.sources_only)
+        return out
 
     def summary(self) -> dict[str, Any]:
         """Counts and minutes: ``{"clips", "subjects", "minutes", "minutes_per_split",

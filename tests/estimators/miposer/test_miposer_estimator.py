@@ -13,7 +13,8 @@ from wearpose.estimators import get_estimator
 from wearpose.estimators.checkpoint import CheckpointMismatchError
 from wearpose.estimators.miposer import MiposerConfig, MiposerEstimator, frames, train_miposer
 from wearpose.estimators.miposer.data import build_split, calibrated_inputs, raw_inputs, simulate_clip, tpose_then, uncalibrated
-from wearpose.estimators.miposer.evaluate import ErrorTable, evaluate_miposer, format_fig5, motion_type
+from wearpose.estimators.miposer.evaluate import ErrorTable, evaluate_miposer, format_fig5
+from wearpose.motion.store import motion_class
 from wearpose.estimators.miposer.model import window_features
 from wearpose.geometry import geodesic_angle, rotation_y
 
@@ -160,7 +161,7 @@ def test_evaluate_and_table(trained, tmp_path):
     assert s["frames"] > 0 and set(s["per_joint_cm"]) >= {"pelvis", "head", "left_wrist"}
     assert s["per_joint_cm"]["pelvis"] == 0.0  # root-aligned
     assert "| head |" in format_fig5(res)
-    assert motion_type({"description": "wave-left-hand (style: x)"}) == "wave-left-hand"
+    assert motion_class({"description": "wave-left-hand (style: x)"}) == "wave-left-hand"
     assert ErrorTable().summary() == {"frames": 0}
 
 

@@ -7,7 +7,8 @@ T-pose window is calibrated (:func:`wearpose.calibration.calibrate`, ``miposer-t
 estimator runs with the calibration ("with sensor-position calibration") and with only its world
 alignment ("without", :func:`~.data.uncalibrated`). Errors: root(pelvis)-aligned joint position
 error of the upper-body joints (:data:`~.config.UPPER_BODY`, as MI-Poser aligns the hip) per
-joint and per motion type (the corpus description without its style, e.g. ``wave-left-hand``),
+joint and per motion type (:func:`wearpose.motion.store.motion_class`: the corpus description
+without its style, e.g. ``wave-left-hand``; a procedural clip's family),
 on clip frames only (not the T-pose) where every input sensor is valid, in cm. Ground truth and
 estimate are posed on the same (mean-shape) body; the ground-truth root orientation is expressed
 in the calibrated world (the calibration's alignment of the simulated VIO world).
@@ -34,15 +35,10 @@ from wearpose.body.skeleton import JOINT_NAMES
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.miposer.config import UPPER_BODY
 from wearpose.interference.study import SOURCE_DOWN, SOURCE_FORWARD
+from wearpose.motion.store import motion_class
 
 #: Metres -> report centimetres (MI-Poser reports cm).
 CM = 100.0
-
-
-def motion_type(entry: dict[str, Any]) -> str:
-    """Motion type of a corpus clip: its description without the ``(style: ...)`` suffix."""
-    d = (entry.get("description") or entry.get("clip") or "?").split(" (")[0].strip()
-    return d or "?"
 
 
 def joint_errors(body: Any, pred_rot: torch.Tensor, gt_rot: torch.Tensor) -> torch.Tensor:
@@ -114,7 +110,7 @@ def evaluate_miposer(estimators: dict[str, Any], split: str = "test", limit: int
     t0 = time.time()
     for k, cid in enumerate(ids):
         motion = store.load(cid)
-        mtype = motion_type(store.entry(cid))
+        mtype = motion_class(store.entry(cid))
         for name, est in estimators.items():
             r = simulate_clip(motion, est.config, est.body, clip_seed(cid, seed, "eval"), noise=noise, native_rates=True)
             raw = raw_inputs(r["recording"], est.kit_name, est.fps)
@@ -148,7 +144,7 @@ def evaluate_imuposer(est: Any, split: str = "test", limit: int | None = None, *
         r = simulate_imu_clip(store.load(cid), est.config, est.body, clip_seed(cid, seed, "eval-imu"), noise=noise)
         rot = est.infer(r["R"], r["a"])
         f = _frames(r["valid"].all(1), 0, frame_stride)
-        table.add(motion_type(store.entry(cid)), joint_errors(est.body, rot[f], r["pose"][f]))
+        table.add(motion_class(store.entry(cid)), joint_errors(est.body, rot[f], r["pose"][f]))
         if progress is not None:
             progress(k + 1, len(ids))
     return {"split": split, "clips": len(ids), "seed": seed, "noise": noise, "frame_stride": frame_stride,
@@ -292,7 +288,7 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
                 bad120 |= (cs[site].pos_error > 0.02) | (cs[site].rot_error > math.radians(5.0))
             hold = int(round(est.config.tpose_s * est.fps))
             window = (min(0.1, 0.25 * est.config.tpose_s), max(hold - 1, 1) / est.fps)
-            mtype = motion_type(store.entry(cid))
+            mtype = motion_class(store.entry(cid))
             for run, (which, use_mim) in runs.items():
                 info = None
                 if sp is not None:
