@@ -128,3 +128,64 @@ def test_shipped_weights_on_two_test_clips(corpus_store: Path) -> None:
     m = json.loads(res.stdout[res.stdout.index("{"):])["models"]["empose12_cpu"]
     assert m["config"]["inputs"] == "both" and m["config"]["init"] == "rnn"
     assert 5.0 < m["mpjpe_mm"] < 60.0 and m["frames"] > 0
+
+
+def test_breakdown_pools_clips_by_source_and_class(tmp_path: Path) -> None:
+    """Issue 24: every result groups its per-clip figures by source and motion class; over all
+    clips a frame-weighted group is the pooled figure."""
+    from wearpose.evaluate.protocols import breakdown, breakdown_markdown
+    from wearpose.motion import CorpusStore
+    from wearpose.motion.store import write_index
+
+    rows = {"bandai/b/walk_1": ("bandai", "walk (style: x)", None), "bandai/b/run_1": ("bandai", "run", None),
+            "procedural/squat/eval/0000": ("procedural", "squat", "squat")}
+    clips = {cid: {"id": cid, "clip": cid.rpartition("/")[2], "subject": "s", "source": src, "split": "test",
+                   "licence": "l", "description": d, "file": "x.npz", **({"class": c} if c else {})}
+             for cid, (src, d, c) in rows.items()}
+    write_index(tmp_path, clips, {}, corpus={"kind": "test"}, converter="t", fps=None, rest_joints=[], rest_source="t")
+    store = CorpusStore(tmp_path)
+    per_clip = [{"clip": "bandai/b/walk_1", "frames": 100, "mpjpe_mm": 10.0},
+                {"clip": "bandai/b/run_1", "frames": 300, "mpjpe_mm": 30.0},
+                {"clip": "procedural/squat/eval/0000", "frames": 50, "mpjpe_mm": 80.0, "coverage_pct": 60.0}]
+    b = breakdown(per_clip, store)
+    assert b["source"]["bandai"] == {"clips": 2, "frames": 400, "mpjpe_mm": 25.0}
+    assert b["source"]["procedural"] == {"clips": 1, "frames": 50, "mpjpe_mm": 80.0, "coverage_pct": 60.0}
+    assert set(b["class"]) == {"walk", "run", "squat"} and b["class"]["run"]["mpjpe_mm"] == 30.0
+    md = breakdown_markdown({"m": {"breakdown": b}}, "class")
+    assert "| squat | 1 | 50 | 80 | 60 |" in md and "| walk | 1 | 100 | 10 | - |" in md, md
+
+
+def test_empose_result_has_breakdowns_that_pool_to_the_headline(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    torch.manual_seed(0)
+    ck = tmp_path / "tiny12.pt"
+    EmposeEstimator(EmposeConfig.preset("tiny", 12)).save(ck)
+    store = FakeStore(tmp_path, {"test": 3})
+    monkeypatch.setattr("wearpose.motion.CorpusStore", lambda *a, **k: store)
+    out = tmp_path / "t"
+    res = runner.invoke(app, ["evaluate", str(ck), "--json", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    m = json.loads(res.stdout[res.stdout.index("{"):])["models"]["tiny12"]
+    assert len(m["per_clip"]) == 3 and sum(c["frames"] for c in m["per_clip"]) == m["frames"]
+    (src,) = m["breakdown"]["source"].values()  # the stand-in store's clips are all "synthetic/..."
+    assert src["clips"] == 3 and src["mpjpe_mm"] == pytest.approx(m["mpjpe_mm"], rel=1e-6)
+    assert src["mpjae_deg"] == pytest.approx(m["mpjae_deg"], rel=1e-6)
+    md = out.with_suffix(".md").read_text()
+    assert "## By source" in md and "| synthetic | 3 |" in md and "## By motion class" in md
+
+
+def test_source_and_protocol_options_are_checked(tmp_path: Path) -> None:
+    from wearpose.motion.store import write_index
+
+    clips = {f"{s}/x/{i}": {"id": f"{s}/x/{i}", "clip": str(i), "subject": "x", "source": s, "split": "test",
+                            "licence": "l", "description": "walk", "file": "x.npz"} for s in ("bandai", "cmu_daz")
+             for i in range(2)}
+    write_index(tmp_path, clips, {}, corpus={"kind": "test"}, converter="t", fps=None, rest_joints=[], rest_source="t")
+    res = runner.invoke(app, ["evaluate", "empose12_cpu", "--cache", str(tmp_path), "--source", "cmu_asf"])
+    assert res.exit_code == 2 and "'cmu_asf'" in res.output and "--source" in res.output, res.output
+    res = runner.invoke(app, ["evaluate", "empose12_cpu", "--cache", str(tmp_path), "--protocol", "unseen-motion"])
+    assert res.exit_code == 2 and "procedural" in res.output and "--cache" in res.output, res.output
+    res = runner.invoke(app, ["evaluate", "empose12_cpu", "--per-family", "2"])
+    assert res.exit_code == 2 and "--per-family" in res.output, res.output
+    res = runner.invoke(app, ["evaluate", "empose12_cpu", "--protocol", "lab"])
+    assert res.exit_code == 2 and "'lab'" in res.output and "--protocol" in res.output, res.output

@@ -79,6 +79,38 @@ def _entry(method: str) -> EstimatorEntry | None:
     return _entries().get(method)
 
 
+def _store(cache: Path | None, protocol: str, source: str | None, per_family: int | None, split: str) -> Any:
+    """The store the command evaluates on: ``--cache`` (or the prepared corpus) for ``corpus``,
+    the built-in procedural store for ``unseen-motion``; restricted to ``--source``."""
+    from wearpose.errors import ConfigError
+    from wearpose.motion import CorpusStore
+
+    if protocol not in ("corpus", "unseen-motion"):
+        raise typer.BadParameter(f"expected corpus or unseen-motion, got {protocol!r}", param_hint="--protocol")
+    if protocol == "corpus" and per_family is not None:
+        raise typer.BadParameter("--per-family sizes the unseen-motion set; add --protocol unseen-motion",
+                                 param_hint="--per-family")
+    if protocol == "unseen-motion":
+        if cache is not None:
+            raise typer.BadParameter("--protocol unseen-motion uses its own procedural store; to evaluate on a store "
+                                     "of yours (wearpose data procedural --out STORE) give only --cache STORE",
+                                     param_hint="--cache")
+        if split != "test":
+            raise typer.BadParameter("the unseen-motion set is a test split only", param_hint="--split")
+        from wearpose.evaluate.protocols import unseen_motion_store
+
+        err_console.print("unseen-motion store: building or checking (about 1.5 s per new clip)")
+        store = unseen_motion_store(per_family)
+    else:
+        store = CorpusStore(cache)
+    if source is not None:
+        try:
+            store = store.subset(source)
+        except ConfigError as exc:
+            raise typer.BadParameter(str(exc), param_hint="--source") from None
+    return store
+
+
 def _render_protocol(r: dict[str, Any]) -> None:
     first = next(iter(r["models"].values()))
     t = Table(title=f"{first['split']} split: {first['clips']} clips, {first['frames']} frames, kit {first['kit']}")
@@ -90,8 +122,30 @@ def _render_protocol(r: dict[str, Any]) -> None:
         t.add_row(k, *(f"{m['metrics'][k]:.3g}" if k in m["metrics"] else "-" for m in r["models"].values()))
     console.print(t)
     console.print(f"protocol: {first['protocol']}", soft_wrap=False)
+    _render_breakdown(r["models"])
     for p in r.get("written", []):
         console.print(f"wrote {p}")
+
+
+def _render_breakdown(models: dict[str, Any]) -> None:
+    """By source and by motion class: each group's clips and its first per-clip figure (the
+    protocol's lead metric) per model; every figure is in the JSON and the markdown."""
+    lead = next(iter(models.values()))
+    first = lead.get("breakdown") or {}
+    rows = next((row for b in first.values() for row in b.values()), {})
+    metric = lead.get("lead") or next((k for k in rows if k not in ("clips", "frames")), None)
+    if metric is None:
+        return
+    for kind in ("source", "class"):
+        t = Table(title=f"by {kind}: {metric}")
+        t.add_column(kind, overflow="fold")
+        t.add_column("clips", justify="right")
+        for name in models:
+            t.add_column(name, justify="right", overflow="fold")
+        for g, row in first[kind].items():
+            t.add_row(g, str(row["clips"]), *(f"{m['breakdown'][kind].get(g, {}).get(metric, float('nan')):.3g}"
+                                              for m in models.values()))
+        console.print(t)
 
 
 def _render(r: dict[str, Any]) -> None:
@@ -105,6 +159,7 @@ def _render(r: dict[str, Any]) -> None:
                   f"{m['seconds']:.1f}")
     console.print(t)
     console.print(f"{r['joints']} joints; mean ± std over frames with every sensor valid; {r['subjects']}.")
+    _render_breakdown(r["models"])
     for p in r.get("written", []):
         console.print(f"wrote {p}")
 
@@ -129,6 +184,12 @@ def evaluate(
                                      help="Sparse-IMU protocols: score every N-th frame (the MI-Poser cards used 4)."),
     cache: Optional[Path] = typer.Option(None, help="Prepared corpus store to evaluate on (default: the store of "
                                                     "`wearpose data prepare`)."),
+    protocol: str = typer.Option("corpus", help="Clips: corpus (the store's split: in-lab) or unseen-motion (the "
+                                                "held-out procedural families, built once: docs/procedural-motion.md)."),
+    source: Optional[str] = typer.Option(None, help="Only the clips of this source (lab): bandai, cmu_daz, cmu_asf "
+                                                    "(unseen lab: a model trained on another lab's clips)."),
+    per_family: Optional[int] = typer.Option(None, "--per-family", min=1,
+                                             help="--protocol unseen-motion: clips per family (default 6)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (progress goes to stderr)."),
 ) -> None:
     """Evaluate checkpoints on simulated held-out recordings with the paper's metrics.
@@ -140,9 +201,14 @@ def evaluate(
     and metrics (PIP: SIP, angular, positional, mesh, jitter, translation; BiRAE: MPJAE groups
     and uncertainty coverage; MI-Poser/IMUPoser: upper-body MPJPE).
 
+    Every result has per-source and per-motion-class breakdowns (JSON, markdown, a table of
+    the lead metric here).
+
     Example: wearpose evaluate empose12_cpu BiRNN=runs/birnn12_cpu/best.pt --clips 20 --out results/em12
     Unseen subjects (EM-POSE Table 4): wearpose evaluate empose12_cpu --offsets unseen --spread 2
     Another method: wearpose evaluate pip_cpu --clips 2 --json
+    Unseen motion: wearpose evaluate birae6_cpu --protocol unseen-motion --out results/unseen_birae6
+    Unseen lab: wearpose evaluate empose12_cpu --source cmu_daz
     """
     import torch
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -157,7 +223,6 @@ def evaluate(
         raise typer.BadParameter(f"expected default or none, got {noise!r}", param_hint="--noise")
     if split == "train":
         err_console.print("[yellow]warning[/]: the train split measures fit, not held-out accuracy")
-    from wearpose.motion import CorpusStore
 
     ckpts: dict[str, Path] = {}
     sources: dict[str, ModelSource] = {}
@@ -172,7 +237,7 @@ def evaluate(
         raise typer.BadParameter(f"EM-POSE models ({', '.join(sorted(compared))}) and others "
                                  f"({', '.join(sorted(set(sources) - compared))}) have different protocols; "
                                  "evaluate them in separate commands", param_hint="MODELS")
-    store = CorpusStore(cache)
+    store = _store(cache, protocol, source, per_family, split)
     if not store.clips(split=split):
         raise typer.BadParameter(f"corpus store {store.root}: the {split!r} split has no clips (nothing to "
                                  "evaluate); prepare a store with that split (wearpose data prepare --split) or "
@@ -185,11 +250,10 @@ def evaluate(
         if compared:
             if frame_stride != 1:
                 raise typer.BadParameter("the EM-POSE protocol scores every frame", param_hint="--frame-stride")
-            from wearpose.estimators.method import resolve
+            from wearpose.evaluate.protocols import compare_models
 
-            run_compare = resolve(next(iter(compare.values())))
-            res = run_compare(ckpts, split, clips, noise=noise, seed=seed, offsets=offsets, spread=spread,
-                              store=store, progress=tick)
+            res = compare_models(next(iter(compare.values())), ckpts, split, clips, noise=noise, seed=seed,
+                                 offsets=offsets, spread=spread, store=store, progress=tick)
         else:
             from wearpose.evaluate.protocols import evaluate_model
 
@@ -200,11 +264,13 @@ def evaluate(
             for n, r in res["models"].items():
                 r["model"] = n
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    res["command"] = command
+    res.update(command=command, protocol_clips=protocol, source_filter=source)
     if out is not None and compared:
         extra = {"command": command, **({"note": note} if note else {})}
+        from wearpose.evaluate.protocols import breakdown_sections
+
         md, js = write_table(res, out, title=title or f"wearpose evaluate ({split} split, kit {res['kit']})",
-                             produced_by=command, paper=None, extra=extra)
+                             produced_by=command, paper=None, extra=extra, appendix=breakdown_sections(res["models"]))
         res["written"] = [str(md), str(js)]
     elif out is not None:
         from wearpose.evaluate.protocols import write_result

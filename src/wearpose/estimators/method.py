@@ -212,6 +212,8 @@ class EstimatorEntry:
         protocol: ``"module:function"`` of its evaluation protocol for one model,
             ``fn(estimator, store, split, clips, seed, noise, progress, frame_stride) -> dict``
             with ``frames``, ``clip_ids``, ``metrics`` (flat, report units, the unit in the key),
+            ``per_clip`` (``[{"clip", "frames", <metric>: the clip's mean}]``, grouped by source
+            and motion class by the runner), ``lead`` (the metric the breakdown table shows),
             ``protocol`` (one sentence) and ``detail`` (:func:`wearpose.evaluate.protocols.evaluate_model`).
         compare: instead, ``"module:function"`` of a protocol that compares several checkpoints
             of the method family on shared simulations (EM-POSE:

@@ -4,6 +4,7 @@ training phases) and evaluation protocol (``wearpose evaluate``), named by its d
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -40,8 +41,11 @@ def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noi
              progress: Callable[[int, int], None] | None, frame_stride: int = 1) -> dict[str, Any]:
     """BiRAE's evaluation protocol for ``wearpose evaluate``: the clean scenario (ideal segment
     orientations) at the weights' rate, offline; MPJAE per joint group and the +-1 / +-2 sigma
-    coverage of the calibrated uncertainty (:func:`wearpose.estimators.birae.evaluate.evaluate`)."""
-    from wearpose.estimators.birae.evaluate import evaluate, public, scenario_recordings, uncertainty_summary
+    coverage of the calibrated uncertainty and its mean per-joint sigma
+    (:func:`wearpose.estimators.birae.evaluate.evaluate`); the same per clip."""
+    from wearpose.estimators.birae.evaluate import (
+        evaluate, per_clip_uncertainty, public, scenario_recordings, uncertainty_summary,
+    )
 
     if noise != "default":
         raise ConfigError(f"--noise {noise!r}: BiRAE's protocol has its own scenarios (the clean one here); "
@@ -52,9 +56,12 @@ def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noi
     metrics = finite_metrics(public(res))
     metrics.update({f"{k}_pct": 100 * float(unc[k]) for k in ("within_1sigma", "within_2sigma")})
     metrics["pearson_r_sigma_error"] = float(unc["pearson_r_sigma_error"])
+    metrics["mean_sigma_deg"] = math.degrees(float(res["_joint_sigma"].mean()))
     for k in ("clips", "frames", "frame_stride", "mc_samples"):
         metrics.pop(k, None)
-    return {"frames": res["frames"], "clip_ids": [c for c, _, _ in recs], "metrics": metrics,
+    per_clip = [{**c, **u} for c, u in zip(res["per_clip"], per_clip_uncertainty(res))]
+    return {"frames": res["frames"], "clip_ids": [c for c, _, _ in recs], "metrics": metrics, "per_clip": per_clip,
+            "lead": "mpjae_all_deg",
             "protocol": "clean scenario (ideal segment orientations), offline, MC-dropout uncertainty calibrated "
                         "with the weights' sigma scale (BiRAE protocol)",
             "detail": {**public(res), "uncertainty": {k: v for k, v in unc.items() if k != "reliability"}}}

@@ -80,6 +80,11 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
         keep_uncertainty: also return pooled residuals and sigmas ``(N, 15, 3)`` (calibrated with
             the estimator's current ``sigma_scale``), per-joint geodesic errors ``(N, 15)`` and
             per-joint sigmas ``(N, 15)``.
+
+    Returns:
+        ``mpjae_<group>_deg`` pooled over frames, ``clips``, ``frames``, the settings, and
+        ``per_clip``: ``[{"clip", "frames", "mpjae_<group>_deg"}]`` in order (the pooled arrays
+        hold the clips' frames in the same order).
     """
     from wearpose.body.skeleton import MAJOR_JOINTS
     from wearpose.estimators.birae.representations import pose_to_target
@@ -87,6 +92,7 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
 
     acc: dict[str, list[torch.Tensor]] = {g: [] for g in GROUP_ORDER}
     res_l, sig_l, je_l, js_l = [], [], [], []
+    per_clip: list[dict[str, Any]] = []
     frames = 0
     for i, (cid, rec, gt) in enumerate(recs):
         T = gt.shape[0]
@@ -111,7 +117,10 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
         errs = group_errors(track.local_rot, gt)
         for g in GROUP_ORDER:
             acc[g].append(errs[g][keep])
-        frames += int(keep.sum())
+        n = int(keep.sum())
+        frames += n
+        per_clip.append({"clip": cid, "frames": n, **{f"mpjae_{g}_deg": math.degrees(float(errs[g][keep].mean()))
+                                                      for g in GROUP_ORDER if n}})
         if keep_uncertainty:
             res_l.append((pose_to_target(gt) - track.extras["expmap"])[keep])
             sig_l.append(track.extras["sigma"][keep])
@@ -122,7 +131,8 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
     out: dict[str, Any] = {"clips": len(recs), "frames": frames, "mode": mode,
                            "window": list(window or est.window) if mode in ("online", "stream") else None,
                            "frame_stride": frame_stride,
-                           "mc_samples": 0 if mode == "stream" else (est.mc_samples if mc_samples is None else mc_samples)}
+                           "mc_samples": 0 if mode == "stream" else (est.mc_samples if mc_samples is None else mc_samples),
+                           "per_clip": per_clip}
     for g in GROUP_ORDER:
         e = torch.cat(acc[g]) if acc[g] else torch.zeros(0)
         out[f"mpjae_{g}_deg"] = math.degrees(float(e.mean())) if e.numel() else math.nan
@@ -214,6 +224,23 @@ def calibrate(est: Any, val_recs: Sequence[tuple[str, Any, torch.Tensor]], metho
     if cv:
         est.calibration["cv"] = {"folds": len(parts), "by": "motion content", **cv}
     return dict(est.calibration)
+
+
+def per_clip_uncertainty(res: dict[str, Any]) -> list[dict[str, float]]:
+    """Per clip of an :func:`evaluate` result with ``keep_uncertainty`` (its ``per_clip`` order):
+    ``within_1sigma_pct`` / ``within_2sigma_pct`` (coverage of the calibrated sigma, %) and
+    ``mean_sigma_deg`` (the mean per-joint sigma of the 15 major joints, degrees)."""
+    from wearpose.estimators.birae.uncertainty import coverage
+
+    out, start = [], 0
+    for c in res["per_clip"]:
+        sl = slice(start, start + c["frames"])
+        start += c["frames"]
+        r, s = res["_residual"][sl], res["_sigma"][sl]
+        out.append({} if not c["frames"] else {
+            "within_1sigma_pct": 100 * coverage(r, s, 1.0), "within_2sigma_pct": 100 * coverage(r, s, 2.0),
+            "mean_sigma_deg": math.degrees(float(res["_joint_sigma"][sl].mean()))})
+    return out
 
 
 def uncertainty_summary(res: dict[str, Any]) -> dict[str, Any]:

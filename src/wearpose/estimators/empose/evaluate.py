@@ -109,6 +109,17 @@ def _stats(xs: list[torch.Tensor], k: float) -> tuple[float, float]:
     return (float(x.mean()), float(x.std())) if x.numel() else (math.nan, math.nan)
 
 
+def _clip_row(cid: str, errs: Mapping[str, list[torch.Tensor]]) -> dict[str, Any]:
+    """The last clip's row of ``errs`` (its per-frame errors just appended): ``{"clip", "frames",
+    "mpjpe_mm", "pa_mpjpe_mm", "mpjae_deg"}`` (means over the clip's valid frames)."""
+    pe = errs["pe"][-1]
+    row: dict[str, Any] = {"clip": cid, "frames": int(pe.numel())}
+    if pe.numel():
+        row.update(mpjpe_mm=float(pe.mean()) * 1000.0, pa_mpjpe_mm=float(errs["pa"][-1].mean()) * 1000.0,
+                   mpjae_deg=math.degrees(float(errs["ae"][-1].mean())))
+    return row
+
+
 def _provenance(store: Any) -> dict[str, Any] | None:
     """Which store and corpus version the clips came from (:meth:`wearpose.motion.CorpusStore.provenance`;
     None for a stand-in store without it)."""
@@ -140,7 +151,8 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         ``{"split", "clips", "frames", "noise", "seed", "kit", "joints", "models": {name: {
         "mpjpe_mm", "mpjpe_std_mm", "pa_mpjpe_mm", "pa_mpjpe_std_mm", "mpjae_deg", "mpjae_std_deg",
         "frames", "method", "checkpoint", "epoch", "val_mpjpe_mm", "data_fingerprint",
-        "train_command", "seconds"}}}``.
+        "train_command", "seconds", "per_clip": [{"clip", "frames", "mpjpe_mm", "pa_mpjpe_mm",
+        "mpjae_deg"}]}}}``.
     """
     from wearpose.body.skeleton import MAJOR_JOINTS
     from wearpose.estimators.empose.baselines import load_any
@@ -161,6 +173,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
     ids = list(clips) if clips is not None else store.clips(split=split)[: limit or None]
     errs: dict[str, dict[str, list[torch.Tensor]]] = {n: {"pe": [], "pa": [], "ae": []} for n in ests}
     secs = {n: 0.0 for n in ests}
+    per_clip: dict[str, list[dict[str, Any]]] = {n: [] for n in ests}
     frames = 0
     for i, cid in enumerate(ids):
         # One simulation per clip for all models (same subject, same noise draw).
@@ -176,6 +189,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
             errs[name]["pe"].append(mpjpe(pj, r["joints"], MAJOR_JOINTS)[ok])
             errs[name]["pa"].append(pa_mpjpe(pj, r["joints"], MAJOR_JOINTS)[ok])
             errs[name]["ae"].append(mpjae(track.local_rot, r["pose"])[ok])
+            per_clip[name].append(_clip_row(cid, errs[name]))
         frames += int(ok.sum())
         if progress is not None:
             progress(i + 1, len(ids))
@@ -190,7 +204,8 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
                         "epoch": est.meta.get("epoch"), "val_mpjpe_mm": est.meta.get("val_mpjpe_mm"),
                         "data_fingerprint": est.data_fingerprint, "train_command": est.train_command,
                         "config": est.config.to_dict(),
-                        "parameters": sum(p.numel() for p in est.model.parameters()), "seconds": secs[name]}
+                        "parameters": sum(p.numel() for p in est.model.parameters()), "seconds": secs[name],
+                        "per_clip": per_clip[name]}
     subjects = ("random synthetic offsets per clip, evaluation seed namespace (never drawn for training)"
                 if offsets == "random" else
                 f"unseen subjects: synthetic offsets from a {spread:g}x wider distribution than the training prior "
@@ -232,9 +247,11 @@ def write_table2(result: Mapping[str, Any], path_stem: str | Path, extra: Mappin
 
 def write_table(result: Mapping[str, Any], path_stem: str | Path, *, title: str = "EM-POSE Table 2 on simulated data (12 sensors)",
                 produced_by: str = "benchmarks/empose_eval.py", paper: Mapping[str, Any] | None = PAPER_TABLE2_12,
-                paper_caption: str = "the paper's Table 2", extra: Mapping[str, Any] | None = None) -> tuple[Path, Path]:
+                paper_caption: str = "the paper's Table 2", extra: Mapping[str, Any] | None = None,
+                appendix: Sequence[str] = ()) -> tuple[Path, Path]:
     """:func:`write_table2` for any table of :func:`evaluate_models` results: ``title``, the command
-    that ``produced_by`` it, the paper's rows ``paper`` (name -> metric -> (mean, std); None = none)."""
+    that ``produced_by`` it, the paper's rows ``paper`` (name -> metric -> (mean, std); None = none);
+    ``appendix``: markdown lines after the models (the per-source and per-class breakdowns)."""
     stem = Path(path_stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     md = [f"# {title}", "",
@@ -256,6 +273,7 @@ def write_table(result: Mapping[str, Any], path_stem: str | Path, *, title: str 
         suffix = " 12" if paper is PAPER_TABLE2_12 else ""
         for name, m in paper.items():
             md.append(f"| {name}{suffix} | " + " | ".join(f"{a} ± {b}" for a, b in m.values()) + " |")
+    md += list(appendix)
     if extra and extra.get("note"):
         md += ["", str(extra["note"])]
     (stem.with_suffix(".md")).write_text("\n".join(md) + "\n", encoding="utf-8")

@@ -90,6 +90,7 @@ def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noi
     metrics.update({f"detection_{k}_at_{e}cm": v for e, dm in res["detection"]["metrics"].items()
                     for k, v in finite_metrics(dm).items() if k != "frames"})
     return {"frames": m["calibrated"]["frames"], "clip_ids": ids, "metrics": metrics,
+            "per_clip": res["per_clip"]["model"], "lead": "calibrated_mpjpe_upper_cm",
             "protocol": "simulated headset VIO + wrist EM after a 1 s T-pose, calibrated and uncalibrated; "
                         "upper-body MPJPE, pelvis-aligned (MI-Poser protocol); interference detection on the same "
                         f"clips: each wrist against a room-fixed source, condition {DETECTION_CONDITION!r}, "
@@ -139,5 +140,6 @@ def imuposer_protocol(est: Any, store: Any, split: str, clips: int | None, seed:
                             progress=progress)
     metrics = {k: v for k, v in finite_metrics(res["summary"]).items() if k != "frames"}
     return {"frames": res["summary"]["frames"], "clip_ids": store.clips(split=split)[: clips or None],
-            "metrics": metrics, "protocol": "simulated head + wrist IMUs (IMUPoser baseline), upper-body MPJPE, "
-                                            "pelvis-aligned, on MI-Poser's clips", "detail": res}
+            "metrics": metrics, "per_clip": res["per_clip"], "lead": "mpjpe_upper_cm",
+            "protocol": "simulated head + wrist IMUs (IMUPoser baseline), upper-body MPJPE, "
+                        "pelvis-aligned, on MI-Poser's clips", "detail": res}

@@ -53,13 +53,23 @@ def joint_errors(body: Any, pred_rot: torch.Tensor, gt_rot: torch.Tensor) -> tor
 
 
 class ErrorTable:
-    """Accumulates per-frame upper-body joint errors by motion type; :meth:`summary` in cm."""
+    """Accumulates per-frame upper-body joint errors by motion type (and clip, when given);
+    :meth:`summary` in cm."""
 
     def __init__(self) -> None:
         self.rows: list[tuple[str, torch.Tensor]] = []
+        self.clips: list[str | None] = []
 
-    def add(self, mtype: str, err: torch.Tensor) -> None:
+    def add(self, mtype: str, err: torch.Tensor, clip: str | None = None) -> None:
+        """``err`` ``(N, 24)`` m, the joint errors of ``N`` frames of one clip of type ``mtype``."""
         self.rows.append((mtype, err[:, list(UPPER_BODY)].float()))
+        self.clips.append(clip)
+
+    def per_clip(self, key: str = "mpjpe_upper_cm") -> list[dict[str, Any]]:
+        """``[{"clip", "frames", key}]`` of the rows added with a clip id, in order (``key``: the
+        clip's upper-body MPJPE, cm)."""
+        return [{"clip": c, "frames": int(e.shape[0]), **({key: float(e.mean()) * CM} if e.shape[0] else {})}
+                for c, (_, e) in zip(self.clips, self.rows) if c is not None]
 
     def summary(self) -> dict[str, Any]:
         if not self.rows:
@@ -98,8 +108,9 @@ def evaluate_miposer(estimators: dict[str, Any], split: str = "test", limit: int
         conditions: ``"calibrated"`` and/or ``"uncalibrated"``.
 
     Returns:
-        ``{"split", "clips", "seed", "noise", "frame_stride", "models": {name: {condition: summary}}}``
-        (summaries from :meth:`ErrorTable.summary`, cm) and timing.
+        ``{"split", "clips", "seed", "noise", "frame_stride", "models": {name: {condition: summary}},
+        "per_clip": {name: [{"clip", "frames", "<condition>_mpjpe_upper_cm"}]}}`` (summaries from
+        :meth:`ErrorTable.summary`, cm) and timing.
     """
     from wearpose.estimators.miposer.data import calibrated_inputs, raw_inputs, simulate_clip, uncalibrated
     from wearpose.motion import CorpusStore
@@ -119,13 +130,25 @@ def evaluate_miposer(estimators: dict[str, Any], split: str = "test", limit: int
                 res = r["calibration"] if cond == "calibrated" else uncalibrated(r["calibration"])
                 R, p = calibrated_inputs(raw, res)
                 rot, _ = est.infer(R, p, f)
-                tables[name][cond].add(mtype, joint_errors(est.body, rot, r["pose"][f]))
+                tables[name][cond].add(mtype, joint_errors(est.body, rot, r["pose"][f]), cid)
         if progress is not None:
             progress(k + 1, len(ids))
     return {"split": split, "clips": len(ids), "seed": seed, "noise": noise, "frame_stride": frame_stride,
             "joints": [JOINT_NAMES[j] for j in UPPER_BODY], "root_aligned": "pelvis position",
             "models": {n: {c: t.summary() for c, t in d.items()} for n, d in tables.items()},
+            "per_clip": {n: _merge_clips({c: t.per_clip(f"{c}_mpjpe_upper_cm") for c, t in d.items()})
+                         for n, d in tables.items()},
             "seconds": time.time() - t0}
+
+
+def _merge_clips(by_condition: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """One row per clip from each condition's :meth:`ErrorTable.per_clip` rows (same clips,
+    same frames, in the same order)."""
+    rows = [dict(r) for r in next(iter(by_condition.values()), [])]
+    for part in by_condition.values():
+        for row, r in zip(rows, part):
+            row.update(r)
+    return rows
 
 
 def evaluate_imuposer(est: Any, split: str = "test", limit: int | None = None, *, seed: int = 0, noise: str = "default",
@@ -144,11 +167,11 @@ def evaluate_imuposer(est: Any, split: str = "test", limit: int | None = None, *
         r = simulate_imu_clip(store.load(cid), est.config, est.body, clip_seed(cid, seed, "eval-imu"), noise=noise)
         rot = est.infer(r["R"], r["a"])
         f = _frames(r["valid"].all(1), 0, frame_stride)
-        table.add(motion_class(store.entry(cid)), joint_errors(est.body, rot[f], r["pose"][f]))
+        table.add(motion_class(store.entry(cid)), joint_errors(est.body, rot[f], r["pose"][f]), cid)
         if progress is not None:
             progress(k + 1, len(ids))
     return {"split": split, "clips": len(ids), "seed": seed, "noise": noise, "frame_stride": frame_stride,
-            "summary": table.summary(), "seconds": time.time() - t0}
+            "summary": table.summary(), "per_clip": table.per_clip(), "seconds": time.time() - t0}
 
 
 def _to_head(rec: Any, kit: str, em_name: str, R_src: np.ndarray, p_src: np.ndarray,

@@ -61,5 +61,7 @@ def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noi
     row = res["rows"]["model"]
     metrics = finite_metrics(row)
     metrics.pop("zmp_frames_pct", None)
+    per_clip = [{"clip": c["clip"], "frames": c["frames"], **{k: c[k] for k in metrics if k in c}}
+                for c in row["per_clip"]]
     return {"frames": res["frames"], "clip_ids": [c["clip"] for c in row["per_clip"]], "metrics": metrics,
-            "protocol": res["protocol"], "detail": res}
+            "per_clip": per_clip, "lead": "sip_error_deg", "protocol": res["protocol"], "detail": res}

@@ -12,8 +12,8 @@ the ignored joints, ``mask_ignored=True``), averaged over frames of all clips. A
 distance (:func:`wearpose.physics.zmp_distance` on the output motion, finite differences over
 +-:data:`ZMP_STRIDE` frames; averaged over the frames with a supporting foot) and the same for
 the ground truth (``result["ground_truth"]``: validates the metric, real motion should be near
-0), and per-clip rows (translation error, final drift, deepest penetration with its frame and
-joint) in ``rows[name]["per_clip"]``.
+0), and per-clip rows (the clip's :func:`compute_all` figures, translation error, final drift,
+deepest penetration with its frame and joint) in ``rows[name]["per_clip"]``.
 """
 
 from __future__ import annotations
@@ -173,7 +173,9 @@ def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int 
             a["qp_ms"].extend(info.get("qp_ms", []))
             if "max_penetration_m" in info:
                 a["pen"].append(info["max_penetration_m"])
-            a["per_clip"].append({"clip": cid, "frames": T, "translation_error_cm": info["translation_error_cm"],
+            a["per_clip"].append({"clip": cid, "frames": T, **{k: v for k, v in m.items() if isinstance(v, float)
+                                                                 and math.isfinite(v)},
+                                  "translation_error_cm": info["translation_error_cm"],
                                   "final_error_m": info["final_error_m"], "travelled_m": info["travelled_m"],
                                   **({"betas": [round(float(x), 4) for x in r["betas"]]} if bodies != "corpus" else {}),
                                   "zmp_distance_m": info["zmp_sum_m"] / max(info["zmp_frames"], 1),
