@@ -58,3 +58,38 @@ def test_tiny_ablation_run_trains_the_ablated_config(tmp_path: Path, corpus_stor
     assert res.exit_code == 0, res.output
     out = json.loads(res.output[res.output.index("{"):])
     assert out["config"]["inputs"] == "position" and out["config"]["offsets"] == "random", out["config"]
+
+
+def test_source_restricts_the_training_store(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 24, unseen lab: ``--source`` trains (and validates) on one source's clips."""
+    from wearpose.estimators.method import OptionError, TrainRun
+    from wearpose.motion.store import write_index
+
+    clips = {f"{s}/x/{sp}{i}": {"id": f"{s}/x/{sp}{i}", "clip": f"{sp}{i}", "subject": "x", "source": s, "split": sp,
+                                "licence": "l", "description": "walk", "file": "x.npz"}
+             for s in ("bandai", "cmu_daz") for sp in ("train", "val") for i in range(2)}
+    write_index(tmp_path, clips, {}, corpus={"kind": "test"}, converter="t", fps=None, rest_joints=[], rest_source="t")
+    monkeypatch.setenv("WEARPOSE_CACHE", str(tmp_path))
+    assert TrainRun().corpus_store() is None and TrainRun().loop()["store"] is None
+    store = TrainRun(source="cmu_daz").loop()["store"]
+    assert store.clips(split="train") == ["cmu_daz/x/train0", "cmu_daz/x/train1"] and store.sources_only == ("cmu_daz",)
+    with pytest.raises(OptionError, match="no clips of source 'cmu_asf'") as err:
+        TrainRun(source="cmu_asf").corpus_store()
+    assert err.value.option == "--source"
+    res = runner.invoke(app, ["train", "empose", "--config", "tiny", "--source", "cmu_asf", "--out", str(tmp_path / "r")])
+    assert res.exit_code == 2 and "--source" in res.output and "'cmu_asf'" in res.output, res.output
+
+
+@pytest.mark.corpus
+def test_tiny_run_on_one_source_records_it(tmp_path: Path, corpus_store: Path) -> None:
+    from wearpose.estimators.checkpoint import load_checkpoint
+
+    n = torch.get_num_threads()
+    try:
+        res = runner.invoke(app, ["train", "empose", "--config", "tiny", "--source", "cmu_daz", "--limit", "2",
+                                  "--epochs", "1", "--threads", "1", "--out", str(tmp_path / "run"), "--json"])
+    finally:
+        torch.set_num_threads(n)
+    assert res.exit_code == 0, res.output
+    meta = load_checkpoint(tmp_path / "run" / "best.pt").meta
+    assert meta["train_sources"] == ["cmu_daz"] and meta["train_clips"] == 2, meta

@@ -113,6 +113,8 @@ SHARED_OPTIONS: tuple[TrainOption, ...] = (
     TrainOption("threads", None, "torch CPU threads (default: torch's choice).", int, min=1),
     TrainOption("device", "auto", "auto (CUDA when available), cpu or cuda[:i]."),
     TrainOption("limit", None, "Use only the first N training clips (quick runs).", int, min=1),
+    TrainOption("source", None, "Train and validate on the clips of this source (lab) only: bandai, cmu_daz "
+                                "or cmu_asf (the unseen-lab protocol: evaluate with --source of another).", str),
     TrainOption("checkpoint_every", 100, "Save last.pt every N optimiser steps (and every epoch).", min=1),
     TrainOption("as_json", False, "Print the result as JSON.", flags=("--json",)),
 )
@@ -130,6 +132,7 @@ class TrainRun:
     threads: int | None = None
     device: str = "auto"
     limit: int | None = None
+    source: str | None = None
     checkpoint_every: int = 100
     train_command: str = ""
     quiet: bool = False
@@ -140,11 +143,29 @@ class TrainRun:
         """The training-clip limit: ``--limit``, else :data:`TINY_TRAIN_CLIPS` for ``tiny``."""
         return self.limit if self.limit is not None or self.config != "tiny" else TINY_TRAIN_CLIPS
 
+    def corpus_store(self) -> Any:
+        """The store the run trains on: None (the prepared corpus, each method's default), or
+        with ``--source`` the prepared corpus restricted to that source
+        (:meth:`wearpose.motion.CorpusStore.subset`), train and val splits alike.
+
+        Raises:
+            OptionError: ``--source`` names a source the store does not hold.
+        """
+        if self.source is None:
+            return None
+        from wearpose.motion import CorpusStore  # deferred: reading declarations loads no corpus code
+
+        try:
+            return CorpusStore().subset(self.source)
+        except ConfigError as exc:
+            raise OptionError("--source", str(exc)) from None
+
     def loop(self) -> dict[str, Any]:
         """The keyword options of :func:`wearpose.estimators.train.train_estimator` this run sets."""
         return {"epochs": self.epochs, "resume": self.resume, "threads": self.threads, "device": self.device,
                 "limit_train": self.limit_train, "checkpoint_every": self.checkpoint_every,
-                "train_command": self.train_command, "quiet": self.quiet, "console": self.console}
+                "train_command": self.train_command, "quiet": self.quiet, "console": self.console,
+                "store": self.corpus_store()}
 
 
 @dataclass(frozen=True)

@@ -416,7 +416,8 @@ def train_estimator(est: Any, out_dir: str | Path, build: Callable[..., Any], ma
     In order: torch CPU ``threads``; the train and val splits (``build``, progress printed every
     ``progress_every`` clips); ``est.data_fingerprint`` = the training data's;
     :func:`resume_provenance` of ``<out_dir>/last.pt``; ``est.meta`` gets the clip and frame
-    counts; the task; ``est.to(device)``; :func:`train` with :func:`loop_settings`.
+    counts (and ``train_sources`` for a store restricted to some sources); the task;
+    ``est.to(device)``; :func:`train` with :func:`loop_settings`.
 
     Args:
         est: the estimator: ``config`` (with ``kit``, ``rate``, ``epochs``, ``val_clips`` and the
@@ -452,6 +453,8 @@ def train_estimator(est: Any, out_dir: str | Path, build: Callable[..., Any], ma
     est.data_fingerprint = tr.fingerprint
     resume_provenance(est, Path(out_dir) / "last.pt", resume=resume, train_command=train_command, console=console)
     est.meta.update({"train_clips": len(tr.clip_ids), "train_frames": tr.num_frames, "val_clips": len(va.clip_ids)})
+    if getattr(store, "sources_only", None):  # `--source`: one lab's clips (CorpusStore.subset)
+        est.meta["train_sources"] = list(store.sources_only)
     task = make_task(tr, va)
     est.to(resolve_device(device))  # network and body together: some losses run the body model
     s = loop_settings(cfg, out_dir, epochs or cfg.epochs, resume=resume, threads=threads, device=device,
