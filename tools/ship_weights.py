@@ -86,6 +86,9 @@ def build_card(ck: dict[str, Any], name: str, *, size_bytes: int, storage: str, 
         "storage": storage,
         "shipped_with": shipped_with,
     }
+    recipe = ck.get("meta", {}).get("recipe")
+    if recipe is not None:  # `wearpose train --recipe`: the resolved recipe reruns it
+        card["recipe"] = recipe
     if notes is not None:
         card["notes"] = notes
     return card

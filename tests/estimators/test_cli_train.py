@@ -27,16 +27,21 @@ def test_train_rejects_unknown_method(tmp_path: Path) -> None:
     assert res.exit_code != 0 and "no-such-method" in res.output
 
 
-@pytest.mark.corpus
-def test_tiny_cli_run_on_the_corpus(tmp_path: Path, corpus_store: Path) -> None:
+def _train(args: list[str]) -> dict:
+    """``wearpose train ARGS --json`` in-process (torch's thread count restored), its JSON result."""
     n = torch.get_num_threads()
     try:
-        res = runner.invoke(app, ["train", "empose", "--config", "tiny", "--limit", "3", "--epochs", "1", "--threads", "1",
-                                  "--out", str(tmp_path / "run"), "--json"])
+        res = runner.invoke(app, ["train", *args, "--json"])
     finally:
         torch.set_num_threads(n)
     assert res.exit_code == 0, res.output
-    out = json.loads(res.output[res.output.index("{"):])
+    return json.loads(res.output[res.output.index("{"):])
+
+
+@pytest.mark.corpus
+def test_tiny_cli_run_on_the_corpus(tmp_path: Path, corpus_store: Path) -> None:
+    out = _train(["empose", "--config", "tiny", "--limit", "3", "--epochs", "1", "--threads", "1",
+                  "--out", str(tmp_path / "run")])
     assert out["method"] == "empose" and out["steps"] >= 1 and (tmp_path / "run" / "best.pt").is_file()
 
 
@@ -49,14 +54,8 @@ def test_train_rejects_unknown_or_misplaced_ablation(tmp_path: Path) -> None:
 
 @pytest.mark.corpus
 def test_tiny_ablation_run_trains_the_ablated_config(tmp_path: Path, corpus_store: Path) -> None:
-    n = torch.get_num_threads()
-    try:
-        res = runner.invoke(app, ["train", "empose", "--config", "tiny", "--ablation", "pos_only", "--limit", "2",
-                                  "--epochs", "1", "--threads", "1", "--out", str(tmp_path / "run"), "--json"])
-    finally:
-        torch.set_num_threads(n)
-    assert res.exit_code == 0, res.output
-    out = json.loads(res.output[res.output.index("{"):])
+    out = _train(["empose", "--config", "tiny", "--ablation", "pos_only", "--limit", "2", "--epochs", "1",
+                  "--threads", "1", "--out", str(tmp_path / "run")])
     assert out["config"]["inputs"] == "position" and out["config"]["offsets"] == "random", out["config"]
 
 
@@ -84,12 +83,7 @@ def test_source_restricts_the_training_store(tmp_path: Path, monkeypatch: pytest
 def test_tiny_run_on_one_source_records_it(tmp_path: Path, corpus_store: Path) -> None:
     from wearpose.estimators.checkpoint import load_checkpoint
 
-    n = torch.get_num_threads()
-    try:
-        res = runner.invoke(app, ["train", "empose", "--config", "tiny", "--source", "cmu_daz", "--limit", "2",
-                                  "--epochs", "1", "--threads", "1", "--out", str(tmp_path / "run"), "--json"])
-    finally:
-        torch.set_num_threads(n)
-    assert res.exit_code == 0, res.output
+    _train(["empose", "--config", "tiny", "--source", "cmu_daz", "--limit", "2", "--epochs", "1", "--threads", "1",
+            "--out", str(tmp_path / "run")])
     meta = load_checkpoint(tmp_path / "run" / "best.pt").meta
     assert meta["train_sources"] == ["cmu_daz"] and meta["train_clips"] == 2, meta

@@ -127,7 +127,10 @@ def test_build_card() -> None:
     assert td["clips"] == 2 and td["clips_per_source"] == {"bandai": 1, "cmu_daz": 1}
     assert td["corpus"]["name"] == "data-v2" and td["corpus"]["manifest_sha1"] == "9" * 40
     assert card["licence"].startswith("non-commercial") and card["validation"] == {"epoch": 3, "val_loss": 0.5}
-    assert card["name"] == "pip_test" and "notes" not in card
+    assert card["name"] == "pip_test" and "notes" not in card and "recipe" not in card
+    ck = _checkpoint("pip", config)
+    ck["meta"]["recipe"] = {"name": "pip_test", "method": "pip", "options": {"config": "cpu"}, "seed": 0}
+    assert ship_weights.build_card(ck, "pip_test", **kw)["recipe"] == ck["meta"]["recipe"]  # issue 24: recipe on the card
     card = ship_weights.build_card(_checkpoint("pip", config), "pip_test", simulation="by hand", notes="n", **kw)
     assert card["training_data"]["simulation"] == "by hand" and card["notes"] == "n"
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import inspect
 import shlex
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Optional
 
 import click
@@ -50,8 +51,10 @@ class MethodCommands(TyperGroup):
 
 train_app = typer.Typer(cls=MethodCommands,
                         help="Train an estimator on simulated sensors from the prepared corpus "
-                             "(one command per method; each runs unchanged under torchrun).\n\n"
-                             "Example: wearpose train empose --config tiny --threads 1 --out runs/empose_tiny",
+                             "(one command per method; each runs unchanged under torchrun), or run a "
+                             "recipe.\n\n"
+                             "Example: wearpose train empose --config tiny --threads 1 --out runs/empose_tiny\n\n"
+                             "Example: wearpose train --recipe miposer_cpu",
                         no_args_is_help=True)
 app.add_typer(train_app, name="train")
 
@@ -65,25 +68,79 @@ def _parameter(o: TrainOption) -> inspect.Parameter:
                              annotation=Optional[kind] if o.default is None else kind)
 
 
+def run_training(training: Training, values: dict[str, Any], train_command: str,
+                 recipe: Any = None) -> dict[str, Any]:
+    """Call ``training``'s entry with the parsed option ``values`` (every declared option by
+    keyword name, ``as_json`` too) and print the result; ``recipe`` (a
+    :class:`~wearpose.estimators.recipe.Recipe`) is recorded in the run's checkpoints and its
+    seed checked against the run's config. A refused value is that option's usage error."""
+    from wearpose.estimators.method import OptionError, resolve
+
+    own, run = training.run_options(values)
+    as_json = bool(values.get("as_json"))
+    run = type(run)(**{**run.__dict__, "train_command": train_command, "quiet": as_json,
+                       "console": None if as_json else console,
+                       "recipe": recipe.record() if recipe is not None else None})
+    try:
+        res = resolve(training.entry)(own, run)
+    except OptionError as exc:
+        raise typer.BadParameter(str(exc), param_hint=exc.option) from None
+    if recipe is not None:
+        from wearpose.estimators.recipe import check_seed
+
+        check_seed(recipe, res.get("config"))
+        res["recipe"] = recipe.record()
+    _emit(res, as_json, lambda r: console.print(training.done.format(**r)))
+    return res
+
+
+@train_app.callback(invoke_without_command=True)
+def train_recipe(
+    ctx: typer.Context,
+    recipe: Optional[str] = typer.Option(None, "--recipe", help="Run a recipe: the name of a shipped one "
+                                                                "(miposer_cpu, empose12_smoke, ...) or a YAML file."),
+    out: Optional[Path] = typer.Option(None, "--out", help="With --recipe: run directory (default: the recipe's "
+                                                           "out option, else runs/<recipe name>)."),
+    as_json: bool = typer.Option(False, "--json", help="With --recipe: print the result as JSON."),
+) -> None:
+    """Train an estimator: `wearpose train <method> [options]`, or `wearpose train --recipe NAME`
+    (one YAML file: method, every option, budget, augmentation, seed, corpus; docs/recipes.md)."""
+    if ctx.invoked_subcommand is not None:
+        if recipe is not None or out is not None or as_json:
+            raise typer.BadParameter("--recipe/--out/--json before the method: give either a recipe or "
+                                     f"`wearpose train {ctx.invoked_subcommand} [options]`", param_hint="--recipe")
+        return
+    if recipe is None:
+        console.print(ctx.get_help())
+        raise typer.Exit(0)
+    from wearpose.errors import WearposeError
+    from wearpose.estimators.recipe import check_corpus, load_recipe
+    from wearpose.estimators.registry import get_method
+
+    try:
+        r = load_recipe(recipe)
+    except WearposeError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--recipe") from None
+    if r.corpus is not None:
+        from wearpose.motion import CorpusStore
+
+        check_corpus(r, CorpusStore().provenance().get("corpus"))
+    values = {**r.values, "as_json": as_json,
+              "out": out if out is not None else (r.values.get("out") or Path("runs") / r.name)}
+    training = get_method(r.method).training
+    assert training is not None, r.method  # load_recipe refuses a method without a training entry
+    run_training(training, values, f"wearpose train --recipe {shlex.quote(str(recipe))}", recipe=r)
+
+
 def training_command(name: str, training: Training) -> click.Command:
     """``wearpose train <name>``: the declared options parsed, the training entry called
     with them (:meth:`~wearpose.estimators.method.Training.run_options`), the result printed
     (the declaration's ``done`` line, or JSON with ``--json``). An option value the method
     refuses (:class:`~wearpose.estimators.method.OptionError`) is that option's usage error."""
-    from wearpose.estimators.method import OptionError, resolve
-
     params = [_parameter(o) for o in training.all_options()]
 
     def command(**values: Any) -> None:
-        own, run = training.run_options(values)
-        as_json = bool(values.get("as_json"))
-        run = type(run)(**{**run.__dict__, "train_command": "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
-                           "quiet": as_json, "console": None if as_json else console})
-        try:
-            res = resolve(training.entry)(own, run)
-        except OptionError as exc:
-            raise typer.BadParameter(str(exc), param_hint=exc.option) from None
-        _emit(res, as_json, lambda r: console.print(training.done.format(**r)))
+        run_training(training, values, "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
 
     command.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
     command.__annotations__ = {p.name: p.annotation for p in params}

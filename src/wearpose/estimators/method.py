@@ -123,7 +123,8 @@ SHARED_OPTIONS: tuple[TrainOption, ...] = (
 @dataclass(frozen=True)
 class TrainRun:
     """The shared options of one ``wearpose train`` run, as the training entry receives them
-    (those the method omits are at their defaults)."""
+    (those the method omits are at their defaults); ``recipe``: the resolved recipe the run was
+    started from (:meth:`wearpose.estimators.recipe.Recipe.record`), kept in the checkpoint."""
 
     config: str = "cpu"
     out: Path | None = None
@@ -137,6 +138,7 @@ class TrainRun:
     train_command: str = ""
     quiet: bool = False
     console: Any = None
+    recipe: Mapping[str, Any] | None = None
 
     @property
     def limit_train(self) -> int | None:
@@ -165,7 +167,7 @@ class TrainRun:
         return {"epochs": self.epochs, "resume": self.resume, "threads": self.threads, "device": self.device,
                 "limit_train": self.limit_train, "checkpoint_every": self.checkpoint_every,
                 "train_command": self.train_command, "quiet": self.quiet, "console": self.console,
-                "store": self.corpus_store()}
+                "store": self.corpus_store(), "recipe": self.recipe}
 
 
 @dataclass(frozen=True)

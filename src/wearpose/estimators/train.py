@@ -410,7 +410,8 @@ def train_estimator(est: Any, out_dir: str | Path, build: Callable[..., Any], ma
                     device: str = "auto", limit_train: int | None = None, limit_val: int | None = None,
                     max_steps: int | None = None, checkpoint_every: int = 100, train_command: str = "",
                     quiet: bool = False, store: Any = None, cache_root: str | Path | None = None, console: Any = None,
-                    progress_every: int = 200, val_frames: bool = True) -> dict[str, Any]:
+                    progress_every: int = 200, val_frames: bool = True,
+                    recipe: dict[str, Any] | None = None) -> dict[str, Any]:
     """Build the data of a method, set the run up and train ``est`` in place with :func:`train`.
 
     In order: torch CPU ``threads``; the train and val splits (``build``, progress printed every
@@ -432,6 +433,7 @@ def train_estimator(est: Any, out_dir: str | Path, build: Callable[..., Any], ma
         limit_train / limit_val: N clips of the split (default all / ``config.val_clips``, 0 = all).
         max_steps: stop after N optimiser steps (tests).
         val_frames: also print the validation frame count.
+        recipe: the recipe the run was started from (``est.meta["recipe"]``, so in every checkpoint).
         The other options are :class:`TrainSettings`'.
 
     Returns:
@@ -455,6 +457,8 @@ def train_estimator(est: Any, out_dir: str | Path, build: Callable[..., Any], ma
     est.meta.update({"train_clips": len(tr.clip_ids), "train_frames": tr.num_frames, "val_clips": len(va.clip_ids)})
     if getattr(store, "sources_only", None):  # `--source`: one lab's clips (CorpusStore.subset)
         est.meta["train_sources"] = list(store.sources_only)
+    if recipe is not None:
+        est.meta["recipe"] = dict(recipe)
     task = make_task(tr, va)
     est.to(resolve_device(device))  # network and body together: some losses run the body model
     s = loop_settings(cfg, out_dir, epochs or cfg.epochs, resume=resume, threads=threads, device=device,

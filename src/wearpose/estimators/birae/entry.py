@@ -33,7 +33,8 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     res = train_birae(BiraeEstimator(cfg), out, resume=run.resume, threads=run.threads, device=run.device,
                       epochs_clean=opts["epochs_clean"], epochs_aug=opts["epochs_aug"],
                       checkpoint_every=run.checkpoint_every, train_command=run.train_command,
-                      init_from=opts["init_from"], quiet=run.quiet, console=run.console, store=run.corpus_store())
+                      init_from=opts["init_from"], quiet=run.quiet, console=run.console, store=run.corpus_store(),
+                      recipe=run.recipe)
     return {"method": "birae", "rep": rep, "config": cfg.to_dict(), **res}
 
 

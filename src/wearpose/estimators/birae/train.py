@@ -106,7 +106,8 @@ def train_birae(est: Any, out_dir: str | Path, *, resume: bool = False, threads:
                 device: str = "cpu", epochs_clean: int | None = None, epochs_aug: int | None = None,
                 max_steps: int | None = None, checkpoint_every: int = 50, train_command: str = "",
                 quiet: bool = False, store: Any = None, cache_root: str | Path | None = None,
-                console: Any = None, init_from: str | Path | None = None) -> dict[str, Any]:
+                console: Any = None, init_from: str | Path | None = None,
+                recipe: dict[str, Any] | None = None) -> dict[str, Any]:
     """Synthesise/load the data and train ``est`` in place: clean phase, then augmented phase.
 
     Args:
@@ -117,6 +118,7 @@ def train_birae(est: Any, out_dir: str | Path, *, resume: bool = False, threads:
         max_steps: optimiser steps per phase (tests).
         init_from: start from this BiRAE checkpoint's weights (same representation and sizes;
             e.g. continue a run with a new schedule or validation set); recorded in ``meta``.
+        recipe: the recipe the run was started from (``meta["recipe"]``).
 
     Returns:
         ``{"clean": <loop result>, "aug": <loop result>, "best": val MPJAE deg, "out_dir", ...}``.
@@ -146,6 +148,8 @@ def train_birae(est: Any, out_dir: str | Path, *, resume: bool = False, threads:
     else:
         est.train_command = train_command
     est.meta.update({"train_clips": len(tr.clip_ids), "train_frames": tr.num_frames, "val_clips": len(va.clip_ids)})
+    if recipe is not None:
+        est.meta["recipe"] = dict(recipe)
     if init_from is not None:
         init = load_checkpoint(init_from)
         init.check(method=est.name, kit=est.kit_name, path=init_from)

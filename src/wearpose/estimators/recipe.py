@@ -1,0 +1,225 @@
+"""Training recipes: one YAML file holds everything a ``wearpose train`` run is made of, so
+``wearpose train --recipe NAME`` reruns it.
+
+A recipe (``format: wearpose.recipe``, ``version: 1``)::
+
+    name: miposer_cpu                # the weights it makes (optional; default: the file's stem)
+    method: miposer                  # wearpose train <method>
+    options: {config: cpu, model: avatarposer, wrists: 2, ...}   # the method's options
+    budget: {epochs: 5}              # options that set the training length
+    augmentation: {}                 # options that set the augmentation (PIP: mirror, speed_copies)
+    init_from: null                  # the init-from checkpoint (methods with --init-from only)
+    seed: 0                          # the config's seed (checked against the run's config)
+    corpus: {name: data-v2, manifest_sha1: 94395d87...}   # the prepared store must hold this corpus
+
+Every key of ``options``, ``budget`` and ``augmentation`` is an option of ``wearpose train
+<method>`` by its keyword name (``batch_size``, ``checkpoint_every``; :class:`~wearpose.estimators.method.TrainOption`),
+given in one section only; options a recipe leaves out take their declared defaults, and the run
+records the whole resolved set. The shipped recipes are ``estimators/<method>/recipes/<name>.yaml``
+(found by name, :func:`find_recipe`); any other file is given by its path.
+
+The checkpoint records the resolved recipe (``meta["recipe"]``) and ``tools/ship_weights.py``
+copies it into the weights' card.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+from wearpose.errors import ConfigError, InputFileError
+from wearpose.estimators.method import MethodSpec
+
+FORMAT = "wearpose.recipe"
+VERSION = 1
+#: Sections whose keys are the method's train options.
+OPTION_SECTIONS = ("options", "budget", "augmentation")
+_KEYS = {"format", "version", "name", "method", "init_from", "seed", "corpus", "notes", *OPTION_SECTIONS}
+_EXPECTED = (f"a YAML mapping with format: {FORMAT}, version: {VERSION}, method and options "
+             "(docs/recipes.md)")
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A loaded recipe (module doc).
+
+    Attributes:
+        path: the file; name: the weights it makes; method: the method's name.
+        values: every option of ``wearpose train <method>`` by keyword name, resolved (the
+            declared defaults overridden by the recipe's sections and ``init_from``).
+        seed: the config seed the run must have (None: not checked).
+        corpus: ``{"name", "manifest_sha1"?}`` the prepared store must hold (None: any).
+        sha1: of the file's bytes.
+    """
+
+    path: Path
+    name: str
+    method: str
+    values: dict[str, Any]
+    seed: int | None = None
+    corpus: dict[str, Any] | None = None
+    sha1: str = ""
+
+    def record(self) -> dict[str, Any]:
+        """What a checkpoint and a card keep of the recipe: name, file, its SHA-1, method, the
+        resolved options, seed and corpus."""
+        return {"name": self.name, "file": str(self.path), "sha1": self.sha1, "method": self.method,
+                "options": {k: (str(v) if isinstance(v, Path) else v) for k, v in self.values.items()},
+                "seed": self.seed, "corpus": self.corpus}
+
+
+def recipe_dirs() -> dict[str, Path]:
+    """Method name -> its shipped recipes folder (``estimators/<method>/recipes``), for the
+    declared trainable methods."""
+    from wearpose.estimators.registry import get_method, list_methods
+
+    out = {}
+    for name in list_methods(trainable=True):
+        spec = get_method(name)
+        module = spec.training.entry.partition(":")[0] if spec.training else ""
+        found = importlib.util.find_spec(module) if module else None
+        if found is not None and found.origin:
+            out[name] = Path(found.origin).parent / "recipes"
+    return out
+
+
+def shipped_recipes() -> dict[str, Path]:
+    """Recipe name -> file, of every shipped recipe."""
+    return {p.stem: p for d in recipe_dirs().values() if d.is_dir() for p in sorted(d.glob("*.yaml"))}
+
+
+def find_recipe(name_or_path: str | Path) -> Path:
+    """A recipe file: an existing path, else the shipped recipe of that name.
+
+    Raises:
+        ConfigError: neither (the message lists the shipped names).
+    """
+    p = Path(name_or_path)
+    if p.is_file():
+        return p
+    known = shipped_recipes()
+    if str(name_or_path) in known:
+        return known[str(name_or_path)]
+    raise ConfigError(f"recipe {str(name_or_path)!r} is neither a file nor a shipped recipe; expected a YAML path or "
+                      f"one of {', '.join(sorted(known)) or '(none shipped)'}")
+
+
+def load_recipe(name_or_path: str | Path) -> Recipe:
+    """Read and check a recipe (module doc) against its method's declaration.
+
+    Raises:
+        InputFileError: not YAML, not a recipe, an unknown key, method or option, an option in
+            two sections, a value of the wrong type, ``init_from`` for a method without it.
+    """
+    import yaml
+
+    path = find_recipe(name_or_path)
+    raw = path.read_bytes()
+    try:
+        d = yaml.safe_load(raw.decode("utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise InputFileError(path, f"not readable YAML ({exc})", _EXPECTED) from exc
+    if not isinstance(d, dict) or d.get("format") != FORMAT or d.get("version") != VERSION:
+        raise InputFileError(path, "not a wearpose recipe of this version", _EXPECTED, field="format/version")
+    unknown = sorted(set(d) - _KEYS)
+    if unknown:
+        raise InputFileError(path, f"unknown keys {unknown}", f"only {', '.join(sorted(_KEYS))}", field=unknown[0])
+    spec = _method(path, d.get("method"))
+    values = _values(path, d, spec)
+    seed = d.get("seed")
+    if seed is not None and not isinstance(seed, int):
+        raise InputFileError(path, f"seed {seed!r}", "an integer (the config's seed) or null", field="seed")
+    corpus = d.get("corpus")
+    if corpus is not None and not (isinstance(corpus, dict) and isinstance(corpus.get("name"), str)):
+        raise InputFileError(path, f"corpus {corpus!r}", "null or a mapping with name (and manifest_sha1)", field="corpus")
+    return Recipe(path=path, name=str(d.get("name") or path.stem), method=spec.name, values=values, seed=seed,
+                  corpus=corpus, sha1=hashlib.sha1(raw).hexdigest())
+
+
+def _method(path: Path, name: Any) -> MethodSpec:
+    from wearpose.estimators.registry import get_method, list_methods
+
+    trainable = list_methods(trainable=True)
+    if name not in trainable:
+        raise InputFileError(path, f"method {name!r}", f"one of {', '.join(trainable)}", field="method")
+    return get_method(name)
+
+
+def _values(path: Path, d: Mapping[str, Any], spec: MethodSpec) -> dict[str, Any]:
+    """The method's options: declared defaults, then the recipe's sections and ``init_from``."""
+    assert spec.training is not None
+    declared = {o.name: o for o in spec.training.all_options() if o.name != "as_json"}
+    values: dict[str, Any] = {n: o.default for n, o in declared.items()}
+    seen: dict[str, str] = {}
+    sections = [(s, d.get(s) or {}) for s in OPTION_SECTIONS]
+    if d.get("init_from") is not None:
+        sections.append(("init_from", {"init_from": d["init_from"]}))
+    for section, opts in sections:
+        if not isinstance(opts, dict):
+            raise InputFileError(path, f"{section} is {type(opts).__name__}", "a mapping of option names to values",
+                                 field=section)
+        for k, v in opts.items():
+            if k not in declared:
+                raise InputFileError(path, f"{k!r} is not an option of wearpose train {spec.name}",
+                                     f"one of {', '.join(declared)}", field=f"{section}.{k}")
+            if k in seen:
+                raise InputFileError(path, f"{k!r} is given in {seen[k]} and {section}", "each option once",
+                                     field=f"{section}.{k}")
+            seen[k] = section
+            values[k] = _typed(path, f"{section}.{k}", v, declared[k].value_type)
+    return values
+
+
+def _typed(path: Path, where: str, v: Any, kind: type) -> Any:
+    """``v`` as the option's type (a path from a string); None stays None."""
+    if v is None:
+        return None
+    if kind is Path and isinstance(v, str):
+        return Path(v)
+    if kind is float and isinstance(v, int) and not isinstance(v, bool):
+        return float(v)
+    if not isinstance(v, kind) or (kind is int and isinstance(v, bool)):
+        raise InputFileError(path, f"{v!r} is {type(v).__name__}", f"a {kind.__name__}", field=where)
+    return v
+
+
+def check_corpus(recipe: Recipe, provenance: Mapping[str, Any] | None) -> None:
+    """Refuse a store that does not hold the recipe's corpus (name, and manifest SHA-1 when given).
+
+    Args:
+        provenance: the store's ``corpus`` record (:meth:`wearpose.motion.CorpusStore.provenance`).
+
+    Raises:
+        ConfigError: naming both corpora and the fix.
+    """
+    want = recipe.corpus
+    if want is None:
+        return
+    have = dict(provenance or {})
+    ok = have.get("name") == want["name"] and (not want.get("manifest_sha1")
+                                              or have.get("manifest_sha1") == want["manifest_sha1"])
+    if not ok:
+        raise ConfigError(f"recipe {recipe.path}: made on corpus {want['name']} (manifest "
+                          f"{str(want.get('manifest_sha1') or 'any')[:12]}), but the prepared store holds "
+                          f"{have.get('name')} (manifest {str(have.get('manifest_sha1'))[:12]}); prepare that corpus "
+                          f"(wearpose data prepare ../shared/{want['name']}) or set WEARPOSE_CACHE to a store of it")
+
+
+def check_seed(recipe: Recipe, config: Mapping[str, Any] | None) -> None:
+    """Refuse a run whose config seed is not the recipe's (the preset changed since).
+
+    Raises:
+        ConfigError: naming the recipe, both seeds and the fix.
+    """
+    if recipe.seed is None or config is None or "seed" not in config:
+        return
+    if int(config["seed"]) != recipe.seed:
+        raise ConfigError(f"recipe {recipe.path}: seed {recipe.seed}, but the run's config has seed {config['seed']}; "
+                          "the preset changed since the recipe was written: update the recipe's seed or the preset")
+
+
+__all__ = ["Recipe", "load_recipe", "find_recipe", "shipped_recipes", "recipe_dirs", "check_corpus", "check_seed",
+           "FORMAT", "VERSION"]

@@ -1,0 +1,122 @@
+"""Training recipes (wearpose.estimators.recipe, ``wearpose train --recipe``): the shipped
+recipes load and match their cards, bad files are refused naming the field, the corpus and seed
+checks, and the smoke recipe runs end to end on the corpus fixture with the recipe recorded in
+its checkpoint."""
+
+from __future__ import annotations
+
+import json
+import shlex
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from wearpose.cli import app
+from wearpose.errors import ConfigError, InputFileError
+from wearpose.estimators.recipe import check_corpus, check_seed, find_recipe, load_recipe, shipped_recipes
+from wearpose.weights import weight_path
+
+runner = CliRunner()
+HEADER = "format: wearpose.recipe\nversion: 1\n"
+
+
+def _card_options(card: dict) -> dict[str, str]:
+    """``--flag value`` pairs of a card's train command (flags as keyword names)."""
+    args = shlex.split(card["train_command"])[3:]
+    out, i = {}, 0
+    while i < len(args):
+        key = args[i].lstrip("-").replace("-", "_")
+        out[key], i = args[i + 1], i + 2
+    return out
+
+
+def test_shipped_recipes_load_and_miposer_cpu_is_its_cards_command() -> None:
+    assert {"miposer_cpu", "empose12_smoke"} <= set(shipped_recipes())
+    for name in shipped_recipes():
+        r = load_recipe(name)
+        assert r.name == name and r.seed is not None and r.corpus is not None, name
+    r = load_recipe("miposer_cpu")
+    card = json.loads(weight_path("miposer_cpu").with_suffix(".json").read_text())
+    given = _card_options(card)
+    given.pop("out")
+    assert {k: str(r.values[k]) for k in given} == given == {"config": "cpu", "epochs": "5", "threads": "1",
+                                                            "checkpoint_every": "25"}
+    assert r.method == card["method"] and r.seed == card["config"]["seed"]
+    assert (r.values["model"], r.values["wrists"]) == (card["config"]["model"], card["config"]["wrists"])
+    assert r.corpus == {"name": card["training_data"]["corpus"]["name"],
+                        "manifest_sha1": card["training_data"]["corpus"]["manifest_sha1"]}
+    assert r.record()["options"]["epochs"] == 5 and len(r.sha1) == 40
+
+
+@pytest.mark.parametrize("body, field, problem", [
+    ("method: nope\noptions: {}\n", "method", "method 'nope'"),
+    ("method: miposer\noptions: {epochs: 2}\nbudget: {epochs: 3}\n", "budget.epochs", "given in options and budget"),
+    ("method: miposer\noptions: {mirror: true}\n", "options.mirror", "not an option of wearpose train miposer"),
+    ("method: miposer\noptions: {wrists: two}\n", "options.wrists", "'two' is str"),
+    ("method: miposer\ninit_from: x.pt\n", "init_from.init_from", "not an option"),
+    ("method: miposer\nepochs: 3\n", "epochs", "unknown keys"),
+    ("method: miposer\nseed: zero\n", "seed", "seed 'zero'"),
+])
+def test_bad_recipes_name_the_field(tmp_path: Path, body: str, field: str, problem: str) -> None:
+    f = tmp_path / "r.yaml"
+    f.write_text(HEADER + body)
+    with pytest.raises(InputFileError, match=problem) as err:
+        load_recipe(f)
+    assert err.value.field == field and err.value.path == f
+
+
+def test_not_a_recipe_and_unknown_names(tmp_path: Path) -> None:
+    f = tmp_path / "r.yaml"
+    f.write_text("method: miposer\n")
+    with pytest.raises(InputFileError, match="not a wearpose recipe"):
+        load_recipe(f)
+    with pytest.raises(ConfigError, match="miposer_cpu"):
+        find_recipe("no_such_recipe")
+
+
+def test_defaults_fill_the_option_set_and_paths_are_typed(tmp_path: Path) -> None:
+    f = tmp_path / "pip.yaml"
+    f.write_text(HEADER + "method: pip\noptions: {config: tiny}\naugmentation: {mirror: true, speed_copies: 2}\n"
+                 "init_from: runs/a/best.pt\nbudget: {epochs: 1}\n")
+    r = load_recipe(f)
+    assert r.values["mirror"] is True and r.values["speed_copies"] == 2 and r.values["init_from"] == Path("runs/a/best.pt")
+    assert r.values["lr"] is None and r.values["checkpoint_every"] == 100 and "as_json" not in r.values
+    assert r.name == "pip" and r.seed is None and r.corpus is None
+
+
+def test_corpus_and_seed_checks() -> None:
+    r = load_recipe("miposer_cpu")
+    check_corpus(r, {"name": "data-v2", "manifest_sha1": r.corpus["manifest_sha1"]})
+    with pytest.raises(ConfigError, match="holds data \\(manifest"):
+        check_corpus(r, {"name": "data", "manifest_sha1": "1" * 40})
+    with pytest.raises(ConfigError, match="made on corpus data-v2"):
+        check_corpus(r, {"name": "data-v2", "manifest_sha1": "2" * 40})
+    check_seed(r, {"seed": 0})
+    with pytest.raises(ConfigError, match="seed 0, but the run's config has seed 3"):
+        check_seed(r, {"seed": 3})
+
+
+def test_recipe_and_a_method_are_one_or_the_other() -> None:
+    res = runner.invoke(app, ["train", "--recipe", "miposer_cpu", "miposer", "--help"])
+    assert res.exit_code == 2 and "--recipe" in res.output, res.output
+    res = runner.invoke(app, ["train", "--recipe", "no_such_recipe"])
+    assert res.exit_code == 2 and "no_such_recipe" in res.output, res.output
+    res = runner.invoke(app, ["train", "--help"])
+    assert res.exit_code == 0 and "--recipe" in res.output and "Example: wearpose train --recipe" in res.output
+
+
+@pytest.mark.corpus
+@pytest.mark.budget(30)
+def test_smoke_recipe_runs_end_to_end_and_is_recorded(tmp_path: Path, corpus_store: Path) -> None:
+    from wearpose.estimators.checkpoint import load_checkpoint
+
+    from tests.estimators.test_cli_train import _train
+
+    out = _train(["--recipe", "empose12_smoke", "--out", str(tmp_path / "run")])
+    assert out["method"] == "empose" and out["config"]["seed"] == 0 and out["recipe"]["name"] == "empose12_smoke"
+    ck = load_checkpoint(tmp_path / "run" / "best.pt")
+    rec = ck.meta["recipe"]
+    assert rec["options"]["config"] == "tiny" and rec["options"]["epochs"] == 1 and rec["options"]["limit"] == 2
+    assert rec["sha1"] == load_recipe("empose12_smoke").sha1 and ck.meta["train_clips"] == 2
+    assert ck.train_command == "wearpose train --recipe empose12_smoke"
