@@ -34,8 +34,9 @@ from rich.console import Console
 from rich.table import Table
 
 from wearpose.estimators.base import iter_frames
-from wearpose.estimators.empose.data import clip_seed, recording_from_clip, simulate_clip
+from wearpose.estimators.empose.data import recording_from_clip, simulate_clip
 from wearpose.estimators.empose.estimator import EmposeEstimator
+from wearpose.estimators.seeding import clip_seed
 from wearpose.motion import load_motion
 from wearpose.weights import weight_path
 

@@ -42,7 +42,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "miposer_latency.json")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    from wearpose.estimators.empose.data import clip_seed
+    from wearpose.estimators.seeding import clip_seed
     from wearpose.estimators.miposer import MiposerEstimator, frames
     from wearpose.estimators.miposer.data import simulate_clip
     from wearpose.motion import load_motion

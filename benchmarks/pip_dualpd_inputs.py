@@ -52,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
     from wearpose.body import BodyModel
-    from wearpose.estimators.empose.data import clip_seed
+    from wearpose.estimators.seeding import clip_seed
     from wearpose.estimators.pip.data import simulate_clip
     from wearpose.estimators.pip.estimator import PipEstimator
     from wearpose.estimators.pip.evaluate import horizontal_path_m

@@ -44,7 +44,7 @@ def main() -> int:
     from physics import walking_clips
 
     from wearpose.body import BodyModel
-    from wearpose.estimators.empose.data import clip_seed
+    from wearpose.estimators.seeding import clip_seed
     from wearpose.estimators.pip.data import simulate_clip
     from wearpose.viewer.demos.pip import G, physical_plots
     from wearpose.estimators.pip.estimator import PipEstimator

@@ -41,7 +41,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "pip_latency.json")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    from wearpose.estimators.empose.data import clip_seed
+    from wearpose.estimators.seeding import clip_seed
     from wearpose.estimators.pip.data import simulate_clip
     from wearpose.estimators.pip.estimator import PipEstimator
     from wearpose.motion import CorpusStore

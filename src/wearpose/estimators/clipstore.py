@@ -9,11 +9,14 @@ when asked, ``clip`` ``(F,)`` (the clip index of every frame). :func:`cached_cli
 dict from its cache file or builds and saves it atomically (each process through its own
 temporary file: several torchrun ranks may build the same file at once). :class:`ClipData` is
 the base of the methods' split classes (``EmposeData``, ``PipData``, ...): the bookkeeping they
-share; each adds its tensors.
+share; each adds its tensors. :func:`num_batches` is how many batches an epoch of training
+windows gives; :func:`kit_sites` the body sites a kit's sensors are simulated on (part of every
+method's data settings, hence of the cache key).
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
@@ -45,6 +48,24 @@ class ClipData:
     def num_frames(self) -> int:
         """``F``, the frames of all clips."""
         return int(self.lengths.sum())
+
+
+def num_batches(num_windows: int, batch_size: int) -> int:
+    """Batches of ``batch_size`` windows in an epoch of ``num_windows``: the last partial batch
+    is dropped (batch-norm statistics of a 1-window batch are poor), except that a split of
+    fewer windows than one batch still gives one batch (0 only for no windows)."""
+    return num_windows // batch_size if num_windows >= batch_size else int(num_windows > 0)
+
+
+def kit_sites(kit: str, body: Any) -> dict[str, str]:
+    """Sensor (and ``"<em_source>"``) of kit ``kit`` -> the body site it is actually simulated on
+    on ``body`` (the kit's documented site substitutions applied, their warnings silenced). Part
+    of a method's data settings: an asset can gain a site without changing its id."""
+    from wearpose.sensors import get_kit, resolve_sites  # deferred: the sensor stack loads only when data are built
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return resolve_sites(get_kit(kit), body.site_names, body.asset_id)[0]
 
 
 def concat_clips(clips: Iterable[Any], one: Callable[[Any], dict[str, torch.Tensor]], frame_keys: Sequence[str], *,

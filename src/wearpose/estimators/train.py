@@ -37,6 +37,7 @@ import torch
 from torch import nn
 
 from wearpose.estimators.checkpoint import load_checkpoint, save_checkpoint
+from wearpose.estimators.clipstore import num_batches
 from wearpose.estimators.seeding import step_seed
 from wearpose.estimators.trainconfig import TrainConfig
 
@@ -361,8 +362,6 @@ class WindowTask:
         return {}
 
     def num_batches(self) -> int:
-        from wearpose.estimators.empose.data import num_batches
-
         return num_batches(self._nw, self.cfg.batch_size)
 
     def batches(self, epoch: int, skip: int) -> Iterable[Any]:

@@ -9,7 +9,7 @@ import torch
 
 from tests.estimators.pip.test_pip_kinematics import FakeStore, tiny
 from wearpose.body import BodyModel
-from wearpose.estimators.empose.data import clip_seed
+from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.pip.data import augment_settings, augmented_ids, augmented_motion
 from wearpose.motion import mirror, play_speed
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from wearpose.estimators.empose.data import clip_seed
+from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.pip import PipConfig, PipEstimator
 from wearpose.estimators.pip.evaluate import evaluate_variants
 from wearpose.motion import MotionSequence

@@ -454,7 +454,7 @@ def test_sitting_drift_reports_series_and_upper_legs(body) -> None:
 
 
 def test_heldout_sitting_clips_end_seated_and_are_not_training_clips(body) -> None:
-    from wearpose.estimators.empose.data import clip_seed
+    from wearpose.estimators.seeding import clip_seed
     from wearpose.estimators.pip.evaluate import sitting_drift
     from wearpose.estimators.pip.sitting import heldout_sitting_clip, sitting_clip_id, sitting_motion
 

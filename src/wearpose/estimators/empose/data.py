@@ -22,7 +22,6 @@ ids and all simulation settings, so epochs never re-simulate.
 
 from __future__ import annotations
 
-
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +29,7 @@ from typing import Any, Iterator, Sequence
 
 import torch
 
-from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, split_source
+from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, kit_sites, num_batches, split_source
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.inputs import held_frame, hold_last_valid
 from wearpose.estimators.seeding import clip_seed
@@ -159,20 +158,6 @@ class EmposeData(ClipData):
         n = num_batches(len(w), batch_size)
         for i in range(skip, n):
             yield self.batch(w[order[i * batch_size:(i + 1) * batch_size]], seq_len)
-
-
-def num_batches(num_windows: int, batch_size: int) -> int:
-    # Drop the last partial batch: batch-norm statistics of a 1-window batch are poor.
-    return num_windows // batch_size if num_windows >= batch_size else int(num_windows > 0)
-
-
-def kit_sites(kit: str, body: Any) -> dict[str, str]:
-    """Sensor (and ``"<em_source>"``) -> body site actually used on ``body`` (substitutions applied)."""
-    from wearpose.sensors import get_kit, resolve_sites
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return resolve_sites(get_kit(kit), body.site_names, body.asset_id)[0]
 
 
 def data_settings(cfg: EmposeConfig, body: Any) -> dict[str, Any]:

@@ -36,8 +36,7 @@ import torch
 
 from wearpose.calibration import CalibrationResult, apply_miposer, calibrate, em_to_world
 from wearpose.errors import ShapeError
-from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, split_source
-from wearpose.estimators.empose.data import num_batches
+from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, kit_sites, num_batches, split_source
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.inputs import hold_last_valid
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
@@ -219,8 +218,6 @@ class MiposerData(ClipData):
 
 def data_settings(cfg: MiposerConfig, body: Any) -> dict[str, Any]:
     """Everything that changes the simulated data (part of the fingerprint)."""
-    from wearpose.estimators.empose.data import kit_sites
-
     return {"version": DATA_VERSION, "kit": cfg.kit, "rate": cfg.rate, "noise": cfg.train_noise, "seed": cfg.seed,
             "tpose_s": cfg.tpose_s, "blend_s": cfg.blend_s, "body_asset": body.asset_id, "sites": kit_sites(cfg.kit, body),
             "root_frame": "calibrated"}

@@ -39,7 +39,7 @@ import torch
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
-from wearpose.estimators.inputs import InputSpec, canonical_input
+from wearpose.estimators.inputs import InputSpec, canonical_input, held_frame
 from wearpose.estimators.miposer.config import MiposerConfig
 from wearpose.estimators.miposer.data import calibrated_inputs, kit_streams, raw_inputs, uncalibrated
 from wearpose.estimators.miposer.model import AvatarPoserNet, decode_pose, head_anchored_translation, window_features
@@ -277,10 +277,8 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
     def step(self, frame: SensorFrame) -> PoseFrame:
         """One 60 Hz frame (:func:`frames`): headset + wrist EM (+ wrist gyro/accelerometer for MIM)."""
         from wearpose.calibration import apply_miposer, em_to_world
-        from wearpose.estimators.empose.data import frame_measurements
-
         names = [n for n in self.sensor_names if n in frame.names and not n.endswith("_imu")]
-        p, R, v = frame_measurements(frame, names, self._last)
+        (p, R), v = held_frame(frame, names, ("position", "orientation"), self._last)
         self._last = (p, R)
         extras: dict[str, Any] = {"frame": "calibrated"}
         if self.mim:

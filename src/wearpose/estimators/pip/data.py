@@ -34,8 +34,7 @@ import torch
 
 from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.estimators.checkpoint import fingerprint
-from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips
-from wearpose.estimators.empose.data import num_batches
+from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, kit_sites, num_batches
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.sitting import SITTING_PREFIX
@@ -235,8 +234,6 @@ class PipData(ClipData):
 
 def data_settings(cfg: PipConfig, body: Any) -> dict[str, Any]:
     """Everything that changes the simulated data (part of the fingerprint)."""
-    from wearpose.estimators.empose.data import kit_sites
-
     return {"version": DATA_VERSION, "kit": cfg.kit, "rate": cfg.rate, "noise": cfg.train_noise, "seed": cfg.seed,
             "acc_scale": cfg.acc_scale, "vel_scale": cfg.vel_scale, "contact_speed": cfg.contact_speed,
             "contact_height": cfg.contact_height, "body_asset": body.asset_id, "orientation": "segment",

@@ -25,8 +25,8 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
-from wearpose.estimators.empose.data import clip_seed
 from wearpose.estimators.pip.data import EDGE_FRAMES, edge_cut, simulate_clip
+from wearpose.estimators.seeding import clip_seed
 
 #: Travelled-distance thresholds of the translation error curve, m.
 DISTANCES = tuple(float(d) for d in range(0, 21, 2))

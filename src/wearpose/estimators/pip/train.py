@@ -9,17 +9,19 @@ from typing import Any
 
 import torch
 
-from wearpose.estimators.empose.train import EmposeTask
 from wearpose.estimators.pip.data import build_split
 from wearpose.estimators.pip.model import pip_loss, run_windows
-from wearpose.estimators.train import train_estimator
+from wearpose.estimators.train import WindowTask, train_estimator
 
 
-class PipTask(EmposeTask):
-    """:class:`~wearpose.estimators.train.TrainTask` for the five-RNN chain (window batching,
-    epoch seeding and checkpointing as EM-POSE's task; PIP's loss and validation)."""
+class PipTask(WindowTask):
+    """:class:`~wearpose.estimators.train.TrainTask` for the five-RNN chain (windows of
+    ``seq_len`` frames every ``window_stride``; PIP's loss and validation)."""
 
     val_metric = "val_joints_mm"
+
+    def window(self) -> tuple[int, int]:
+        return self.cfg.seq_len, self.cfg.window_stride
 
     def window_options(self) -> dict[str, Any]:
         return {"min_len": self.cfg.min_window, "sitting_len": self.cfg.sitting_window}
