@@ -44,6 +44,25 @@ def _dot(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return (a * b).sum(-1, keepdim=True)
 
 
+def _frame_backward(x: torch.Tensor, y: torch.Tensor, a2: torch.Tensor, d: torch.Tensor, n1: torch.Tensor,
+                    n2: torch.Tensor, gx: torch.Tensor, gy: torch.Tensor, gz: torch.Tensor
+                    ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Backward of the Gram-Schmidt frame ``[x, y, x cross y]`` built from ``a1``, ``a2``
+    (``(..., 3)``): ``x = a1 / n1``, ``y = (a2 - d x) / n2`` with ``d = x . a2`` (the pose's 6D
+    rotations, and the skin-site frames with ``x`` the normal and ``y`` the tangent).
+
+    Args: the forward's ``x``, ``y``, ``a2``, ``d``, ``n1``, ``n2`` and the gradients ``gx``,
+    ``gy``, ``gz`` of the three columns. Returns: the gradients of ``a1`` and ``a2``.
+    """
+    gx = gx + _cross(y, gz)
+    gy = gy + _cross(gz, x)
+    gyr = (gy - y * _dot(y, gy)) / n2
+    gyrx = _dot(gyr, x)
+    ga2 = gyr - x * gyrx
+    gx = gx - (d * gyr + gyrx * a2)
+    return (gx - x * _dot(x, gx)) / n1, ga2
+
+
 class LeanSensorGrad:
     """L_r(Omega) and its gradient for fixed sensor sites of one body (see module doc).
 
@@ -210,16 +229,9 @@ class LeanSensorGrad:
         gRs[:, self.src] += gRsrc
         gp = torch.zeros(N, self.K, 3, dtype=x.dtype, device=x.device).index_add_(1, self.index, gdp)
         gp[:, self.src] -= gdp.sum(1)
-        # Rs = [tan, n x tan, n].
-        gtan, gbit, gn = gRs[..., 0], gRs[..., 1], gRs[..., 2]
-        gn = gn + _cross(tan, gbit)
-        gtan = gtan + _cross(gbit, n)
-        gep = (gtan - tan * _dot(tan, gtan)) / ne
-        gepn = _dot(gep, n)
-        ge = gep - n * gepn
-        gn = gn - (s * gep + gepn * e)
+        # Rs = [tan, n x tan, n]: the frame [n, tan, n x tan] of (nr, e).
+        gnr, ge = _frame_backward(n, tan, e, s, nn_, ne, gRs[..., 2], gRs[..., 0], gRs[..., 1])
         gp = gp - ge
-        gnr = (gn - n * _dot(n, gn)) / nn_
         gfn = self.inc.t() @ gnr  # (N, F, 3)
         ge1, ge2 = _cross(e2, gfn), _cross(gfn, e1)
         gverts = torch.zeros_like(verts).index_add_(1, self._scatter, torch.cat([-(ge1 + ge2), ge1, ge2, gp, ge], 1))
@@ -245,12 +257,5 @@ class LeanSensorGrad:
             gL[:, 1:] += (gvs.reshape(N, -1) @ self.pd.t()).view(N, NUM_JOINTS - 1, 3, 3)
         # Gram-Schmidt: R = [x, y, x cross y], x = a1/|a1|, y = (a2 - (x.a2) x)/|.|.
         gR = gL[:, self.pred]
-        gx, gy, gz = gR[..., 0], gR[..., 1], gR[..., 2]
-        gx = gx + _cross(y, gz)
-        gy = gy + _cross(gz, x)
-        gyr = (gy - y * _dot(y, gy)) / n2
-        gyrx = _dot(gyr, x)
-        ga2 = gyr - x * gyrx
-        gx = gx - (d * gyr + gyrx * a2)
-        ga1 = (gx - x * _dot(x, gx)) / n1
+        ga1, ga2 = _frame_backward(x, y, a2, d, n1, n2, gR[..., 0], gR[..., 1], gR[..., 2])
         return torch.cat([torch.cat([ga1, ga2], -1).reshape(N, -1), gbeta], dim=-1)
