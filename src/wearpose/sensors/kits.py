@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
-from typing import Iterable
+from typing import Iterable, Mapping
 
 from wearpose.errors import ConfigError, WearposeError
 
@@ -211,18 +211,18 @@ def _lr(prefix: str) -> tuple[str, str]:
     return f"left_{prefix}", f"right_{prefix}"
 
 
+def _sensors(kind: str, rate: float, sites: Mapping[str, str]) -> tuple[SensorSpec, ...]:
+    """Sensors of one ``kind`` sampled at ``rate`` Hz: sensor name -> body site, in kit order."""
+    return tuple(SensorSpec(name, kind, site, rate) for name, site in sites.items())
+
+
 def _builtin() -> None:
     # EM-POSE, S_ORDER of the public code (back, head, then right arm/leg, then left).
-    def em_side(side: str) -> list[SensorSpec]:
-        return [
-            SensorSpec(f"{side}_lower_arm", "em6dof", f"{side}_wrist", 120.0),
-            SensorSpec(f"{side}_upper_arm", "em6dof", f"{side}_upper_arm", 120.0),
-            SensorSpec(f"{side}_shoulder", "em6dof", f"{side}_shoulder", 120.0),
-            SensorSpec(f"{side}_upper_leg", "em6dof", f"{side}_thigh", 120.0),
-            SensorSpec(f"{side}_lower_leg", "em6dof", f"{side}_shin", 120.0),
-        ]
-    em12 = (SensorSpec("back", "em6dof", "back_upper", 120.0), SensorSpec("head", "em6dof", "head", 120.0),
-            *em_side("right"), *em_side("left"))
+    def em_side(side: str) -> tuple[SensorSpec, ...]:
+        return _sensors("em6dof", 120.0, {f"{side}_{name}": f"{side}_{site}" for name, site in (
+            ("lower_arm", "wrist"), ("upper_arm", "upper_arm"), ("shoulder", "shoulder"), ("upper_leg", "thigh"),
+            ("lower_leg", "shin"))})
+    em12 = (*_sensors("em6dof", 120.0, {"back": "back_upper", "head": "head"}), *em_side("right"), *em_side("left"))
     register_kit(SensorKit("em12", em12, "pelvis", "EM-POSE 12 EM sensors, source on the lower back (ICCV 2021)"))
     keep6 = [0, 1, 2, 6, 7, 11]  # S_CONFIG_6 of the EM-POSE code
     register_kit(SensorKit("em6", tuple(em12[i] for i in keep6), "pelvis",
@@ -230,18 +230,14 @@ def _builtin() -> None:
 
     lf, rf = _lr("forearm")
     ls, rs = _lr("shin")
-    register_kit(SensorKit("imu6", (
-        SensorSpec("left_forearm", "imu", lf, 60.0), SensorSpec("right_forearm", "imu", rf, 60.0),
-        SensorSpec("left_lower_leg", "imu", ls, 60.0), SensorSpec("right_lower_leg", "imu", rs, 60.0),
-        SensorSpec("head", "imu", "head", 60.0), SensorSpec("pelvis", "imu", "pelvis", 60.0)),
-        None, "DIP/TransPose/PIP 6 IMUs (order of TransPose vi_mask), 60 Hz"))
+    register_kit(SensorKit("imu6", _sensors("imu", 60.0, {
+        "left_forearm": lf, "right_forearm": rf, "left_lower_leg": ls, "right_lower_leg": rs, "head": "head",
+        "pelvis": "pelvis"}), None, "DIP/TransPose/PIP 6 IMUs (order of TransPose vi_mask), 60 Hz"))
 
     lw, rw = _lr("wrist")
-    register_kit(SensorKit("mimu6", (
-        SensorSpec("left_wrist", "mimu", lw, 60.0), SensorSpec("right_wrist", "mimu", rw, 60.0),
-        SensorSpec("left_lower_leg", "mimu", ls, 60.0), SensorSpec("right_lower_leg", "mimu", rs, 60.0),
-        SensorSpec("head", "mimu", "head", 60.0), SensorSpec("root", "mimu", "pelvis", 60.0)),
-        None, "BiRAE 6 MIMUs: wrists, lower legs, head, lower spine (root), 60 Hz"))
+    register_kit(SensorKit("mimu6", _sensors("mimu", 60.0, {
+        "left_wrist": lw, "right_wrist": rw, "left_lower_leg": ls, "right_lower_leg": rs, "head": "head",
+        "root": "pelvis"}), None, "BiRAE 6 MIMUs: wrists, lower legs, head, lower spine (root), 60 Hz"))
 
     register_kit(SensorKit("miposer", (
         SensorSpec("head_vio", "vio", "head", 60.0),
