@@ -15,7 +15,7 @@ from wearpose.estimators.checkpoint import load_checkpoint
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.miposer.config import MiposerConfig
 from wearpose.estimators.pip.config import PipConfig
-from wearpose.estimators.trainconfig import TrainConfig
+from wearpose.estimators.trainconfig import SimulatedTrainConfig, TrainConfig
 from wearpose.weights import list_weights, weight_path
 
 CONFIGS = (EmposeConfig, PipConfig, BiraeConfig, MiposerConfig)
@@ -67,3 +67,14 @@ def test_shipped_checkpoints_load_with_their_stored_config(name: str) -> None:
     assert isinstance(est.config, TrainConfig)
     assert {k: cfg[k] for k in ck.config} == ck.config  # every stored value, as stored
     assert type(est.config).from_dict(cfg) == est.config
+
+
+@pytest.mark.parametrize("cls", (EmposeConfig, PipConfig, MiposerConfig))
+def test_train_noise_declared_and_checked_once(cls: type) -> None:
+    """EM-POSE, PIP and MI-Poser train on simulated sensors: ``train_noise`` comes from
+    SimulatedTrainConfig (default ``"default"``, checked there); BiRAE has no error model."""
+    assert issubclass(cls, SimulatedTrainConfig) and cls().train_noise == "default"
+    assert cls(train_noise="none").train_noise == "none"
+    with pytest.raises(ConfigError, match=rf"{cls.__name__}\.train_noise: expected one of 'default', 'none', got 'ximu3'"):
+        cls(train_noise="ximu3")
+    assert not issubclass(BiraeConfig, SimulatedTrainConfig) and not hasattr(BiraeConfig(), "train_noise")

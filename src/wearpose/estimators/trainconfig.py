@@ -1,4 +1,5 @@
-"""``TrainConfig``: the training fields every method's config shares, declared once.
+"""``TrainConfig``: the training fields every method's config shares, declared once;
+``SimulatedTrainConfig``: with the sensor error model of methods trained on simulated sensors.
 
 A method's config (``EmposeConfig``, ``PipConfig``, ``BiraeConfig``, ``MiposerConfig``, a new
 method's) is a frozen, keyword-only dataclass extending :class:`TrainConfig`; it adds its model
@@ -44,3 +45,21 @@ class TrainConfig(ConfigIO):
         if self.lr_schedule not in self.LR_SCHEDULES:
             raise ConfigError(f"{type(self).__name__}.lr_schedule: expected one of "
                               f"{', '.join(repr(s) for s in self.LR_SCHEDULES)}, got {self.lr_schedule!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimulatedTrainConfig(TrainConfig):
+    """:class:`TrainConfig` of a method whose training data are sensors simulated with an error
+    model (:func:`wearpose.sensors.simulate`; EM-POSE, PIP, MI-Poser): ``train_noise`` one of
+    :attr:`TRAIN_NOISES`, ``default`` (the documented error models) or ``none`` (ideal sensors).
+    """
+
+    TRAIN_NOISES: ClassVar[tuple[str, ...]] = ("default", "none")
+
+    train_noise: str = "default"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.train_noise not in self.TRAIN_NOISES:
+            raise ConfigError(f"{type(self).__name__}.train_noise: expected one of "
+                              f"{', '.join(repr(s) for s in self.TRAIN_NOISES)}, got {self.train_noise!r}")

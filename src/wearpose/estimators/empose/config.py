@@ -20,11 +20,11 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from wearpose.errors import ConfigError
-from wearpose.estimators.trainconfig import TrainConfig
+from wearpose.estimators.trainconfig import SimulatedTrainConfig
 
 
 @dataclass(frozen=True, kw_only=True)
-class EmposeConfig(TrainConfig):
+class EmposeConfig(SimulatedTrainConfig):
     """LGD-RNN and training settings.
 
     Model: ``hidden`` LSTM width (``rnn_layers`` layers), ``width`` / ``mlp_layers`` of the
@@ -35,7 +35,8 @@ class EmposeConfig(TrainConfig):
     ``supervise_initial`` adds the loss on Omega^(0) (the paper sums n = 1..N only).
     Data: ``sensors`` 12 / 6 (kits ``em12`` / ``em6``), ``rate`` Hz, ``seq_len`` frames per
     training window, ``window_stride`` frames between window starts, ``train_noise`` the EM error
-    model of the training simulation (``"default"`` / ``"none"``), ``offsets`` subject offsets
+    model of the training simulation (``"default"`` / ``"none"``, checked by
+    :class:`~wearpose.estimators.trainconfig.SimulatedTrainConfig`), ``offsets`` subject offsets
     (``"random"`` synthetic subjects per sequence; ``"rot"`` = their rotations only, translations
     zero in the training data and in L_r, the "no t" ablation of Table 3; ``"none"`` = identity,
     the "no [R|t]" ablation).
@@ -76,7 +77,6 @@ class EmposeConfig(TrainConfig):
     rate: float = 30.0
     seq_len: int = 32
     window_stride: int = 16
-    train_noise: str = "default"
     offsets: str = "random"
     lr: float = 1e-4
     batch_size: int = 12
@@ -88,16 +88,15 @@ class EmposeConfig(TrainConfig):
     mapper_input: str = "raw"
 
     def __post_init__(self) -> None:
-        super().__post_init__()  # the shared training fields (TrainConfig)
+        super().__post_init__()  # the shared training fields (SimulatedTrainConfig)
         if self.sensors not in (6, 12):
             raise ConfigError(f"EmposeConfig.sensors: expected 6 or 12, got {self.sensors!r}")
         if self.rep not in ("rot6d", "axis_angle"):
             raise ConfigError(f"EmposeConfig.rep: expected 'rot6d' or 'axis_angle', got {self.rep!r}")
         if self.iterations < 0 or self.mlp_layers < 1 or self.rnn_layers < 1:
             raise ConfigError("EmposeConfig: iterations >= 0, mlp_layers >= 1 and rnn_layers >= 1 required")
-        if self.train_noise not in ("default", "none") or self.offsets not in ("random", "rot", "none"):
-            raise ConfigError(f"EmposeConfig: train_noise must be 'default'/'none' and offsets 'random'/'rot'/'none', "
-                              f"got {self.train_noise!r} / {self.offsets!r}")
+        if self.offsets not in ("random", "rot", "none"):
+            raise ConfigError(f"EmposeConfig.offsets: expected 'random', 'rot' or 'none', got {self.offsets!r}")
         if self.inputs not in ("both", "position", "orientation"):
             raise ConfigError(f"EmposeConfig.inputs: expected 'both', 'position' or 'orientation', got {self.inputs!r}")
         if self.init not in ("rnn", "mean"):

@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from wearpose.errors import ConfigError
-from wearpose.estimators.trainconfig import TrainConfig
+from wearpose.estimators.trainconfig import SimulatedTrainConfig
 
 #: SMPL joints MI-Poser reports (Fig. 5 "upper body"): pelvis (the alignment root), the spine,
 #: neck, collars, head, shoulders, elbows and wrists.
@@ -42,7 +42,7 @@ LATER_LOSS: dict[str, Any] = {"rot_loss": "l1_6d", "spine_rot_weight": 1.0, "lam
 
 
 @dataclass(frozen=True, kw_only=True)
-class MiposerConfig(TrainConfig):
+class MiposerConfig(SimulatedTrainConfig):
     """Network, data and optimisation settings (see module doc).
 
     Network (``avatarposer``): ``d_model`` width, ``layers`` encoder layers, ``heads`` attention
@@ -61,7 +61,8 @@ class MiposerConfig(TrainConfig):
     in it), ``lambda_twist`` / ``twist_limit_deg`` (a hinge on the spine joints' twist about the
     bone beyond the limit, rad; 0 = off). The defaults keep a stored config's old loss.
     Data: ``rate`` Hz, ``window`` frames, ``stride`` frames between training windows,
-    ``train_noise`` the simulated sensors' error model (``default`` / ``none``), ``tpose_s`` /
+    ``train_noise`` the simulated sensors' error model (``default`` / ``none``;
+    :class:`~wearpose.estimators.trainconfig.SimulatedTrainConfig`), ``tpose_s`` /
     ``blend_s`` the calibration T-pose held before each clip and the blend into the clip.
     Optimisation: ``epochs``, and :class:`~wearpose.estimators.trainconfig.TrainConfig`'s
     ``seed``, ``val_clips``, ``lr``, ``lr_schedule``, ``lr_min_factor``, ``batch_size``,
@@ -88,14 +89,13 @@ class MiposerConfig(TrainConfig):
     rate: float = 60.0
     window: int = 40
     stride: int = 6
-    train_noise: str = "default"
     tpose_s: float = 1.0
     blend_s: float = 0.5
     lr_schedule: str = "cosine"
     epochs: int = 100
 
     def __post_init__(self) -> None:
-        super().__post_init__()  # the shared training fields (TrainConfig)
+        super().__post_init__()  # the shared training fields (SimulatedTrainConfig)
         if self.model not in ("avatarposer", "imuposer"):
             raise ConfigError(f"MiposerConfig.model: expected 'avatarposer' or 'imuposer', got {self.model!r}")
         if self.wrists not in (1, 2):
@@ -104,8 +104,6 @@ class MiposerConfig(TrainConfig):
             raise ConfigError(f"MiposerConfig: d_model {self.d_model} must be divisible by heads {self.heads}")
         if self.window < 2 or self.stride < 1 or self.layers < 1:
             raise ConfigError("MiposerConfig: window >= 2, stride >= 1 and layers >= 1 required")
-        if self.train_noise not in ("default", "none"):
-            raise ConfigError(f"MiposerConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
         if self.rot_loss not in ("l1_6d", "geodesic"):
             raise ConfigError(f"MiposerConfig.rot_loss: expected 'l1_6d' or 'geodesic', got {self.rot_loss!r}")
 

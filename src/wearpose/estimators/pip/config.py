@@ -21,12 +21,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from wearpose.errors import ConfigError
-from wearpose.estimators.trainconfig import TrainConfig
+from wearpose.estimators.trainconfig import SimulatedTrainConfig
 from wearpose.estimators.pip.sitting import STAND_HOLD_S, TRANSITIONS
 
 
 @dataclass(frozen=True, kw_only=True)
-class PipConfig(TrainConfig):
+class PipConfig(SimulatedTrainConfig):
     """PIP kinematics settings.
 
     Model: ``hidden`` LSTM width (``rnn_layers`` layers) of every RNN, ``dropout`` on each RNN's
@@ -47,7 +47,7 @@ class PipConfig(TrainConfig):
     of a sit-down over many seconds, coexist with the corpus's short clips), ``sitting_window``
     (0: the synthetic sitting clips are windowed like the corpus; N > 0: windows of N frames
     every N // 2 for them, e.g. long windows for motion and short ones for sitting),
-    ``train_noise`` IMU error model (``default`` / ``none``), ``max_train_clips`` (0 = whole
+    ``train_noise`` IMU error model (``default`` / ``none``; :class:`~wearpose.estimators.trainconfig.SimulatedTrainConfig`), ``max_train_clips`` (0 = whole
     train split), ``sitting_clips`` synthetic sitting clips
     (:mod:`~wearpose.estimators.pip.sitting`; the corpus has none) added to the
     train split (and a tenth as many, at least 4, to val); 0 = corpus only; ``sitting_stand_s``
@@ -88,7 +88,6 @@ class PipConfig(TrainConfig):
     window_stride: int = 200
     min_window: int = 0
     sitting_window: int = 0
-    train_noise: str = "default"
     max_train_clips: int = 0
     sitting_clips: int = 0
     sitting_stand_s: tuple[float, float] = STAND_HOLD_S
@@ -101,13 +100,11 @@ class PipConfig(TrainConfig):
     epochs: int = 100
 
     def __post_init__(self) -> None:
-        super().__post_init__()  # the shared training fields (TrainConfig)
+        super().__post_init__()  # the shared training fields (SimulatedTrainConfig)
         if self.hidden < 1 or self.rnn_layers < 1:
             raise ConfigError("PipConfig: hidden >= 1 and rnn_layers >= 1 required")
         if not 0.0 <= self.dropout < 1.0:
             raise ConfigError(f"PipConfig.dropout: expected 0 <= p < 1, got {self.dropout!r}")
-        if self.train_noise not in ("default", "none"):
-            raise ConfigError(f"PipConfig.train_noise: expected 'default' or 'none', got {self.train_noise!r}")
         if self.seq_len < 2 or self.window_stride < 1:
             raise ConfigError("PipConfig: seq_len >= 2 and window_stride >= 1 required")
         if self.sitting_window < 0 or self.sitting_window == 1:
