@@ -6,30 +6,13 @@ Public API: :class:`StreamServer`, :func:`run_server`, :func:`estimator_factory`
 types/codecs of :mod:`wearpose.stream.packets` (contract in ``docs/streaming.md``).
 """
 
+from wearpose.stream import packets
 from wearpose.stream.client import StreamClient, StreamError
-from wearpose.stream.packets import (
-    CHANNEL_FLOATS,
-    HEADER,
-    VERSION,
-    FramePacket,
-    Hello,
-    PacketError,
-    PosePacket,
-    decode_frame_binary,
-    decode_frame_json,
-    decode_pose,
-    encode_frame_binary,
-    encode_frame_json,
-    encode_pose_binary,
-    encode_pose_json,
-)
+from wearpose.stream.packets import *  # noqa: F403 - the packet API, listed once in packets.__all__
 from wearpose.stream.replay import Faults, replay, stack_recording
 from wearpose.stream.server import ReorderBuffer, StreamServer, estimator_factory, run_server
 
 __all__ = [
     "StreamServer", "run_server", "estimator_factory", "ReorderBuffer", "StreamClient", "StreamError",
-    "replay", "Faults", "stack_recording",
-    "Hello", "FramePacket", "PosePacket", "PacketError", "HEADER", "VERSION", "CHANNEL_FLOATS",
-    "encode_frame_binary", "encode_frame_json", "decode_frame_binary", "decode_frame_json",
-    "encode_pose_binary", "encode_pose_json", "decode_pose",
+    "replay", "Faults", "stack_recording", *packets.__all__,
 ]

@@ -46,6 +46,14 @@ import numpy as np
 
 from wearpose.errors import WearposeError
 
+#: The packet types and codecs of the streaming contract (``docs/streaming.md``): the names
+#: :mod:`wearpose.stream` re-exports (listed here once).
+__all__ = [
+    "Hello", "FramePacket", "PosePacket", "PacketError", "HEADER", "VERSION", "CHANNEL_FLOATS",
+    "encode_frame_binary", "encode_frame_json", "decode_frame_binary", "decode_frame_json",
+    "encode_pose_binary", "encode_pose_json", "decode_pose",
+]
+
 VERSION = 1
 MAGIC = b"WP"
 KIND_FRAME = 1
