@@ -635,14 +635,7 @@ class StreamServer:
         if udp and kind in ("hello", "subscribe", "stats") and not await self._udp_token_ok(ws, d, kind):
             return
         if kind == "frame":
-            subject = d.get("subject")
-            s = await self._frame_subject(ws, subject, "frame")
-            if s is None:
-                return
-            try:
-                self._on_frame(s, decode_frame_json(d, s.hello), t_arr)
-            except PacketError as exc:
-                self._malformed(exc, ws, subject)
+            await self._on_frame_packet(ws, d.get("subject"), "frame", lambda hello: decode_frame_json(d, hello), t_arr)
         elif kind == "hello":
             # In the background: loading an estimator (or draining one, for bye) must not hold up
             # the frames of this connection's other subjects.
@@ -754,15 +747,22 @@ class StreamServer:
         await self._safe_send(ws, json.dumps({"type": "bye", "subject": subject, "stats": stats, "reason": "bye"}))
 
     async def _on_binary(self, ws: Any, msg: bytes, t_arr: float) -> None:
-        subject = peek_subject(msg)
-        s = await self._frame_subject(ws, subject, "binary frame")
+        await self._on_frame_packet(ws, peek_subject(msg), "binary frame",
+                                    lambda hello: decode_frame_binary(msg, hello), t_arr)
+
+    async def _on_frame_packet(self, ws: Any, subject: Any, what: str, decode: Callable[[Hello], FramePacket],
+                               t_arr: float) -> None:
+        """A frame (JSON or binary, ``what``) from ``ws`` for ``subject``: decoded by
+        ``decode(hello)`` and run; a malformed one is counted (server-wide and in the subject's
+        ``malformed``), logged and skipped. A frame for an unknown subject raises PacketError
+        (:meth:`_frame_subject`)."""
+        s = await self._frame_subject(ws, subject, what)
         if s is None:
             return
         try:
-            self._on_frame(s, decode_frame_binary(msg, s.hello), t_arr)
+            self._on_frame(s, decode(s.hello), t_arr)
         except PacketError as exc:
-            self.subjects[subject].counts["malformed"] += 1
-            raise exc
+            self._malformed(exc, ws, subject)
 
     # ------------------------------------------------------------------ local (in-process) subjects
     async def open_local_subject(self, peer: Any, hello: Hello,
