@@ -36,5 +36,19 @@ class ShapeError(WearposeError, ValueError):
     """A tensor/array argument has the wrong shape, dtype or value range."""
 
 
+class RecordingInputError(ShapeError):
+    """A recording does not carry what an estimator reads (a sensor, a channel, a kind, a rate).
+
+    Args:
+        recording: how the recording is named: its file, or a note that it was made in memory.
+        problem: what is wrong, naming the sensor and the field.
+        expected: the form the estimator reads.
+    """
+
+    def __init__(self, recording: str, problem: str, expected: str):
+        self.recording, self.problem, self.expected = recording, problem, expected
+        super().__init__(f"{recording}: {problem}. Expected: {expected}")
+
+
 class ConfigError(WearposeError, ValueError):
     """A configuration value or environment variable is invalid or missing."""

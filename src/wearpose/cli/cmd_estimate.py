@@ -65,7 +65,7 @@ def estimate(
         with err_console.status(f"estimating {rec.duration:.0f} s of {recording.name} with {model}"):
             run = estimate_recording(source, rec, recording, resample=resample)
     except ShapeError as exc:  # the estimator's check of the recording: missing sensors, another rate
-        raise recording_mismatch(recording, source, str(exc)) from None
+        raise recording_mismatch(recording, source, exc) from None
     except CalibrationError as exc:  # IMU methods calibrate an uncalibrated recording from a T-pose
         raise InputFileError(recording, f"{model} could not calibrate it ({exc})",
                              "a recording that starts with about 1 s of T-pose (or marks its T-pose in "

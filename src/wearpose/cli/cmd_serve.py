@@ -341,4 +341,4 @@ def view_recording(
     except ShapeError as exc:  # the estimator's check of the recording: missing sensors, another rate
         if source is None:
             raise
-        raise recording_mismatch(recording, source, str(exc)) from None
+        raise recording_mismatch(recording, source, exc) from None

@@ -108,23 +108,23 @@ def run_sensor_demo(clip: str, out: str | Path, weights: str = "empose12_cpu", m
     """
     from wearpose.body.skeleton import MAJOR_JOINTS
     from wearpose.estimators.empose.data import recording_from_clip, simulate_clip
+    from wearpose.estimators.run import estimate_recording, open_model
     from wearpose.estimators.seeding import clip_seed
-    from wearpose.estimators.empose.estimator import EmposeEstimator
     from wearpose.evaluate import mpjae, mpjpe, pa_mpjpe
-    from wearpose.weights import card, weight_path
+    from wearpose.weights import card
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    est = EmposeEstimator.load(weight_path(weights))
+    source = open_model(weights)  # the checkpoint is read here, once
+    est = source.make()
     body = est.body
     seq = load_motion(clip, rest_joints=body.rest_joints())
     seq = seq.slice(0, min(seq.num_frames, int(round(max_seconds * seq.fps))))
     r = simulate_clip(seq, est.config, body, clip_seed(clip, seed, "demo"), noise="default", offsets="random")
     rec = recording_from_clip(r, est.config)
     rec.save(out / "recording.npz")
-    track = est.estimate(rec)
-    src = r["sim"].em_source[float(est.config.rate)]
-    world = est.to_world(track, src["orientation"].float(), src["position"].float())
+    run = estimate_recording(source, rec, out / "recording.npz", estimator=est)
+    track, world = run.estimated, run.track  # world: through the recorded EM source pose, on the floor
     with torch.no_grad():
         pj = body(track.local_rot, track.betas, None, return_vertices=False).joints
     ok = track.valid

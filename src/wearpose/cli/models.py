@@ -37,10 +37,13 @@ def check_pose_weights(model: str, param_hint: str = "--model") -> None:
                              f"{', '.join(pose_weights())}", param_hint=param_hint)
 
 
-def recording_mismatch(recording: Path, source: ModelSource, problem: str) -> Exception:
+def recording_mismatch(recording: Path, source: ModelSource, exc: Exception) -> Exception:
     """An :class:`~wearpose.errors.InputFileError` for a recording the weights cannot read: the
-    file, the estimator's complaint, and what a fitting recording looks like."""
-    from wearpose.errors import InputFileError
+    file, the estimator's complaint (without its own naming of the file), and what a fitting
+    recording looks like."""
+    from wearpose.errors import InputFileError, RecordingInputError
+
+    problem = f"{exc.problem}; {exc.expected}" if isinstance(exc, RecordingInputError) else str(exc)
 
     if not source.kit:
         return InputFileError(recording, problem, f"a recording made for {source.name}")

@@ -10,27 +10,40 @@ or :func:`prepare`. In order, they:
 2. convert every declared convention to canonical form (:meth:`Recording.to_canonical`:
    mm/cm, deg/s, g, sensor-frame acceleration with gravity, Z-up world), so that a recording
    written in a device's own units gives the same estimate as its canonical copy;
-3. (:func:`prepare`) stack the kit's sensors on their common time grid and treat masked samples
-   as the method says: held at the sensor's last valid sample (:func:`hold_last_valid`) or left
-   NaN. A dropped sample is never interpolated.
+3. (:func:`prepare`) run the method's own step on the canonical recording, if it has one (PIP:
+   T-pose calibration to bone orientations; MI-Poser: metal-interference mitigation);
+4. stack the kit's sensors on one time grid (:attr:`InputSpec.align`: the grid they share, or the
+   first sensor's instants for kits whose sensors run at different rates) and treat masked
+   samples as the method says: held at the sensor's last valid sample (:func:`hold_last_valid`)
+   or left as recorded. A dropped sample is never interpolated.
+
+Online, :class:`OnlineInput` does step 4 per frame: it maps the frame's sensors to the
+estimator's order once per stream (not per frame) and holds dropped samples.
+
+Every error names the recording (:func:`recording_label`), the sensor, the field and the
+expected form.
 """
 
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 import torch
 
-from wearpose.errors import ShapeError
+from wearpose.errors import RecordingInputError, ShapeError
 from wearpose.recording import Recording, SensorStream
 from wearpose.sensors import get_kit
 
 #: Rates agree when within this fraction of the trained rate.
 RATE_TOLERANCE = 1e-3
+#: ``align="first"``: a sample further than this from a grid instant is not used there, s.
+ALIGN_TOLERANCE_S = 1e-3
+#: The grids :attr:`InputSpec.align` names.
+ALIGNMENTS = ("shared", "first")
 
 
 @dataclass(frozen=True)
@@ -47,6 +60,11 @@ class InputSpec:
         rates: sensor kind -> the rate (Hz) the weights were trained at; kinds not listed may run
             at any rate.
         reference: EM sensors' required reference frame (``"source"``), or ``None`` for either.
+        align: the time grid :func:`prepare` stacks the sensors on: ``"shared"`` (they must share
+            one, :meth:`Recording.on_common_grid`) or ``"first"`` (the first sensor's instants;
+            each other sensor contributes its nearest sample within :data:`ALIGN_TOLERANCE_S`,
+            else that instant is masked: kits whose sensors run at integer multiples of one rate,
+            e.g. a 60 Hz headset with 120 Hz EM sensors). Nothing is interpolated either way.
     """
 
     method: str
@@ -56,15 +74,21 @@ class InputSpec:
     kinds: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     rates: Mapping[str, float] = field(default_factory=dict)
     reference: str | None = None
+    align: str = "shared"
+
+    def __post_init__(self) -> None:
+        if self.align not in ALIGNMENTS:
+            raise ShapeError(f"InputSpec of {self.method}: align {self.align!r}; expected one of {list(ALIGNMENTS)}")
 
     @classmethod
     def from_kit(cls, method: str, kit: str, channels: tuple[str, ...], *,
                  sensor_names: tuple[str, ...] | None = None, kinds: Mapping[str, tuple[str, ...]] | None = None,
-                 rates: Mapping[str, float] | None = None, reference: str | None = None) -> InputSpec:
+                 rates: Mapping[str, float] | None = None, reference: str | None = None,
+                 align: str = "shared") -> InputSpec:
         """The spec of ``kit``'s sensors (all of them unless ``sensor_names``)."""
         k = get_kit(kit)
         names = tuple(sensor_names) if sensor_names is not None else tuple(k.sensor_names)
-        return cls(method, kit, names, tuple(channels), dict(kinds or {}), dict(rates or {}), reference)
+        return cls(method, kit, names, tuple(channels), dict(kinds or {}), dict(rates or {}), reference, align)
 
     def kit_kind(self, name: str) -> str:
         """The kind kit sensor ``name`` has in the kit (``"any"`` without a kit)."""
@@ -81,7 +105,8 @@ class PreparedInput:
     """Kit sensors of a canonical recording on their common grid.
 
     Attributes:
-        recording: the whole recording in canonical form (other sensors included).
+        recording: the whole recording in canonical form (other sensors included), after the
+            method's own step (``before_grid``), at its own rates (before the grid).
         names: ``S`` sensor names, input order.
         timestamps: ``(T,)`` s.
         valid: ``(T, S)`` bool.
@@ -96,30 +121,47 @@ class PreparedInput:
     channels: dict[str, torch.Tensor]
 
 
+def recording_label(recording: Recording) -> str:
+    """How an error names ``recording``: its file (``Recording.origin``, set by
+    :func:`~wearpose.recording.load_recording`), or a note that it was made in memory."""
+    origin = getattr(recording, "origin", None)
+    return f"recording {origin}" if origin else "a recording not loaded from a file (made in memory)"
+
+
+def _input_error(recording: Recording, problem: str, expected: str) -> RecordingInputError:
+    """The one form of a bad-input error: the recording, the problem (sensor and field in it),
+    the expected form."""
+    return RecordingInputError(recording_label(recording), problem, expected)
+
+
 def check_input(recording: Recording, spec: InputSpec) -> None:
     """Raise :class:`ShapeError` unless ``recording`` carries what ``spec`` reads (module doc, 1)."""
     missing = [n for n in spec.sensor_names if n not in recording.names]
     if missing:
-        raise ShapeError(f"recording lacks sensors {missing} of kit {spec.kit!r}: {spec.method} reads "
-                         f"{list(spec.sensor_names)}; the recording has {list(recording.names)}")
+        raise _input_error(recording, f"no sensors {missing} (it has {list(recording.names)})",
+                           f"{spec.method} reads sensors {list(spec.sensor_names)} of kit {spec.kit!r}")
     for name in spec.sensor_names:
-        s = recording.sensor(name)
-        kit_kind = spec.kit_kind(name)
-        accepted = spec.kinds.get(kit_kind, (kit_kind,) if spec.kit is not None else (s.kind,))
-        if s.kind not in accepted:
-            raise ShapeError(f"sensor {name!r}: kind {s.kind!r}; {spec.method} (kit {spec.kit!r}) needs "
-                             f"kind {' or '.join(repr(k) for k in accepted)}")
-        if s.kind == "em6dof" and spec.reference is not None and s.info.reference != spec.reference:
-            raise ShapeError(f"sensor {name!r}: reference {s.info.reference!r}; {spec.method} needs EM poses "
-                             f"relative to the {spec.reference!r}")
-        lacking = [c for c in spec.channels if getattr(s, c) is None]
-        if lacking:
-            raise ShapeError(f"sensor {name!r}: no {lacking} channel; {spec.method} needs "
-                             f"{list(spec.channels)} for every kit sensor")
-        rate = spec.rates.get(kit_kind)
-        if rate is not None and abs(float(s.info.rate) - rate) > RATE_TOLERANCE * rate:
-            raise ShapeError(f"sensor {name!r} runs at {s.info.rate:g} Hz; {spec.method} was trained at "
-                             f"{rate:g} Hz (resample the recording first, e.g. wearpose estimate does)")
+        _check_sensor(recording, spec, recording.sensor(name))
+
+
+def _check_sensor(recording: Recording, spec: InputSpec, s: SensorStream) -> None:
+    name, kit_kind = s.name, spec.kit_kind(s.name)
+    accepted = spec.kinds.get(kit_kind, (kit_kind,) if spec.kit is not None else (s.kind,))
+    if s.kind not in accepted:
+        raise _input_error(recording, f"sensor {name!r} [kind] is {s.kind!r}",
+                           f"kind {' or '.join(repr(k) for k in accepted)} ({spec.method}, kit {spec.kit!r})")
+    if s.kind == "em6dof" and spec.reference is not None and s.info.reference != spec.reference:
+        raise _input_error(recording, f"sensor {name!r} [reference] is {s.info.reference!r}",
+                           f"EM poses relative to the {spec.reference!r} ({spec.method})")
+    lacking = [c for c in spec.channels if getattr(s, c) is None]
+    if lacking:
+        raise _input_error(recording, f"sensor {name!r} has no {lacking} channel",
+                           f"channels {list(spec.channels)} for every sensor {spec.method} reads")
+    rate = spec.rates.get(kit_kind)
+    if rate is not None and abs(float(s.info.rate) - rate) > RATE_TOLERANCE * rate:
+        raise _input_error(recording, f"sensor {name!r} [rate] is {s.info.rate:g} Hz",
+                           f"{rate:g} Hz, the rate {spec.method} was trained at (resample the recording "
+                           "first, e.g. wearpose estimate does)")
 
 
 def canonical_input(recording: Recording, spec: InputSpec) -> Recording:
@@ -130,15 +172,82 @@ def canonical_input(recording: Recording, spec: InputSpec) -> Recording:
     return recording if recording.is_canonical else recording.to_canonical()
 
 
-def prepare(recording: Recording, spec: InputSpec, hold: bool = True) -> PreparedInput:
-    """Steps 1-3 of the module doc: the kit sensors' channels as ``(T, S, ...)`` float32 tensors."""
+def prepare(recording: Recording, spec: InputSpec, hold: bool = True, *,
+            before_grid: Callable[[Recording], Recording] | None = None, dtype: torch.dtype = torch.float32,
+            nan_to_zero: Sequence[str] = ()) -> PreparedInput:
+    """Steps 1-4 of the module doc: the kit sensors' channels as ``(T, S, ...)`` tensors.
+
+    Args:
+        recording: any recording (declared conventions are converted).
+        spec: what the estimator reads.
+        hold: hold masked samples at the sensor's last valid one (False: as recorded; the
+            method treats them itself).
+        before_grid: the method's own step on the checked, canonical recording (step 3).
+        dtype: the tensors' dtype (the recording's float32 samples are exact in float64 too).
+        nan_to_zero: channels whose NaNs become 0 before the hold.
+    """
     rec = canonical_input(recording, spec)
-    grid = rec.on_common_grid(spec.sensor_names)
+    if before_grid is not None:
+        rec = before_grid(rec)
+    on_grid = on_first_grid(rec, spec.sensor_names) if spec.align == "first" else rec
+    grid = on_grid.on_common_grid(spec.sensor_names)
     valid = torch.as_tensor(grid.valid)
-    chans = {c: torch.as_tensor(grid.channels[c], dtype=torch.float32) for c in spec.channels}
+    chans = {c: torch.as_tensor(np.nan_to_num(grid.channels[c]) if c in nan_to_zero else grid.channels[c], dtype=dtype)
+             for c in spec.channels}
     if hold:
         chans = {c: hold_last_valid(x, valid) for c, x in chans.items()}
     return PreparedInput(rec, tuple(grid.names), grid.timestamps, valid, chans)
+
+
+def nearest_samples(ts: np.ndarray, instants: np.ndarray,
+                    tolerance: float = ALIGN_TOLERANCE_S) -> tuple[np.ndarray, np.ndarray]:
+    """The sample of ``ts`` nearest each of ``instants`` (the earlier one on a tie) and whether it
+    is within ``tolerance`` s of it.
+
+    Args:
+        ts: ``(N,)`` increasing sample times, s. instants: ``(T,)`` s.
+
+    Returns:
+        ``(index (T,) int, within (T,) bool)``.
+    """
+    i = np.clip(np.searchsorted(ts, instants), 1, max(1, len(ts) - 1))
+    i = np.where(np.abs(ts[i - 1] - instants) <= np.abs(ts[np.minimum(i, len(ts) - 1)] - instants), i - 1, i)
+    i = np.clip(i, 0, len(ts) - 1)
+    return i, np.abs(ts[i] - instants) <= tolerance
+
+
+def on_first_grid(recording: Recording, names: Sequence[str]) -> Recording:
+    """The named sensors on the first one's time grid (:attr:`InputSpec.align` ``"first"``).
+
+    Each other sensor contributes, at every instant of the first, its nearest sample
+    (:func:`nearest_samples`); an instant with no sample within :data:`ALIGN_TOLERANCE_S` is
+    masked and its channels NaN. Nothing is interpolated. Other sensors are left as they are.
+
+    Returns:
+        a recording whose named sensors share the first's ``timestamps`` (rate declared as the
+        first's); ``meta["grid"]`` says how, and how many instants each sensor lost to it.
+    """
+    ref = recording.sensor(names[0])
+    ts = np.asarray(ref.timestamps, dtype=np.float64)
+    out, lost = [], {}
+    for s in recording.sensors:
+        if s.name not in names[1:]:
+            out.append(s)
+            continue
+        i, ok = nearest_samples(np.asarray(s.timestamps, dtype=np.float64), ts)
+        ch = {c: np.where(ok.reshape(-1, *([1] * (x.ndim - 1))), x[i], np.nan).astype(x.dtype)
+              for c, x in s.channels().items()}
+        out.append(SensorStream(replace(s.info, rate=ref.info.rate), ts.copy(), np.asarray(s.valid)[i] & ok, **ch))
+        lost[s.name] = int((np.asarray(s.valid)[i] & ~ok).sum())
+    meta = {**copy.deepcopy(recording.meta), "grid": {
+        "rule": f"{names[0]!r}'s instants; other sensors' nearest sample within {ALIGN_TOLERANCE_S:g} s",
+        "instants": int(len(ts)), "masked_by_grid": lost}}
+    return _like(recording, out, meta)
+
+
+def _like(recording: Recording, sensors: list[SensorStream], meta: dict[str, Any]) -> Recording:
+    """A recording of ``sensors`` with ``recording``'s ground truth, subject and origin."""
+    return replace(recording, sensors=sensors, subject=copy.deepcopy(recording.subject), meta=meta)
 
 
 def hold_last_valid(x: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
@@ -167,44 +276,61 @@ def hold_last_valid(x: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     return out
 
 
-def held_frame(frame: Any, sensor_names: Sequence[str], channels: Sequence[str],
-               last: Sequence[torch.Tensor] | None, *, who: str = "estimator",
-               nan_to_zero: Sequence[str] = ()) -> tuple[tuple[torch.Tensor, ...], torch.Tensor]:
-    """One :class:`~wearpose.estimators.base.SensorFrame` as input in ``sensor_names`` order,
-    online: the per-frame twin of :func:`hold_last_valid`.
+class OnlineInput:
+    """The online twin of :func:`prepare`'s step 4: one :class:`~wearpose.estimators.base.SensorFrame`
+    at a time as input in the estimator's sensor order, dropped samples held.
+
+    An estimator makes one at ``reset()``. The map from a frame's sensor columns to the
+    estimator's order is built on the first frame and reused for every later one with the same
+    sensor names (rebuilt only when they change), so a step does no name look-ups.
 
     Args:
-        frame: the newest frame (its ``names``, ``valid`` and ``channels``).
         sensor_names: the estimator's ``S`` sensors, in its order.
         channels: the channels to return (``"position"``, ``"acceleration"``, ``"orientation"``, ...).
-        last: the previous call's returned tensors (one per channel), or None at the start.
         who: the estimator named in the error.
         nan_to_zero: channels whose NaNs (dropped samples) become 0 before the hold.
-
-    Returns:
-        ``(tensors, valid)``: one float32 ``(S, ...)`` tensor per channel, dropped samples held
-        at ``last``, or neutral before any (identity for ``(3, 3)`` rotations, zeros otherwise);
-        ``valid`` ``(S,)`` bool.
-
-    Raises:
-        ShapeError: the frame lacks one of ``sensor_names``.
     """
-    names = list(frame.names)
-    try:
-        idx = [names.index(n) for n in sensor_names]
-    except ValueError:
-        raise ShapeError(f"frame has sensors {names}; {who} needs {list(sensor_names)}") from None
-    valid = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
-    out = []
-    for i, ch in enumerate(channels):
-        a = np.asarray(frame.channels[ch])[idx]
-        x = torch.as_tensor(np.nan_to_num(a) if ch in nan_to_zero else a, dtype=torch.float32)
-        if last is not None:
-            hold = last[i]
-        else:
-            hold = torch.eye(3).expand_as(x) if x.shape[1:] == (3, 3) else torch.zeros_like(x)
-        out.append(torch.where(valid.reshape(-1, *([1] * (x.dim() - 1))), x, hold))
-    return tuple(out), valid
+
+    def __init__(self, sensor_names: Sequence[str], channels: Sequence[str], *, who: str = "estimator",
+                 nan_to_zero: Sequence[str] = ()) -> None:
+        self.sensor_names = tuple(sensor_names)
+        self.channels = tuple(channels)
+        self.who = who
+        self.nan_to_zero = frozenset(nan_to_zero)
+        #: the previous frame's returned tensors (one per channel), None before the first
+        self.last: tuple[torch.Tensor, ...] | None = None
+        self._names: tuple[str, ...] | None = None
+        self._idx: np.ndarray | None = None
+
+    def index(self, names: Sequence[str]) -> np.ndarray:
+        """``(S,)`` column of each of :attr:`sensor_names` in a frame with sensors ``names``
+        (the kept map when ``names`` are those of the previous frame)."""
+        if self._idx is None or (names is not self._names and tuple(names) != self._names):
+            cols = {n: i for i, n in enumerate(names)}
+            missing = [n for n in self.sensor_names if n not in cols]
+            if missing:
+                raise ShapeError(f"live frame: no sensors {missing} (it has {list(names)}). Expected: "
+                                 f"{self.who} reads sensors {list(self.sensor_names)}")
+            self._names, self._idx = tuple(names), np.array([cols[n] for n in self.sensor_names])
+        return self._idx
+
+    def __call__(self, frame: Any) -> tuple[tuple[torch.Tensor, ...], torch.Tensor]:
+        """``(tensors, valid)`` of ``frame``: one float32 ``(S, ...)`` tensor per channel, dropped
+        samples held at the previous frame's, or neutral before any (identity for ``(3, 3)``
+        rotations, zeros otherwise); ``valid`` ``(S,)`` bool."""
+        idx = self.index(frame.names)
+        valid = torch.as_tensor(np.asarray(frame.valid)[idx], dtype=torch.bool)
+        out = []
+        for i, ch in enumerate(self.channels):
+            a = np.asarray(frame.channels[ch])[idx]
+            x = torch.as_tensor(np.nan_to_num(a) if ch in self.nan_to_zero else a, dtype=torch.float32)
+            if self.last is not None:
+                hold = self.last[i]
+            else:
+                hold = torch.eye(3).expand_as(x) if x.shape[1:] == (3, 3) else torch.zeros_like(x)
+            out.append(torch.where(valid.reshape(-1, *([1] * (x.dim() - 1))), x, hold))
+        self.last = tuple(out)
+        return self.last, valid
 
 
 def nearest_sample_grid(recording: Recording, names: tuple[str, ...], rate: float | None = None) -> Recording:
@@ -245,4 +371,4 @@ def nearest_sample_grid(recording: Recording, names: tuple[str, ...], rate: floa
     meta = {**copy.deepcopy(recording.meta), "grid": {
         "rule": f"nearest sample at {rate:.4g} Hz, within half a sensor period, each sample once",
         "instants": int(len(grid)), "masked_by_grid": lost}}
-    return Recording(out, recording.ground_truth, recording.ground_truth_start, copy.deepcopy(recording.subject), meta)
+    return _like(recording, out, meta)

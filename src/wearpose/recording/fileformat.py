@@ -263,7 +263,7 @@ def _load(path: Path, check_conventions: bool) -> Recording:
     gt, gt_start = None, 0.0
     if gt_json is not None:
         gt, gt_start = _load_ground_truth(path, d, gt_json)
-    rec = Recording(streams, gt, gt_start, header.get("subject", {}) or {}, header.get("meta", {}) or {})
+    rec = Recording(streams, gt, gt_start, header.get("subject", {}) or {}, header.get("meta", {}) or {}, str(path))
     if check_conventions:
         issues = check_recording(rec.sensors)
         if issues:

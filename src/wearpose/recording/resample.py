@@ -83,4 +83,5 @@ def decimate(recording: Recording, rate: float) -> Recording:
     meta = copy.deepcopy(recording.meta)
     if changed:
         meta["resampled"] = {**meta.get("resampled", {}), **changed}
-    return Recording(out, recording.ground_truth, recording.ground_truth_start, copy.deepcopy(recording.subject), meta)
+    return Recording(out, recording.ground_truth, recording.ground_truth_start, copy.deepcopy(recording.subject), meta,
+                     recording.origin)

@@ -457,6 +457,9 @@ class Recording:
         subject: JSON-serialisable facts about the wearer: ``id``, ``height_m``, ``sex``,
             ``offsets`` (e.g. EM-POSE sensor-to-skin offsets) ...
         meta: JSON-serialisable provenance: ``source``, ``licence``, ``device`` ...
+        origin: the file this recording was read from (:func:`~wearpose.recording.load_recording`
+            sets it; copies made from it keep it), None for one made in memory. Not written to
+            files and not compared: it only lets errors about the data name the file.
     """
 
     sensors: list[SensorStream]
@@ -464,6 +467,7 @@ class Recording:
     ground_truth_start: float = 0.0
     subject: dict[str, Any] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
+    origin: str | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         self.sensors = list(self.sensors)
@@ -594,7 +598,8 @@ class Recording:
         if converted:
             # Provenance: which sensors were converted from declared conventions.
             meta["converted_to_canonical"] = sorted(set(meta.get("converted_to_canonical", [])) | set(converted))
-        return Recording(out, self.ground_truth, self.ground_truth_start, copy.deepcopy(self.subject), meta)
+        return Recording(out, self.ground_truth, self.ground_truth_start, copy.deepcopy(self.subject), meta,
+                         self.origin)
 
     def declared_as(self, position_unit: str = "m", gyro_unit: str = "rad/s", acc_unit: str = "m/s2",
                     acc_frame: str = "world", acc_gravity: str = "removed", world_up: str = "y_up") -> Recording:
@@ -650,7 +655,7 @@ class Recording:
             ch = {k: v.astype(getattr(s, k).dtype) for k, v in ch.items() if v is not None}
             out.append(SensorStream(replace(s.info, **new), s.timestamps.copy(), s.valid.copy(), **ch))
         return Recording(out, self.ground_truth, self.ground_truth_start, copy.deepcopy(self.subject),
-                         copy.deepcopy(self.meta))
+                         copy.deepcopy(self.meta), self.origin)
 
     # ------------------------------------------------------------------ stacking
     def on_common_grid(self, names: Iterable[str] | None = None) -> CommonGrid:

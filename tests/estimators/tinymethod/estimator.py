@@ -13,7 +13,7 @@ from wearpose.body import BodyModel
 from wearpose.errors import ConfigError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import NetworkCheckpointing
-from wearpose.estimators.inputs import InputSpec, held_frame, prepare
+from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.estimators.trainconfig import TrainConfig
 from wearpose.geometry import rot6d_to_matrix
@@ -58,7 +58,7 @@ class TinyNet(nn.Module):
 class TinyEstimator(NetworkCheckpointing, Estimator):
     """Per frame: the kit's six IMU orientations ``R_WS`` -> 24 local joint rotations. Masked
     samples are held at the sensor's last valid one (``inputs.prepare``, online
-    ``inputs.held_frame``); a frame is valid
+    ``inputs.OnlineInput``); a frame is valid
     when every sensor is. Poses are in the IMU world (``extras["frame"] == "world"``), no
     translation."""
 
@@ -99,9 +99,9 @@ class TinyEstimator(NetworkCheckpointing, Estimator):
                          extras={"frame": "world", "method": self.name})
 
     def reset(self) -> None:
-        self._last: tuple[torch.Tensor, ...] | None = None
+        self._input = OnlineInput(self.sensor_names, ("orientation",), who="tiny")
 
     def step(self, frame: SensorFrame) -> PoseFrame:
-        self._last, valid = held_frame(frame, self.sensor_names, ("orientation",), self._last, who="tiny")
-        return PoseFrame(self.rotations(self._last[0][None])[0], torch.zeros(10), None, bool(valid.all()),
+        (R,), valid = self._input(frame)
+        return PoseFrame(self.rotations(R[None])[0], torch.zeros(10), None, bool(valid.all()),
                          frame.timestamp, extras={"frame": "world"})

@@ -56,7 +56,7 @@ from wearpose.estimators.birae.representations import (
 from wearpose.estimators.birae.streaming import StreamState, stream_predict, stream_step
 from wearpose.estimators.birae.uncertainty import combine, mc_predict
 from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
-from wearpose.estimators.inputs import InputSpec, held_frame, prepare
+from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.body.skeleton import MAJOR_JOINTS, NUM_JOINTS
 from wearpose.estimators.seeding import init_seed, seeded
@@ -316,7 +316,7 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
     # ------------------------------------------------------------------ online
     def reset(self) -> None:
         self._buf: deque[tuple[float, torch.Tensor, bool]] = deque()
-        self._last_R: torch.Tensor | None = None
+        self._input = OnlineInput(self.sensor_names, ("orientation",), who="BiRAE", nan_to_zero=("orientation",))
         self._prev_rel: torch.Tensor | None = None
         self._stream: StreamState | None = None
 
@@ -329,9 +329,7 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
             fps: input rate (default: the trained rate); scales the window and the angular rate.
         """
         fps = float(fps or self.fps)
-        (R,), v = held_frame(frame, self.sensor_names, ("orientation",),
-                             None if self._last_R is None else (self._last_R,), who="BiRAE", nan_to_zero=("orientation",))
-        self._last_R = R
+        (R,), v = self._input(frame)
         Rr = relative_orientations(R)
         rate = None
         if self.config.uses_rate:

@@ -45,7 +45,7 @@ from torch import nn
 from wearpose.errors import ConfigError
 from wearpose.estimators.base import OfflineOnlyError, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.empose.config import EmposeConfig
-from wearpose.estimators.empose.data import EmposeData, frame_measurements
+from wearpose.estimators.empose.data import EmposeData
 from wearpose.estimators.empose.estimator import EmposeEstimator
 from wearpose.body.skeleton import NUM_JOINTS
 from wearpose.estimators.empose.model import (
@@ -268,8 +268,7 @@ class ResNetEstimator(BaselineEstimator):
         """One frame, independent of the past except for holding dropped samples at the last
         valid value (neutral values before any). Returns a :class:`PoseFrame` (root in the EM
         source frame, the frame's own betas)."""
-        p, R, v = frame_measurements(frame, self.sensor_names, self._last)
-        self._last = (p, R)
+        (p, R), v = self._input(frame)
         self.model.eval()
         omega = self.model(sensor_features(p, R)[None].to(self.device)).cpu()
         rot, b = decode_omega(omega, self.model.rep)

@@ -25,13 +25,13 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Iterator
 
 import torch
 
 from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, kit_sites, num_batches, split_source
 from wearpose.estimators.empose.config import EmposeConfig
-from wearpose.estimators.inputs import held_frame, hold_last_valid
+from wearpose.estimators.inputs import hold_last_valid
 from wearpose.estimators.seeding import clip_seed
 from wearpose.geometry import matrix_to_rot6d, rot6d_to_matrix
 
@@ -39,24 +39,6 @@ DATA_VERSION = 1
 #: Per-frame tensors of the cache (``(F, ...)``; with ``clip`` ``(F,)``) and per-clip ones (``(C, ...)``).
 FRAME_KEYS = ("position", "orientation", "valid", "pose6", "joints")
 CLIP_KEYS = ("betas", "off_R", "off_t")
-
-
-def frame_measurements(frame: Any, sensor_names: Sequence[str],
-                       last: tuple[torch.Tensor, torch.Tensor] | None
-                       ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """One :class:`~wearpose.estimators.base.SensorFrame` as EM input in kit order, online.
-
-    Dropped samples are held at ``last`` (the previous returned values), or neutral (zero
-    position, identity orientation) before any (:func:`wearpose.estimators.inputs.held_frame`).
-
-    Returns:
-        ``p`` ``(S, 3)`` m, ``R`` ``(S, 3, 3)`` (source frame), ``valid`` ``(S,)`` bool.
-
-    Raises:
-        ShapeError: the frame lacks one of ``sensor_names``.
-    """
-    (p, R), v = held_frame(frame, sensor_names, ("position", "orientation"), last)
-    return p, R, v
 
 
 def rotation_only_offsets(num_sensors: int, seed: int) -> Any:

@@ -26,9 +26,8 @@ from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.config import EmposeConfig
-from wearpose.estimators.empose.data import frame_measurements
 from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, module_version, sensor_features
-from wearpose.estimators.inputs import InputSpec, prepare
+from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.estimators.seeding import init_seed, seeded
 
@@ -80,7 +79,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         with seeded(init_seed(self.config.seed)):  # initial weights: a function of the seed (issue 24)
             self.model = LGDRNN(self.config, len(self.sensor_names)).to(self.device)
         self._state: tuple[torch.Tensor, torch.Tensor] | None = None
-        self._last: tuple[torch.Tensor, torch.Tensor] | None = None
+        self._input = OnlineInput(self.sensor_names, ("position", "orientation"), who=self.name)
         self._offsets: tuple[torch.Tensor, torch.Tensor] | None = None
         self._traced: tuple[Any, Any] | None = None
 
@@ -249,7 +248,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
     # ------------------------------------------------------------------ online
     def reset(self) -> None:
         self._state = None
-        self._last = None
+        self._input = OnlineInput(self.sensor_names, ("position", "orientation"), who=self.name)
 
     def _online_fn(self) -> Any:
         """The per-frame computation (LSTM step + N closed-form LGD updates) as a TorchScript trace
@@ -284,8 +283,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         function (:meth:`_online_fn`; the first call traces it, ~1 s)."""
         if self._offsets is None:
             self._offsets = self._offsets_from(None)
-        p, R, v = frame_measurements(frame, self.sensor_names, self._last)
-        self._last = (p, R)
+        (p, R), v = self._input(frame)
         if self.model.training:
             self.model.eval()
         dev = self.device

@@ -213,12 +213,9 @@ class LbfgsEstimator(EmposeEstimator):
     @torch.no_grad()
     def step(self, frame: SensorFrame) -> PoseFrame:
         """One frame, warm-started from the previous solution."""
-        from wearpose.estimators.empose.data import frame_measurements
-
         if self._offsets is None:
             self._offsets = self._offsets_from(None)
-        p, R, v = frame_measurements(frame, self.sensor_names, self._last)
-        self._last = (p, R)
+        (p, R), v = self._input(frame)
         self.model.eval()
         offR, offt = self._offsets
         rot, beta, self._warm, rec = self._solve(p.to(self.device), R.to(self.device), offR.to(self.device),

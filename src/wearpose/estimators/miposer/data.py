@@ -29,84 +29,61 @@ import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
-import numpy as np
 import torch
 
 from wearpose.calibration import CalibrationResult, apply_miposer, calibrate, em_to_world
-from wearpose.errors import ShapeError
 from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, kit_sites, num_batches, split_source
 from wearpose.estimators.seeding import clip_seed
-from wearpose.estimators.inputs import hold_last_valid
+from wearpose.estimators.inputs import InputSpec, hold_last_valid, prepare
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.geometry import matrix_to_rot6d
 from wearpose.recording.tpose import tpose_then
+from wearpose.sensors import get_kit
 
 DATA_VERSION = 1
-#: Tolerance when picking 120 Hz EM samples at the 60 Hz headset instants, s.
-GRID_TOLERANCE_S = 1e-3
 
 
-def _pick(ts: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Index of the sample of ``ts`` at each ``grid`` instant and whether it is within tolerance."""
-    i = np.clip(np.searchsorted(ts, grid), 1, max(1, len(ts) - 1))
-    i = np.where(np.abs(ts[i - 1] - grid) <= np.abs(ts[np.minimum(i, len(ts) - 1)] - grid), i - 1, i)
-    i = np.clip(i, 0, len(ts) - 1)
-    return i, np.abs(ts[i] - grid) <= GRID_TOLERANCE_S
-
-
-def kit_streams(recording: Any, kit: str) -> tuple[str, list[str]]:
-    """The headset (``vio``) sensor name and the wrist EM sensor names of ``kit`` (kit order)."""
-    from wearpose.sensors import get_kit
-
+def input_spec(kit: str, rate: float = 60.0) -> InputSpec:
+    """What MI-Poser reads of ``kit``: the headset (``vio``, first) at ``rate`` Hz and the wrist EM
+    sensors (kit order, relative to the head-worn source or in the world) at any rate, sampled at
+    the headset's instants (``align="first"``: exact in simulation; a sample further than
+    :data:`~wearpose.estimators.inputs.ALIGN_TOLERANCE_S` counts as dropped). The kit's wrist IMUs
+    (MIM's input) are not required."""
     k = get_kit(kit)
-    vio = [s.name for s in k.sensors if s.kind == "vio"]
-    em = [s.name for s in k.sensors if s.kind == "em6dof"]
-    missing = [n for n in (*vio, *em) if n not in recording.names]
-    if missing:
-        raise ShapeError(f"recording lacks sensors {missing} of kit {kit!r} (has {list(recording.names)})")
-    return vio[0], em
+    names = (*(s.name for s in k.sensors if s.kind == "vio"), *(s.name for s in k.sensors if s.kind == "em6dof"))
+    return InputSpec.from_kit("MI-Poser", kit, ("position", "orientation"), sensor_names=names,
+                              rates={"vio": float(rate)}, align="first")
 
 
-def raw_inputs(recording: Any, kit: str, rate: float = 60.0) -> dict[str, torch.Tensor]:
+def raw_inputs(recording: Any, kit: str, rate: float = 60.0,
+               before_grid: Callable[[Any], Any] | None = None) -> dict[str, torch.Tensor]:
     """Headset and wrist sensor poses in the headset's world, on the headset's time grid.
 
-    Wrist EM poses (relative to the head-worn source, DESIGN: EM canonical form) are composed
-    with the headset pose (:func:`wearpose.calibration.em_to_world`); 120 Hz EM samples are
-    taken at the headset's 60 Hz instants (exact in simulation; a sample further than
-    :data:`GRID_TOLERANCE_S` counts as dropped). Dropped samples are held at the last valid one
+    The recording goes through :func:`wearpose.estimators.inputs.prepare` (:func:`input_spec`;
+    ``before_grid``: a step on the canonical recording first, e.g. MIM). Wrist EM poses relative
+    to the head-worn source (DESIGN: EM canonical form) are composed with the headset pose
+    (:func:`wearpose.calibration.em_to_world`), in float64. A wrist sample counts as dropped
+    when the headset's is; dropped samples are then held at the last valid composed one
     (:func:`~wearpose.estimators.inputs.hold_last_valid`).
 
     Returns:
-        ``{"t": (T,) s, "R": (T, S, 3, 3), "p": (T, S, 3) m, "valid": (T, S)}``, head first.
+        ``{"t": (T,) s, "R": (T, S, 3, 3), "p": (T, S, 3) m, "valid": (T, S), "recording":
+        the canonical recording the grid was taken from}``, head first.
 
     Raises:
-        ShapeError: missing sensors, or a headset not at ``rate`` Hz.
+        ShapeError: missing sensors, or a headset not at ``rate`` Hz (naming the recording).
     """
-    vio, em = kit_streams(recording, kit)
-    h = recording.sensor(vio)
-    if abs(float(h.info.rate) - rate) > 1e-3 * rate:
-        raise ShapeError(f"sensor {vio!r} runs at {h.info.rate} Hz; MI-Poser's IK model runs at {rate:g} Hz")
-    ts = np.asarray(h.timestamps, dtype=np.float64)
-    hR = torch.as_tensor(np.asarray(h.orientation), dtype=torch.float64)
-    hp = torch.as_tensor(np.asarray(h.position), dtype=torch.float64)
-    hv = torch.as_tensor(np.asarray(h.valid))
-    Rs, ps, vs = [hR], [hp], [hv]
-    for n in em:
-        s = recording.sensor(n)
-        i, ok = _pick(np.asarray(s.timestamps, dtype=np.float64), ts)
-        eR = torch.as_tensor(np.asarray(s.orientation)[i], dtype=torch.float64)
-        ep = torch.as_tensor(np.asarray(s.position)[i], dtype=torch.float64)
-        v = torch.as_tensor(np.asarray(s.valid)[i] & ok) & hv
-        if (s.info.reference or "source") == "source":
-            eR, ep = em_to_world(hR, hp, eR, ep)
-        Rs.append(eR)
-        ps.append(ep)
-        vs.append(v)
-    R, p, valid = torch.stack(Rs, 1), torch.stack(ps, 1), torch.stack(vs, 1)
+    spec = input_spec(kit, rate)
+    x = prepare(recording, spec, hold=False, before_grid=before_grid, dtype=torch.float64)
+    R, p, valid = x.channels["orientation"], x.channels["position"], x.valid.clone()
+    valid[:, 1:] &= valid[:, :1]
+    for j, n in enumerate(spec.sensor_names[1:], start=1):
+        if (x.recording.sensor(n).info.reference or "source") == "source":
+            R[:, j], p[:, j] = em_to_world(R[:, 0], p[:, 0], R[:, j], p[:, j])
     p, R = hold_last_valid(p, valid), hold_last_valid(R, valid)
-    return {"t": torch.as_tensor(ts), "R": R, "p": p, "valid": valid}
+    return {"t": torch.as_tensor(x.timestamps), "R": R, "p": p, "valid": valid, "recording": x.recording}
 
 
 def uncalibrated(res: CalibrationResult) -> CalibrationResult:

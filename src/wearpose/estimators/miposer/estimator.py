@@ -39,9 +39,9 @@ import torch
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
-from wearpose.estimators.inputs import InputSpec, canonical_input, held_frame
+from wearpose.estimators.inputs import InputSpec, OnlineInput, canonical_input, on_first_grid
 from wearpose.estimators.miposer.config import MiposerConfig
-from wearpose.estimators.miposer.data import calibrated_inputs, kit_streams, raw_inputs, uncalibrated
+from wearpose.estimators.miposer.data import calibrated_inputs, input_spec, raw_inputs, uncalibrated
 from wearpose.estimators.miposer.model import AvatarPoserNet, decode_pose, head_anchored_translation, window_features
 from wearpose.estimators.registry import register_estimator
 from wearpose.sensors import get_kit
@@ -89,38 +89,28 @@ def frames(recording: Any, kit: str = "miposer", rate: float = 60.0) -> Iterator
     ``(S, 3)``, ``orientation`` ``(S, 3, 3)`` in canonical form (headset in its world, EM relative
     to the source; declared units and up axes converted), plus ``angular_velocity`` /
     ``acceleration`` ``(S, 3)`` of each wrist's co-located IMU (NaN for the headset and when the
-    kit has no IMU).
+    kit has no IMU). Every sensor is taken at the headset's instants as offline
+    (:func:`~wearpose.estimators.miposer.data.input_spec`, :func:`~wearpose.estimators.inputs.on_first_grid`).
     """
-    from wearpose.estimators.miposer.data import _pick
-
-    recording = recording if recording.is_canonical else recording.to_canonical()
-    vio, em = kit_streams(recording, kit)
-    h = recording.sensor(vio)
-    ts = np.asarray(h.timestamps, dtype=np.float64)
-    names = (vio, *em)
-    S, T = len(names), len(ts)
-    pos = np.full((T, S, 3), np.nan, np.float32)
-    ori = np.full((T, S, 3, 3), np.nan, np.float32)
-    gyr = np.full((T, S, 3), np.nan, np.float32)
-    acc = np.full((T, S, 3), np.nan, np.float32)
-    valid = np.zeros((T, S), bool)
-    pos[:, 0], ori[:, 0], valid[:, 0] = h.position, h.orientation, h.valid
-    imus = {s.site: s.name for s in get_kit(kit).sensors if s.kind == "imu"}
-    for j, n in enumerate(em, start=1):
-        s = recording.sensor(n)
-        i, ok = _pick(np.asarray(s.timestamps, dtype=np.float64), ts)
-        pos[:, j], ori[:, j], valid[:, j] = np.asarray(s.position)[i], np.asarray(s.orientation)[i], np.asarray(s.valid)[i] & ok
-        site = get_kit(kit).sensor(n).site
-        if site in imus and imus[site] in recording.names:
-            u = recording.sensor(imus[site])
-            k, ok2 = _pick(np.asarray(u.timestamps, dtype=np.float64), ts)
-            if u.angular_velocity is not None:
-                gyr[:, j] = np.where(ok2[:, None], np.asarray(u.angular_velocity)[k], np.nan)
-            if u.acceleration is not None:
-                acc[:, j] = np.where(ok2[:, None], np.asarray(u.acceleration)[k], np.nan)
+    spec = input_spec(kit, rate)
+    recording = canonical_input(recording, spec)
+    k = get_kit(kit)
+    imus = {s.site: s.name for s in k.sensors if s.kind == "imu" and s.name in recording.names}
+    wrist_imu = {n: imus.get(k.sensor(n).site) for n in spec.sensor_names[1:]}
+    aligned = on_first_grid(recording, (*spec.sensor_names, *(u for u in wrist_imu.values() if u)))
+    grid = aligned.on_common_grid(spec.sensor_names)
+    T, S = grid.valid.shape
+    gyr, acc = np.full((T, S, 3), np.nan, np.float32), np.full((T, S, 3), np.nan, np.float32)
+    for j, n in enumerate(spec.sensor_names[1:], start=1):
+        u = aligned.sensor(wrist_imu[n]) if wrist_imu[n] else None  # NaN beyond the grid tolerance
+        if u is not None and u.angular_velocity is not None:
+            gyr[:, j] = u.angular_velocity
+        if u is not None and u.acceleration is not None:
+            acc[:, j] = u.acceleration
     for t in range(T):
-        yield SensorFrame(float(ts[t]), names, valid[t],
-                          {"position": pos[t], "orientation": ori[t], "angular_velocity": gyr[t], "acceleration": acc[t]})
+        yield SensorFrame(float(grid.timestamps[t]), grid.names, grid.valid[t],
+                          {"position": grid.channels["position"][t], "orientation": grid.channels["orientation"][t],
+                           "angular_velocity": gyr[t], "acceleration": acc[t]})
 
 
 @register_estimator("miposer")
@@ -225,10 +215,7 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
         """What :meth:`estimate` reads: the headset pose at the trained rate and the wrist EM
         poses (relative to the head-worn source, or in the world), any EM rate. The kit's wrist
         IMUs (MIM's input) are optional and converted with the rest."""
-        k = get_kit(self.kit_name)
-        names = tuple(s.name for s in k.sensors if s.kind in ("vio", "em6dof"))
-        return InputSpec.from_kit("MI-Poser", self.kit_name, ("position", "orientation"), sensor_names=names,
-                                  rates={"vio": self.fps})
+        return input_spec(self.kit_name, self.fps)
 
     def estimate(self, recording: Any, calibration: Any = None,
                  calibration_window: tuple[float, float] | None = None, imu: dict[str, Any] | None = None) -> PoseTrack:
@@ -243,14 +230,16 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
                 EM samples, relative to the source (default: derived from the recording,
                 :func:`~wearpose.estimators.miposer.mim.relative_imu`).
         """
-        recording = canonical_input(recording, self.input_spec)
         extras: dict[str, Any] = {"frame": "calibrated", "method": self.name, "mim": self.mim}
-        if self.mim:
+
+        def mitigated(rec: Any) -> Any:  # MIM on the checked, canonical recording, before the grid
             from wearpose.estimators.miposer.mim import mitigate_recording
 
-            recording, extras["interference"] = mitigate_recording(recording, self.kit_name, self.mim_config, imu)
-        res = resolve_calibration(recording, calibration, calibration_window or self.calibration_window, self.body)
-        raw = raw_inputs(recording, self.kit_name, self.fps)
+            rec, extras["interference"] = mitigate_recording(rec, self.kit_name, self.mim_config, imu)
+            return rec
+
+        raw = raw_inputs(recording, self.kit_name, self.fps, before_grid=mitigated if self.mim else None)
+        res = resolve_calibration(raw["recording"], calibration, calibration_window or self.calibration_window, self.body)
         if res is None:
             warnings.warn("MI-Poser: no calibration (pass calibration=, calibration_window= or store one with "
                           "wearpose calibrate --method miposer-tpose); sensor poses are used as they are", stacklevel=2)
@@ -269,7 +258,7 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
     def reset(self) -> None:
         self._R: list[torch.Tensor] = []
         self._p: list[torch.Tensor] = []
-        self._last: tuple[torch.Tensor, torch.Tensor] | None = None
+        self._input = OnlineInput(self.input_spec.sensor_names, ("position", "orientation"), who="MI-Poser")
         self._mims: list[Any] | None = None
         self._prev_t: float | None = None
 
@@ -277,9 +266,9 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
     def step(self, frame: SensorFrame) -> PoseFrame:
         """One 60 Hz frame (:func:`frames`): headset + wrist EM (+ wrist gyro/accelerometer for MIM)."""
         from wearpose.calibration import apply_miposer, em_to_world
-        names = [n for n in self.sensor_names if n in frame.names and not n.endswith("_imu")]
-        (p, R), v = held_frame(frame, names, ("position", "orientation"), self._last)
-        self._last = (p, R)
+
+        names = self._input.sensor_names
+        (p, R), v = self._input(frame)
         extras: dict[str, Any] = {"frame": "calibrated"}
         if self.mim:
             from wearpose.estimators.miposer.mim import step_mim
@@ -287,7 +276,8 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
             dt = 1.0 / self.fps if self._prev_t is None else max(1e-4, frame.timestamp - self._prev_t)
             if self._mims is None:
                 self._mims = [None] * (len(names) - 1)
-            R, p, extras["interference"] = step_mim(self._mims, frame, names, R, p, dt, self.mim_config)
+            R, p, extras["interference"] = step_mim(self._mims, frame, names, self._input.index(frame.names), R, p, dt,
+                                                    self.mim_config)
         self._prev_t = frame.timestamp
         wR, wp = em_to_world(R[:1].expand(len(names) - 1, 3, 3), p[:1].expand(len(names) - 1, 3), R[1:], p[1:])
         Rw = torch.cat([R[:1].double(), wR])

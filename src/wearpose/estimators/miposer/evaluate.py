@@ -180,9 +180,9 @@ def _to_head(rec: Any, kit: str, em_name: str, R_src: np.ndarray, p_src: np.ndar
     convention), through the recording's headset VIO pose (held to the EM instants): composing
     them back with the headset (as :func:`~.data.raw_inputs` does) gives the room-fixed
     measurement in the headset's world (MI-Poser App. A)."""
-    from wearpose.estimators.miposer.data import kit_streams
+    from wearpose.estimators.miposer.data import input_spec
 
-    vio, _ = kit_streams(rec, kit)
+    vio = input_spec(kit).sensor_names[0]
     h, s = rec.sensor(vio), rec.sensor(em_name)
     n = min(len(R_src), s.num_frames)
     i = np.clip(np.searchsorted(np.asarray(h.timestamps), np.asarray(s.timestamps[:n]) + 1e-6) - 1, 0, h.num_frames - 1)

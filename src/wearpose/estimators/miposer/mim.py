@@ -84,17 +84,17 @@ def relative_imu(recording: Any, kit: str, em_name: str, imu_name: str | None) -
     Returns:
         ``(gyro (T, 3) rad/s, acc (T, 3) m/s^2)``; zeros where the kit has no co-located IMU.
     """
-    from wearpose.estimators.miposer.data import _pick, kit_streams
+    from wearpose.estimators.inputs import nearest_samples
+    from wearpose.estimators.miposer.data import input_spec
 
     em = recording.sensor(em_name)
     ts = np.asarray(em.timestamps, dtype=np.float64)
     T = len(ts)
     if imu_name is None or imu_name not in recording.names:
         return np.zeros((T, 3)), np.zeros((T, 3))
-    vio, _ = kit_streams(recording, kit)
-    h = recording.sensor(vio)
+    h = recording.sensor(input_spec(kit).sensor_names[0])
     u = recording.to_canonical().sensor(imu_name)
-    i, _ = _pick(np.asarray(u.timestamps, dtype=np.float64), ts)
+    i, _ = nearest_samples(np.asarray(u.timestamps, dtype=np.float64), ts)
     w_site = np.nan_to_num(np.asarray(u.angular_velocity, dtype=np.float64)[i])
     a_world = np.nan_to_num(np.asarray(u.acceleration, dtype=np.float64)[i])
     R_off = np.eye(3)
@@ -108,7 +108,7 @@ def relative_imu(recording: Any, kit: str, em_name: str, imu_name: str | None) -
     if len(hts) > 1:
         w_head[1:] = _rot_log(hR[1:] @ np.swapaxes(hR[:-1], -1, -2)) / np.diff(hts)[:, None]  # world frame
         w_head[0] = w_head[1]
-    j, _ = _pick(hts, ts)
+    j, _ = nearest_samples(hts, ts)
     R_head = hR[j]
     R_em = np.nan_to_num(np.asarray(em.orientation, dtype=np.float64))
     R_ws = R_head @ R_em
@@ -149,20 +149,22 @@ def mitigate_recording(recording: Any, kit: str, mim_config: Any = None,
     return rec, info
 
 
-def step_mim(mims: list[Any], frame: Any, names: Sequence[str], R: torch.Tensor, p: torch.Tensor, dt: float,
-             mim_config: Any = None) -> tuple[torch.Tensor, torch.Tensor, dict[str, Any]]:
+def step_mim(mims: list[Any], frame: Any, names: Sequence[str], cols: Sequence[int], R: torch.Tensor, p: torch.Tensor,
+             dt: float, mim_config: Any = None) -> tuple[torch.Tensor, torch.Tensor, dict[str, Any]]:
     """Online MIM on one frame: ``names`` = (headset, wrist EM ...) rows of ``R`` ``(S, 3, 3)`` /
-    ``p`` ``(S, 3)``; the frame's ``angular_velocity`` / ``acceleration`` rows of the wrists in
-    MIM's convention (NaN -> 0). ``mims`` holds one MIM per wrist (created on first use)."""
+    ``p`` ``(S, 3)``, in the frame's columns ``cols`` (the estimator's
+    :meth:`~wearpose.estimators.inputs.OnlineInput.index`); the frame's ``angular_velocity`` /
+    ``acceleration`` rows of the wrists in MIM's convention (NaN -> 0). ``mims`` holds one MIM
+    per wrist (created on first use)."""
     R, p = R.clone(), p.clone()
-    fn = list(frame.names)
-    gy = np.asarray(frame.channels.get("angular_velocity", np.full((len(fn), 3), np.nan)), dtype=np.float64)
-    ac = np.asarray(frame.channels.get("acceleration", np.full((len(fn), 3), np.nan)), dtype=np.float64)
+    n_cols = len(frame.names)
+    gy = np.asarray(frame.channels.get("angular_velocity", np.full((n_cols, 3), np.nan)), dtype=np.float64)
+    ac = np.asarray(frame.channels.get("acceleration", np.full((n_cols, 3), np.nan)), dtype=np.float64)
     info: dict[str, Any] = {}
     for j, n in enumerate(names[1:]):
         if mims[j] is None:
             mims[j] = make_mim(mim_config)
-        k = fn.index(n)
+        k = int(cols[j + 1])
         o = mims[j].step(R[j + 1].double().numpy(), p[j + 1].double().numpy(), np.nan_to_num(gy[k]), np.nan_to_num(ac[k]), dt)
         R[j + 1] = torch.as_tensor(o["R"], dtype=R.dtype)
         p[j + 1] = torch.as_tensor(o["p"], dtype=p.dtype)

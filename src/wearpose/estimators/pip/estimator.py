@@ -44,7 +44,7 @@ import torch
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
-from wearpose.estimators.inputs import InputSpec, canonical_input, held_frame, hold_last_valid
+from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.data import EDGE_FRAMES, LEAF_JOINTS, imu_features
 from wearpose.estimators.pip.model import NumpyStepper, PipNet
@@ -218,8 +218,9 @@ class PipEstimator(NetworkCheckpointing, Estimator):
                                   sensor_names=tuple(self.sensor_names), kinds={"imu": ("imu", "mimu"), "mimu": ("imu", "mimu")},
                                   rates={"imu": self.fps, "mimu": self.fps})
 
-    def _bone_recording(self, recording: Any) -> Any:
-        rec = canonical_input(recording, self.input_spec)
+    def _bone_orientations(self, rec: Any) -> Any:
+        """The checked, canonical recording with bone orientations (module doc): the method's
+        own step of :func:`~wearpose.estimators.inputs.prepare`."""
         meta = rec.meta or {}
         if meta.get("orientation_frame") == "segment":
             return rec
@@ -232,20 +233,15 @@ class PipEstimator(NetworkCheckpointing, Estimator):
             res = calibrate(rec.select(self.sensor_names), "tpose", body=None, window=self.calibration_window)
             return apply_calibration(rec, res)
         warnings.warn("PIP: recording is neither calibrated nor marked orientation_frame='segment'; using the IMU "
-                      "orientations as bone orientations", stacklevel=3)
+                      "orientations as bone orientations", stacklevel=5)
         return rec
 
     def _inputs(self, recording: Any) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        rec = self._bone_recording(recording)
-        grid = rec.on_common_grid(self.sensor_names)
-        valid = torch.as_tensor(grid.valid)
-        acc = torch.as_tensor(np.nan_to_num(grid.channels["acceleration"]), dtype=torch.float32)
-        ori = torch.as_tensor(grid.channels["orientation"], dtype=torch.float32)
-        acc, ori = hold_last_valid(acc, valid), hold_last_valid(ori, valid)
+        x = prepare(recording, self.input_spec, before_grid=self._bone_orientations, nan_to_zero=("acceleration",))
         subj = recording.subject or {}
         if subj.get("betas") is not None:
             self.betas = torch.as_tensor(np.asarray(subj["betas"], dtype=np.float32)).reshape(10)
-        return acc, ori, valid
+        return x.channels["acceleration"], x.channels["orientation"], x.valid
 
     # ------------------------------------------------------------------ outputs
     def _decode(self, out: dict[str, torch.Tensor], root: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -356,7 +352,8 @@ class PipEstimator(NetworkCheckpointing, Estimator):
     # ------------------------------------------------------------------ online
     def reset(self) -> None:
         self._states: list[Any] | None = None
-        self._last: tuple[torch.Tensor, torch.Tensor] | None = None
+        self._input = OnlineInput(self.sensor_names, ("acceleration", "orientation"), who="PIP",
+                                  nan_to_zero=("acceleration",))
         self._trans: torch.Tensor | None = None
         self._started_physics = False
         self._integrating = False
@@ -366,9 +363,7 @@ class PipEstimator(NetworkCheckpointing, Estimator):
     def step(self, frame: SensorFrame) -> PoseFrame:
         """One 60 fps frame of bone orientations and free accelerations (calibrated: see
         :meth:`set_initial_state` and the module doc); the LSTM states carry over."""
-        (a, R), v = held_frame(frame, self.sensor_names, ("acceleration", "orientation"), self._last, who="PIP",
-                               nan_to_zero=("acceleration",))
-        self._last = (a, R)
+        (a, R), v = self._input(frame)
         return self.step_tensors(a, R, bool(v.all()), frame.timestamp)
 
     @torch.no_grad()

@@ -29,21 +29,21 @@ def run_demo(clip: str, out: str | Path, max_seconds: float = 10.0, seed: int = 
     from wearpose.body import BodyModel, JOINT_INDEX, MAJOR_JOINTS
     from wearpose.estimators.birae.data import SCENARIOS, make_recording, synthesize
     from wearpose.estimators.seeding import clip_seed
-    from wearpose.estimators.birae.estimator import BiraeEstimator
     from wearpose.estimators.birae.evaluate import group_errors
     from wearpose.viewer.demos.birae_plots import uncertainty_bands
     from wearpose.estimators.birae.uncertainty import coverage
     from wearpose.motion import load_motion
     from wearpose.viewer import write_html
     from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
-    from wearpose.weights import card, weight_path
+    from wearpose.estimators.run import open_model
+    from wearpose.weights import card
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     body = BodyModel()
     seq = load_motion(clip, rest_joints=body.rest_joints())
     seq = seq.slice(0, min(seq.num_frames, int(round(max_seconds * seq.fps))))
-    ests = {k: BiraeEstimator.load(weight_path(w)) for k, w in WEIGHTS.items()}
+    ests = {k: open_model(w).make() for k, w in WEIGHTS.items()}  # each checkpoint read once
     k = 180.0 / math.pi
     noisy = synthesize(seq, 60.0, SCENARIOS["noise"], clip_seed(clip, seed, "birae:demo-noise"), channels=True)
     rec = make_recording(noisy["R_world"], 60.0, noisy["sim"], motion=noisy["motion"], meta={"clip": clip})

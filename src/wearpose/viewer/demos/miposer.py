@@ -73,19 +73,18 @@ def run_demo(clip: str, out: str | Path, weights: str = "miposer_cpu", condition
     from wearpose.calibration import calibrate
     from wearpose.estimators.miposer.config import UPPER_BODY
     from wearpose.recording.tpose import tpose_then
-    from wearpose.estimators.miposer.estimator import MiposerEstimator
+    from wearpose.estimators.run import open_model
     from wearpose.estimators.miposer.evaluate import interference_recording, joint_errors
     from wearpose.interference import simulate_condition
     from wearpose.motion import load_motion, resample
     from wearpose.sensors import get_kit
     from wearpose.viewer import write_html
     from wearpose.viewer.scene import ESTIMATE_COLOUR, SECOND_ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
-    from wearpose.weights import card, weight_path
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    wpath = Path(weights) if str(weights).endswith(".pt") else weight_path(weights)
-    est = MiposerEstimator.load(wpath)
+    source = open_model(weights)  # shipped weights or a checkpoint file, read here once
+    est = source.make()
     body = est.body
     seq = load_motion(clip, rest_joints=body.rest_joints())
     seq = resample(seq, est.fps) if abs(seq.fps - est.fps) > 1e-9 else seq
@@ -145,7 +144,7 @@ def run_demo(clip: str, out: str | Path, weights: str = "miposer_cpu", condition
         "</div><iframe src='viewer.html'></iframe></body></html>", encoding="utf-8")
     result = {"clip": clip, "frames": mm.num_frames, "fps": est.fps, "html": str(index), "viewer": str(viewer),
               "timeline": str(png), "title": title, "weights": weights,
-              "weights_licence": card(weights).get("licence", "") if wpath.parent == weight_path.__globals__["WEIGHTS_DIR"] else "",
+              "weights_licence": source.card.get("licence", ""),
               "metrics": metrics,
               "mim_position_fallback": info.get("fallback")}
     (out / "metrics.json").write_text(json.dumps(result, indent=2))

@@ -90,11 +90,10 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
     """
     from wearpose.estimators.seeding import clip_seed
     from wearpose.estimators.pip.data import EDGE_FRAMES
-    from wearpose.estimators.pip.estimator import PipEstimator
     from wearpose.evaluate import compute_all
     from wearpose.geometry import heading, rotation_y
     from wearpose.motion import load_motion, resample
-    from wearpose.estimators.run import use_calibration_window
+    from wearpose.estimators.run import estimate_recording, open_model
     from wearpose.recording import CALIBRATION_WINDOW_KEY, Recording, prepend_tpose
     from wearpose.sensors import simulate
     from wearpose.viewer import write_html
@@ -102,13 +101,10 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    if Path(weights).is_file():
-        path, licence = Path(weights), ""
-    else:
-        from wearpose.weights import card, weight_path
-
-        path, licence = weight_path(weights), card(weights).get("licence", "")
-    est = PipEstimator.load(path, physics=physics)
+    source = open_model(weights)  # shipped weights or a checkpoint file, read here once
+    path, licence = Path(source.path or weights), source.card.get("licence", "")
+    est = source.make()
+    est.physics = bool(physics)
     body = est.body
     seq = load_motion(clip, rest_joints=body.rest_joints())
     if abs(seq.fps - est.fps) > 1e-9:
@@ -125,8 +121,8 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
     # PIP's known initial state (Sec. 3.1.2) is the calibration pose: a T-pose at rest at the
     # origin, facing +Z; the subject's shape is known, as in PIP.
     est.set_initial_state(betas=seq.betas)
-    use_calibration_window(est, rec)
-    track = est.estimate(rec)
+    run = estimate_recording(source, rec, out / "recording.npz", estimator=est)  # calibrates on the marked T-pose
+    track = run.estimated  # metrics in the calibrated world; the page shows run.track (feet on the floor)
     # Ground truth in the calibrated world: the T-pose faced the clip's first heading and the
     # estimate starts at the origin, so rotate by minus that heading about +Y around the start.
     R = rotation_y(-heading(full.pose[0, 0].double())).float()
@@ -158,8 +154,10 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
     title = (f"{clip}: PIP ({path.stem}) from 6 simulated IMUs after a {TPOSE_S:g} s calibration T-pose, "
              f"{frames} clip frames evaluated at {est.fps:g} fps"
              f"{', physics (dual PD)' if track.extras.get('physics') else ', no physics'}")
-    html = write_html(out / "demo.html", body, track.local_rot, track.betas, track.trans, est.fps, title=title,
-                      label=f"estimate ({len(est.sensor_names)} IMUs, PIP)", compare=[("ground truth", gt_pose[:n], gt_betas, gt_trans[:n])],
+    lift = run.track.trans[:1] - track.trans[:1]  # place_in_world's vertical shift, given to the truth too
+    html = write_html(out / "demo.html", body, run.track.local_rot, run.track.betas, run.track.trans, est.fps, title=title,
+                      label=f"estimate ({len(est.sensor_names)} IMUs, PIP)",
+                      compare=[("ground truth", gt_pose[:n], gt_betas, gt_trans[:n] + lift)],
                       colours=[ESTIMATE_COLOUR, TRUTH_COLOUR], site_names=kit_sites(est.kit_name, body, est.sensor_names),
                       sites_label=f"{len(est.sensor_names)} IMUs ({est.kit_name})",
                       info={"SIP err (deg)": f"{metrics.get('sip_error_deg', float('nan')):.1f}",
