@@ -56,8 +56,8 @@ def main() -> None:
     worst = max(max(d.values()) for r in rows.values() for d in r.values())
     command = "python benchmarks/declared_units.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     res = {"clip": args.clip, "seconds": args.seconds, "tpose_s": 1.0, "noise": "none", "seed": 2,
-           "declarations": DECLARATIONS, "unit": "max |difference| over frames and elements; rotations as matrix "
-           "elements, trans in m", "rows": rows, "max": worst, "tolerance": 1e-4, "command": command,
+           "weights": list(rows), "declarations": DECLARATIONS,
+           "unit": "max |difference| over frames and elements; rotations as matrix elements, trans in m", "rows": rows, "max": worst, "tolerance": 1e-4, "command": command,
            "machine": {"platform": platform.platform(), "load_avg": os.getloadavg()}}
     decl = ", ".join(f"{k}={v}" for k, v in DECLARATIONS["mm"].items() if k != "position_unit")
     md = (f"# Declared units and frames give the same estimate (issue 21)\n\n`{command}`\n\n"
