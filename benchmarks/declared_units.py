@@ -70,8 +70,8 @@ def main() -> None:
           + "".join(f"| {n} | {r['mm']['local_rot']:.2g} | {r['mm'].get('trans', float('nan')):.2g} | "
                     f"{r['cm']['local_rot']:.2g} | {r['cm'].get('trans', float('nan')):.2g} |\n" for n, r in rows.items()))
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"{args.out}.md").write_text(md)
-    (RESULTS / f"{args.out}.json").write_text(json.dumps(res, indent=2))
+    for suffix, text in (("md", md), ("json", json.dumps(res, indent=2))):
+        (RESULTS / f"{args.out}.{suffix}").write_text(text)
     print(md)
 
 
