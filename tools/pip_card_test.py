@@ -1,7 +1,7 @@
 """Fill a shipped PIP card's ``test`` block from the Table 2 and walking-GRF benchmark JSONs.
 
-    python tools/pip_card_test.py pip_cpu benchmarks/results/pip_table2_mix.json \\
-        benchmarks/results/pip_grf_test_mix.json
+    python tools/pip_card_test.py pip_cpu benchmarks/results/pip_table2_arms.json \\
+        benchmarks/results/pip_grf_test_arms.json
 
 ``tools/ship_weights.py`` takes one evaluation row; a PIP card reports the "PIP" row of
 ``benchmarks/pip_eval.py`` (physics, dual PD, learned init) and the walking ground reaction

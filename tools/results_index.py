@@ -1,7 +1,9 @@
 """Write ``benchmarks/results/README.md``: one row per result (a ``.md`` table and/or its
 ``.json``), with its title, the command that produced it and the weights it names, read from
 the files themselves (the ``command`` / ``produced_by`` field of the JSON, else the markdown's
-"Produced by" line). Rows whose producer is not recorded say so.
+"Produced by" line). Rows whose producer is not recorded say so. Weights are named by their run
+directory (``runs/pip_w256_arms/best.pt`` -> ``pip_w256_arms``), with the shipped name a weights
+card (``src/wearpose/weights/*.json``, ``shipped_with``) gives that run.
 
 Run: ``python tools/results_index.py`` (after adding or re-running a benchmark).
 """
@@ -12,7 +14,9 @@ import json
 import re
 from pathlib import Path
 
-RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+CARDS = ROOT / "src" / "wearpose" / "weights"
 
 #: Producers of results whose file does not record one, from the commit that wrote the file
 #: (``git log -- benchmarks/results/<stem>.json``); re-running the benchmark records it in the file.
@@ -32,6 +36,27 @@ PRODUCERS = {
     "ximu3_noise": "python benchmarks/ximu3_noise.py (commit d7799b5)",
 }
 
+#: What the file name and command do not say: which shipped model a kept file stands for when its
+#: weights changed since, or why a result not measured with today's shipped weights stays.
+NOTES = {
+    "birae_heading_sweep": "current for birae3_cpu (3param); its 6param row is the width-128 birae6_cpu of commit "
+                           "ddbc6df, the shipped width-256 birae6_cpu is in birae_heading_sweep_w256",
+    "birae_heading_sweep_w256": "current for birae6_cpu (6param_w256 = the run shipped as birae6_cpu in 5570a1e); "
+                                "its 6param row is the previous width-128 birae6_cpu",
+    "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals')",
+    "empose_table3_rep": "a second training of four Table 3 rows: the run-to-run spread",
+    "physics_val_kres0.1": "made before contact_no_lift; with physics_val_literal_weights the evidence "
+                           "PhysicsConfig.weights_in_norm's docstring cites",
+    "physics_val_literal_weights": "made before contact_no_lift; see physics_val_kres0.1",
+    "pip_dualpd_inputs_test_aug3": "session-6 weights (pip_cpu until ce012f7): not re-run with the shipped weights",
+    "pip_dualpd_inputs_val_aug3": "session-6 weights (pip_cpu until ce012f7): not re-run with the shipped weights",
+    "pip_sitting_synthetic_arms_noinit": "the shipped pair's no-learned-init partner (not shipped)",
+    "pip_sitting_synthetic_arms_1h_noinit": "the shipped pair's no-learned-init partner (not shipped)",
+    "pip_val_travel_clips": "the 64 val clips that travel > 1 m (the pip_perclip_valtravel_* selection)",
+    "pip_grf_walk": "plot of the session-6 weights (commit efd9441)",
+    "pip_torque_wave": "plot of the width-128 weights (commit a528881)",
+}
+
 
 def _producer(stem: str, js: dict | None, md: str | None) -> str:
     for k in ("command", "produced_by", "cmd"):
@@ -41,23 +66,46 @@ def _producer(stem: str, js: dict | None, md: str | None) -> str:
     return m.group(1) if m else PRODUCERS.get(stem, "(not recorded in the file)")
 
 
-def _weights(js: dict | None) -> str:
-    if not isinstance(js, dict):
-        return ""
+def shipped_runs() -> dict[str, str]:
+    """``{run directory name: shipped weights name}`` from the cards' ``shipped_with`` commands."""
+    out = {}
+    for card in sorted(CARDS.glob("*.json")):
+        m = re.search(r"(\S+\.pt) (\w+)", str(json.loads(card.read_text(encoding="utf-8")).get("shipped_with", "")))
+        if m and Path(m.group(1)).parent.name:
+            out[Path(m.group(1)).parent.name] = m.group(2)
+    return out
+
+
+def _weight_name(path: str, shipped: dict[str, str]) -> str:
+    """A checkpoint as its run (``runs/X/best.pt`` -> ``X``), a shipped file as its name."""
+    p = Path(path)
+    run = p.parent.name if p.suffix == ".pt" and p.parent.name not in ("", "runs", "weights") else p.stem
+    return f"{run} (shipped as {shipped[run]})" if shipped.get(run, run) != run else run
+
+
+def _weights(js: dict | None, producer: str, shipped: dict[str, str]) -> str:
+    """The weights a result names: its JSON's weights field, else the checkpoints in its command."""
+    paths: list[str] = []
     for k in ("weights", "checkpoints", "checkpoint", "model"):
-        v = js.get(k)
+        v = js.get(k) if isinstance(js, dict) else None
         if isinstance(v, str):
-            return Path(v).stem
-        if isinstance(v, dict):
-            return ", ".join(sorted(Path(str(x)).stem if not isinstance(x, dict) else str(n) for n, x in v.items()))
-        if isinstance(v, list):
-            return ", ".join(Path(str(x)).stem for x in v)
-    return ""
+            paths = [v]
+        elif isinstance(v, dict):
+            paths = [str(n) if isinstance(x, dict) else str(x) for n, x in v.items()]
+        elif isinstance(v, list):
+            paths = [str(x) for x in v]
+        if paths:
+            break
+    if not paths:  # checkpoints, then shipped weights given by name (``--weights miposer_cpu``)
+        names = "|".join(sorted(c.stem for c in CARDS.glob("*.json")))
+        paths = re.findall(r"[\w./-]+\.pt\b", producer) + re.findall(rf"(?<![\w./-])(?:{names})(?![\w./-])", producer)
+    return ", ".join(dict.fromkeys(_weight_name(x, shipped) for x in paths))
 
 
-def rows() -> list[tuple[str, str, str, str]]:
-    """``(stem, title, producer, weights)`` for every result stem, sorted."""
+def rows() -> list[tuple[str, str, str, str, str]]:
+    """``(stem, title, producer, weights, note)`` for every result stem, sorted."""
     out = []
+    shipped = shipped_runs()
     stems = sorted({p.stem for p in RESULTS.iterdir() if p.suffix in (".md", ".json") and p.name != "README.md"})
     for stem in stems:
         md_path, js_path = RESULTS / f"{stem}.md", RESULTS / f"{stem}.json"
@@ -68,20 +116,34 @@ def rows() -> list[tuple[str, str, str, str]]:
             js = None
         title = next((ln.lstrip("# ").strip() for ln in (md or "").splitlines() if ln.startswith("#")), "")
         files = " ".join(f"[{p.suffix[1:]}]({p.name})" for p in (md_path, js_path) if p.is_file())
-        out.append((f"`{stem}` {files}", title.replace("|", "/"), _producer(stem, js, md).replace("|", "/"), _weights(js)))
+        producer = _producer(stem, js, md)
+        out.append((f"`{stem}` {files}", title.replace("|", "/"), producer.replace("|", "/"),
+                    _weights(js, producer, shipped), NOTES.get(stem, "")))
+    extra = sorted(p.name for p in RESULTS.iterdir() if p.suffix not in (".md", ".json"))
+    out += [(f"[{name}]({name})", "", "", "", NOTES.get(Path(name).stem, "")) for name in extra]
     return out
 
 
-def main() -> None:
+def render() -> str:
+    """The index's markdown, one row per result stem, then the other files (plots, clip lists)."""
     lines = ["# Benchmark results", "",
              "Written by `python tools/results_index.py` from the files themselves: each result's title, the "
-             "command that produced it (as recorded in the file) and the weights it names. A result whose "
-             "producer is not recorded in it is given from the commit that wrote it (`PRODUCERS` in the tool); "
-             "superseded variants are removed from the tree (git keeps them).", "",
-             "| result | title | produced by | weights |", "| --- | --- | --- | --- |"]
-    lines += [f"| {a} | {b} | `{c}` | {d} |" for a, b, c, d in rows()]
-    (RESULTS / "README.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
-    print(f"wrote {RESULTS / 'README.md'} ({len(lines) - 6} results)")
+             "command that produced it (as recorded in the file) and the weights it names (a run directory, "
+             "with the name it was shipped under when a weights card says so). A result whose "
+             "producer is not recorded in it is given from the commit that wrote it (`PRODUCERS` in the tool). "
+             "One current file per table per shipped model: superseded variants (earlier weights, earlier "
+             "code, development checks and parameter sweeps) are removed from the tree; git keeps them and "
+             "the docs cite them at their commit. A kept result not measured with today's shipped weights "
+             "says why in its note.", "",
+             "| result | title | produced by | weights | note |", "| --- | --- | --- | --- | --- |"]
+    lines += [f"| {a} | {b} | {f'`{c}`' if c else ''} | {d} | {e} |" for a, b, c, d, e in rows()]
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    text = render()
+    (RESULTS / "README.md").write_text(text, encoding="utf-8")
+    print(f"wrote {RESULTS / 'README.md'} ({text.count(chr(10)) - 6} rows)")
 
 
 if __name__ == "__main__":
