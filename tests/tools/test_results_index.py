@@ -4,24 +4,13 @@ longer in the tree only at the commit that holds it."""
 
 from __future__ import annotations
 
-import importlib.util
 import re
-from pathlib import Path
-from typing import Any
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.tools.tool_loader import ROOT, load_tool
+
 RESULTS = ROOT / "benchmarks" / "results"
 
-
-def _load_tool() -> Any:
-    # tools/ is not a package: load the script by path
-    spec = importlib.util.spec_from_file_location("results_index", ROOT / "tools" / "results_index.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-results_index = _load_tool()
+results_index = load_tool("results_index")
 
 
 def test_committed_index_is_current() -> None:

@@ -2,30 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import pytest
 
+from tests.tools.tool_loader import load_tool
 from wearpose.errors import ConfigError
 from wearpose.estimators import get_estimator
 from wearpose.weights import WEIGHTS_DIR
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _load_tool() -> Any:
-    # tools/ is not a package: load the script by path
-    spec = importlib.util.spec_from_file_location("ship_weights", ROOT / "tools" / "ship_weights.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-ship_weights = _load_tool()
+ship_weights = load_tool("ship_weights")
 
 
 def _described_cards() -> list[dict[str, Any]]:
