@@ -150,3 +150,62 @@ def test_viewer_port_refuses_a_foreign_origin_before_sending_the_scene() -> None
         assert viewer.server.origin_guard.refused == 2
     finally:
         viewer.close()
+
+
+def _walking_track(seconds: float = 6.0, fps: float = 30.0, speed: float = 0.6) -> PoseTrack:
+    """A body in the rest pose gliding along +X at ``speed`` m/s (a walk seen from the floor)."""
+    T = int(seconds * fps)
+    t = torch.arange(T, dtype=torch.float32) / fps
+    trans = torch.stack([speed * t, torch.zeros(T), torch.zeros(T)], -1)
+    return PoseTrack(torch.eye(3).repeat(T, 24, 1, 1), torch.zeros(10), trans, torch.ones(T, dtype=torch.bool), fps)
+
+
+def _blue(shot: np.ndarray) -> np.ndarray:
+    """``(N, 2)`` pixel (row, column) of the estimate's blue mesh in the scene area."""
+    area = shot[135:290, 60:365].astype(int)  # below the notification, right of the axes, left of the GUI panel
+    return np.argwhere(area[..., 2] - area[..., 0] > 60)
+
+
+@pytest.mark.budget(40)  # a software-WebGL page load and a few seconds of playback: 17 s measured
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium/chrome executable found (set WEARPOSE_CHROMIUM)")
+def test_camera_follows_the_walking_body_in_headless_chromium() -> None:
+    """On by default, as a user opens it: playing from the page's first frame, the camera the
+    browser reports (not the server's copy) looks at the body's place from the initial camera's
+    orbit once playback is paused, and the body is drawn where it was while it walked."""
+    body = BodyModel(make_tiny_asset())
+    track = _walking_track(seconds=20.0)
+    viewer = RecordingViewer(None, track, body=body, port=0, autoplay=True, camera_distance=2.5)
+    reports: list[tuple[np.ndarray, np.ndarray]] = []  # (position, look_at) the browser sent, m
+    viewer.server.on_client_connect(lambda c: c.camera.on_update(
+        lambda cam: reports.append((np.array(cam.position), np.array(cam.look_at)))))
+    look0 = np.asarray(viewer.server.initial_camera.look_at)
+    orbit0 = np.asarray(viewer.server.initial_camera.position) - look0
+    browser = None
+    try:
+        assert viewer.timeline.camera_follows.value, "camera follows must be on by default"
+        browser = Browser(viewer.url)
+        t0 = time.time()
+        first = None
+        while first is None and time.time() - t0 < 20:  # the page connects and draws while playing
+            time.sleep(0.5)
+            shot = browser.screenshot()
+            first = shot if len(_blue(shot)) > 50 else None
+        assert first is not None, "the body was never drawn"
+        time.sleep(3.0)  # playing: the body walks on (0.6 m/s)
+        viewer.timeline.playing.value = False
+        time.sleep(0.2)  # the player's last frame
+        frame = int(viewer.timeline.slider.value)
+        moved = float(track.trans[frame, 0] - track.trans[0, 0])
+        time.sleep(1.5)  # the browser applies the last camera and reports it back
+        second = browser.screenshot()
+        assert moved > 1.5, f"playback did not advance (frame {frame})"
+        pos, look = reports[-1]
+        assert np.allclose(look, look0 + [moved, 0, 0], atol=0.02), (look, look0, moved)
+        assert np.allclose(pos - look, orbit0, atol=0.02), "the follow changed the view, not only its place"
+        a, b = _blue(first), _blue(second)
+        assert len(b) > 50, "the body left the screen"
+        assert np.abs(a.mean(0) - b.mean(0)).max() < 15, "the body moved on screen: the camera did not follow"
+    finally:
+        if browser is not None:
+            browser.close()
+        viewer.close()

@@ -262,12 +262,63 @@ def _new_server(host: str, port: int, allow_origins: Sequence[str] = ()) -> Any:
 
 
 def _frame_scene(server: Any, centre: np.ndarray, ground_y: float, distance: float = 6.0) -> None:
-    """Ground grid at ``ground_y`` m; camera ``distance`` m in front (+Z) of ``centre`` (bodies
-    sit at ``centre + (0, 1, 2 ...) m`` along X, facing +Z)."""
+    """Ground grid at ``ground_y`` m (endless: a walking body never leaves it); camera
+    ``distance`` m in front (+Z) of ``centre`` (bodies sit at ``centre + (0, 1, 2 ...) m`` along
+    X, facing +Z)."""
     c = np.asarray(centre, np.float32)
-    server.scene.add_grid("/ground", width=8.0, height=8.0, plane="xz", position=(float(c[0]), float(ground_y), float(c[2])))
+    server.scene.add_grid("/ground", plane="xz", position=(float(c[0]), float(ground_y), float(c[2])),
+                          infinite_grid=True, fade_distance=30.0)
     server.initial_camera.position = (float(c[0]) + 0.5, float(c[1]) + 0.6, float(c[2]) + distance)
     server.initial_camera.look_at = (float(c[0]) + 0.5, float(c[1]) - 0.3, float(c[2]))
+
+
+class CameraFollow:
+    """Keeps every browser's camera on a moving body: its look-at point is the initial camera's,
+    moved over the floor (X, Z) as far as the body's root has moved; the user's orbit (camera
+    minus look-at: direction and distance) is kept, so only panning is taken over.
+
+    Why absolute and gated: the server's copy of a client's camera is overwritten by the
+    client's reports, which lag what the server sent; adding each frame's root motion to that
+    copy lost the motion of every report in flight (the camera fell behind the body), and the
+    first report can be viser's default camera ((3, 3, 3) looking at the origin) sent before the
+    page applied ``initial_camera``: moving that one replaced the initial view with a high
+    oblique one. Here the look-at is computed from the root alone (a stale report only delays a
+    frame), and a client is followed once it has reported the initial camera's look-at.
+
+    Args:
+        server: the ``viser.ViserServer``.
+        root0: ``(3,)`` m, world position of the followed root when the initial camera was set.
+    """
+
+    def __init__(self, server: Any, root0: np.ndarray) -> None:
+        self.server = server
+        self.look0 = np.asarray(server.initial_camera.look_at, np.float64)
+        self.root0 = np.asarray(root0, np.float64)
+        self.ready: set[int] = set()  # client ids that have shown the initial camera
+        self._lock = threading.Lock()
+
+    def target(self, root: np.ndarray) -> np.ndarray:
+        """``(3,)`` m, the look-at point for a root at ``root`` ``(3,)`` m (height unchanged)."""
+        d = np.asarray(root, np.float64) - self.root0
+        return self.look0 + np.array([d[0], 0.0, d[2]])
+
+    def follow(self, root: np.ndarray) -> None:
+        """Move every ready client's camera to look at :meth:`target` from its current orbit."""
+        look = self.target(root)
+        with self._lock:  # the player thread and GUI callbacks both draw frames
+            for cid, client in self.server.get_clients().items():
+                # One report: viser replaces a client's camera state object on each report, so
+                # reading position and look_at through the handle could mix two reports and
+                # shift the orbit for good.
+                state = getattr(client.camera, "_state", None) or client.camera
+                pos, at = np.array(state.position, np.float64), np.array(state.look_at, np.float64)
+                if cid not in self.ready:
+                    if not np.allclose(at, self.look0, atol=1e-3):
+                        continue  # the page has not applied initial_camera yet: its report is viser's default
+                    self.ready.add(cid)
+                with client.atomic():  # both in one batch: a page drawing between them reports a torn orbit
+                    client.camera.position = look + (pos - at)  # viser moves look_at by the same offset
+                    client.camera.look_at = look
 
 
 def _kit_sites(kit: str | None, sensor_names: Sequence[str], body: BodyModel) -> tuple[tuple[str, ...], str | None]:
@@ -307,9 +358,9 @@ class _Timeline:
         self.server, self.fps = server, fps
         server.gui.add_markdown(f"**{title}**")
         self.follow = server.gui.add_checkbox("follow live", True) if live else None
-        # Offline: the camera moves with the first body, keeping the user's orbit around it. Off by
-        # default: in headless Chromium (viser 1.1) the view it gave was not the initial camera's.
-        self.camera_follows = None if live else server.gui.add_checkbox("camera follows", False)
+        # Offline: the camera moves with the first body over the floor, keeping the user's orbit
+        # around it (CameraFollow); untick it to pan freely.
+        self.camera_follows = None if live else server.gui.add_checkbox("camera follows", True)
         self.slider = server.gui.add_slider("frame", min=0, max=max(1, num_frames - 1), step=1, initial_value=0)
         self.playing = server.gui.add_checkbox("play", not live)
         self.speed = server.gui.add_slider("speed", min=0.1, max=4.0, step=0.1, initial_value=1.0)
@@ -377,8 +428,12 @@ class RecordingViewer:
         self.timeline.playing.value = autoplay
         self.timeline.slider.on_update(self._on_slider)
         self._stop = threading.Event()
-        self._camera_root = next(iter(self.layers.values())).root.copy()
+        # The camera follows the body that moves over the floor: the estimate when it has a root
+        # translation, else the ground truth.
+        self.lead = "estimate" if first is not None or gt is None else "ground truth"
         self.show(0)
+        self.camera = CameraFollow(self.server, self.layers[self.lead].root)
+        self.timeline.camera_follows.on_update(lambda _: self._follow_camera())
         self._player = threading.Thread(target=self._play, daemon=True, name="wearpose-viewer-play")
         self._player.start()
 
@@ -418,17 +473,10 @@ class RecordingViewer:
         self._follow_camera()
 
     def _follow_camera(self) -> None:
-        """Move every client's camera (position and look-at) by how far the first body's root
-        moved since the last frame shown, when "camera follows" is ticked."""
-        lead = next(iter(self.layers.values()))
-        d = lead.root - self._camera_root
-        self._camera_root = lead.root.copy()
-        if not self.timeline.camera_follows.value or not np.any(d):
-            return
-        for client in self.server.get_clients().values():
-            if not client.camera.update_timestamp:  # no camera reported yet: moving viser's default would undo initial_camera
-                continue
-            client.camera.position = tuple(np.asarray(client.camera.position) + d)  # viser moves look_at with it
+        """Point every client's camera at the first body when "camera follows" is ticked."""
+        camera = getattr(self, "camera", None)  # None while the first frame is drawn
+        if camera is not None and self.timeline.camera_follows.value:
+            camera.follow(self.layers[self.lead].root)
 
     def _play(self) -> None:
         last = time.perf_counter()
