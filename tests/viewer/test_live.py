@@ -209,3 +209,57 @@ def test_camera_follows_the_walking_body_in_headless_chromium() -> None:
         if browser is not None:
             browser.close()
         viewer.close()
+
+
+def test_skeleton_sensors_and_label_move_with_the_mesh_in_one_batch() -> None:
+    """Read from the server's scene state after each drawn frame: the mesh as the browser skins
+    it (bone poses, linear blend skinning) is the body model's mesh; every skeleton joint node
+    has its mesh bone's pose, every bone line ends at its child joint, sensor dots sit at their
+    body sites and the label above the head; and a frame's updates are sent in atomic batches
+    with no line or point geometry rebuilt (562bec5's cause of the lag)."""
+    from wearpose.geometry import quat_to_matrix
+
+    body = BodyModel(make_tiny_asset())
+    rec, track = _recording_and_track(body)
+    viewer = RecordingViewer(rec, track, body=body, port=0, autoplay=False)
+    sent: list[tuple[str, int]] = []  # (message type, atomic depth when queued)
+    buffer = viewer.server._websock_server.get_message_buffer()
+    push = buffer.push
+    buffer.push = lambda m: (sent.append((type(m).__name__, buffer.atomic_counter)), push(m))[1]
+    try:
+        gt = rec.ground_truth
+        for i in (17, 45, 3):  # not 0: drawn at start, so re-drawing it sends nothing
+            sent.clear()
+            viewer.show(i)
+            for key, (pose, trans) in {"estimate": (track.local_rot[i], track.trans[i]),
+                                       "ground truth": (gt.pose[i], gt.trans[i])}.items():
+                layer = viewer.layers[key]
+                ref = body(pose[None], layer.betas[None], trans[None])
+                off = np.asarray(layer.mesh.position)
+                q = np.stack([np.asarray(b.wxyz) for b in layer.mesh.bones])
+                p = np.stack([np.asarray(b.position) for b in layer.mesh.bones])
+                R = quat_to_matrix(torch.as_tensor(q, dtype=torch.float64)).numpy()
+                v0 = (body.v_template + torch.einsum("vcs,s->vc", body.shapedirs, layer.betas)).double().numpy()
+                J0 = layer.J_rest.double().numpy()
+                drawn = np.einsum("vb,bvc->vc", body.weights.double().numpy(),
+                                  np.einsum("bcd,bvd->bvc", R, v0[None] - J0[:, None]) + p[:, None])
+                assert np.abs(drawn - ref.vertices[0].numpy()).max() < 1e-4, (key, i)
+                for j, f in enumerate(layer.frames):
+                    assert np.allclose(f.position, off + p[j], atol=1e-5), (key, i, j)
+                    assert np.allclose(quat_to_matrix(torch.as_tensor(f.wxyz)).numpy(), R[j], atol=1e-5), (key, i, j)
+                for j, line in layer.bone_lines.items():  # the bone's far end, through its parent's node
+                    parent = layer.frames[int(line.name.split("/joint")[1].split("/")[0])]
+                    end = quat_to_matrix(torch.as_tensor(parent.wxyz)).numpy() @ line.points[0, 1] + parent.position
+                    assert np.allclose(end, layer.frames[j].position, atol=1e-4), (key, i, j)
+                assert np.allclose(layer.label_anchor.position, layer.frames[15].position + [0, 0.35, 0], atol=1e-5)
+                if layer.sites:
+                    sites = body.sites(pose[None], layer.betas, trans[None], layer.sites).positions[0].numpy()
+                    for k, f in enumerate(layer.sensor_frames):
+                        assert np.allclose(f.position, sites[k] + off, atol=1e-5), (key, i, k)
+            moved = [(t, d) for t, d in sent if t in ("SetPositionMessage", "SetOrientationMessage",
+                                                       "SetBonePositionMessage", "SetBoneOrientationMessage")]
+            assert len(moved) > 100 and all(d > 0 for _, d in moved), "a pose update left outside an atomic batch"
+            assert not [t for t, _ in sent if t in ("LineSegmentsMessage", "PointCloudMessage")], "geometry rebuilt per frame"
+    finally:
+        buffer.push = push
+        viewer.close()

@@ -117,9 +117,9 @@ class BodyLayer:
             position=tuple(self.offset), cast_shadow=False, receive_shadow=False)  # shadows cost a pass per light
         self.frames = [server.scene.add_frame(f"/{name}/joint{j}", show_axes=False, position=tuple(J[j] + self.offset))
                        for j in range(24)]
-        for j, p in BONES:  # bone j -> p, fixed in the parent's frame
-            server.scene.add_line_segments(f"/{name}/joint{p}/bone{j}", np.stack([np.zeros(3, np.float32), J[j] - J[p]])[None],
-                                           colors=(30, 30, 30), thickness=0.012)
+        self.bone_lines = {j: server.scene.add_line_segments(  # bone j -> p, fixed in the parent's frame
+            f"/{name}/joint{p}/bone{j}", np.stack([np.zeros(3, np.float32), J[j] - J[p]])[None],
+            colors=(30, 30, 30), thickness=0.012) for j, p in BONES}
         self._joint_cols = joint_colours(None)
         self.joint_dots = [server.scene.add_point_cloud(f"/{name}/joint{j}/dot", np.zeros((1, 3), np.float32),
                                                         colors=self._joint_cols[j:j + 1], point_size=0.035,
