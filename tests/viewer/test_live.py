@@ -263,3 +263,31 @@ def test_skeleton_sensors_and_label_move_with_the_mesh_in_one_batch() -> None:
     finally:
         buffer.push = push
         viewer.close()
+
+
+@pytest.mark.budget(30)  # the x-IMU3 import and the segment estimate: 11 s measured
+def test_view_recording_shows_the_real_ximu3_segment_estimate(real_sensors, tmp_path) -> None:
+    """`wearpose view-recording REAL --model segments` (issue 26): the segment estimator names no
+    sensors and the seven x-IMU3 devices keep their own clocks (no common grid); the viewer
+    used to stop with 'on_common_grid: no sensors selected'. Now it shows the estimate with the
+    seven sensors on the estimator's nearest-sample grid, each dot at its body site."""
+    from wearpose.estimators.run import open_model
+    from wearpose.recording import from_ximu3, save_recording
+    from wearpose.viewer.live import open_recording_viewer
+
+    path = save_recording(from_ximu3(real_sensors / "ximu3-lower-body"), tmp_path / "ximu3-lower-body.npz")
+    viewer = open_recording_viewer(path, model=open_model("segments"), port=0)
+    try:
+        layer = viewer.layers["estimate"]
+        assert len(layer.sites) == 7 and len(viewer.grid.names) == 7
+        viewer.timeline.playing.value = False  # it opens playing, as for a user
+        time.sleep(0.2)  # the player's last frame
+        i = int(5.0 * viewer.fps)  # the right knee raised
+        viewer.show(i)
+        track = viewer.track
+        sites = viewer.body.sites(track.local_rot[i][None], layer.betas, track.trans[i][None], layer.sites).positions[0]
+        for k, f in enumerate(layer.sensor_frames):
+            assert np.allclose(f.position, sites[k].numpy(), atol=1e-5)
+        assert "sensors valid: " in viewer.timeline.info.content
+    finally:
+        viewer.close()

@@ -367,6 +367,21 @@ class _Timeline:
         self.info = server.gui.add_markdown("")
 
 
+def _sensor_grid(recording: Any, names: Sequence[str] | None) -> Any:
+    """``names``' (None: all) samples on one time grid, for the sensor dots' valid colours: the
+    recording's own when the sensors share one, else the nearest-sample grid the segment
+    estimator puts devices with their own clocks on (x-IMU3; nothing interpolated, a lost
+    sample stays masked)."""
+    from wearpose.recording import RecordingError
+
+    try:
+        return recording.on_common_grid(names)
+    except RecordingError:
+        from wearpose.estimators.inputs import nearest_sample_grid
+
+        return nearest_sample_grid(recording, tuple(names or recording.names)).on_common_grid()
+
+
 class RecordingViewer:
     """Offline viewer of a recording and/or an estimate (module doc).
 
@@ -395,7 +410,7 @@ class RecordingViewer:
         self.gt_start = float(getattr(recording, "ground_truth_start", 0.0))
         self.fps = float(track.fps if track is not None else gt.fps)
         self.num_frames = int(track.num_frames if track is not None else gt.num_frames)
-        self.grid = recording.on_common_grid(sensor_names) if recording is not None and recording.names else None
+        self.grid = _sensor_grid(recording, sensor_names) if recording is not None and recording.names else None
         names = tuple(self.grid.names) if self.grid is not None else ()
         infos = [recording.sensor(n).info for n in names]
         keep = [i for i, inf in enumerate(infos) if inf.site in self.body.site_names]
@@ -665,11 +680,12 @@ def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subj
     return why
 
 
-def run_recording_viewer(path: str | Path, *, model: ModelSource | None = None, host: str = "127.0.0.1",
-                         port: int = 8080, body: str | None = None, allow_origins: Sequence[str] = (),
-                         resample: bool | None = None) -> None:
-    """Blocking: the offline viewer of a recording file (and ``model``'s estimate, made as
-    ``wearpose estimate`` makes it: :func:`wearpose.estimators.run.estimate_recording`) until Ctrl-C."""
+def open_recording_viewer(path: str | Path, *, model: ModelSource | None = None, host: str = "127.0.0.1",
+                          port: int = 8080, body: str | None = None, allow_origins: Sequence[str] = (),
+                          resample: bool | None = None) -> RecordingViewer:
+    """The offline viewer of a recording file (and ``model``'s estimate, made as ``wearpose
+    estimate`` makes it: :func:`wearpose.estimators.run.estimate_recording`), serving until
+    :meth:`RecordingViewer.close`."""
     from wearpose.recording import load_recording
 
     rec = load_recording(path)
@@ -681,10 +697,20 @@ def run_recording_viewer(path: str | Path, *, model: ModelSource | None = None, 
         run = estimate_recording(model, rec, path, resample=resample)
         if run.note:
             print(f"warning: {run.note}", flush=True)
-        rec, track, names, bm = run.recording, run.track, run.estimator.sensor_names, run.body
+        rec, track, bm = run.recording, run.track, run.body
+        # an estimator for any kit (segments) names no sensors: the ones its estimate used
+        names = run.estimator.sensor_names or tuple(track.extras.get("segments", {})) or None
     _warn_if_exposed(host, port)
-    v = RecordingViewer(rec, track, sensor_names=names, body=bm, host=host, port=port, title=f"wearpose: {Path(path).name}",
-                        allow_origins=allow_origins)
+    return RecordingViewer(rec, track, sensor_names=names, body=bm, host=host, port=port,
+                           title=f"wearpose: {Path(path).name}", allow_origins=allow_origins)
+
+
+def run_recording_viewer(path: str | Path, *, model: ModelSource | None = None, host: str = "127.0.0.1",
+                         port: int = 8080, body: str | None = None, allow_origins: Sequence[str] = (),
+                         resample: bool | None = None) -> None:
+    """Blocking: :func:`open_recording_viewer` (``wearpose view-recording``) until Ctrl-C."""
+    v = open_recording_viewer(path, model=model, host=host, port=port, body=body, allow_origins=allow_origins,
+                              resample=resample)
     print(f"viewer on {v.url}; Ctrl-C to stop", flush=True)
     try:
         while True:
