@@ -36,10 +36,18 @@ def _level_plan(parents: tuple[int, ...]) -> tuple[tuple[int, int, int, tuple[in
 
 def _fk_levels(local_rot: torch.Tensor, rest_joints: torch.Tensor, parents: tuple[int, ...],
                plan: tuple[tuple[int, int, int, tuple[int, ...]], ...]) -> tuple[torch.Tensor, torch.Tensor]:
-    """:func:`forward_kinematics` one tree level per step, on ``[R | offset]`` blocks ``(..., J, 3, 4)``
-    (the root's offset is its rest position). Same products as the per-joint loop."""
-    offset = torch.cat([rest_joints[..., :1, :], rest_joints[..., 1:, :] - rest_joints[..., list(parents[1:]), :]], -2)
+    """:func:`forward_kinematics` one tree level per step: a joint's ``[R | t]`` block ``(..., 3, 4)``
+    is its parent's block times its own homogeneous ``[[R_local, offset], [0, 0, 0, 1]]``, one
+    matrix product per level (the root's offset is its rest position).
+
+    Bit-equal to the per-joint loop: every product is a dot of 3 terms (the fourth, ``t * 0`` for
+    a rotation entry and ``t * 1`` for a translation, adds exactly the loop's ``+ 0`` / ``+ t``)
+    computed by the same small-matrix kernel (tested)."""
+    par = list(parents[1:])
+    offset = torch.cat([rest_joints[..., :1, :], rest_joints[..., 1:, :] - rest_joints[..., par, :]], -2)
     top = torch.cat([local_rot, offset.unsqueeze(-1)], dim=-1)  # (..., J, 3, 4)
+    last = top.new_tensor([0.0, 0.0, 0.0, 1.0]).expand(*top.shape[:-2], 1, 4)
+    child = torch.cat([top, last], dim=-2)  # (..., J, 4, 4) homogeneous
     levels = [top[..., :plan[0][0], :, :]]
     for a, b, pl, local in plan:
         P = levels[pl]
@@ -48,10 +56,8 @@ def _fk_levels(local_rot: torch.Tensor, rest_joints: torch.Tensor, parents: tupl
         elif len(set(local)) == 1:
             Pp = P[..., local[0]:local[0] + 1, :, :]  # broadcast: every joint of the level has this parent
         else:
-            Pp = P.index_select(-3, torch.as_tensor(local, device=P.device))
-        Rp, tp = Pp[..., :3], Pp[..., 3:]
-        C = top[..., a:b, :, :]
-        levels.append(torch.cat([Rp @ C[..., :3], Rp @ C[..., 3:] + tp], dim=-1))
+            Pp = P[..., list(local), :, :]
+        levels.append(Pp @ child[..., a:b, :, :])
     T = torch.cat(levels, dim=-3)
     return T[..., :3], T[..., 3]
 
