@@ -129,12 +129,14 @@ def _reference_normals(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor
 
 
 def test_chunked_component_major_skinning_equals_reference(monkeypatch: pytest.MonkeyPatch) -> None:
-    """More frames than one skinning chunk, pose correctives on: vertices equal the per-vertex
-    LBS sum, normals the plain area-weighted normals, joints the joints-only path, sites the mesh."""
+    """More frames than one skinning chunk and one pose-corrective block, pose correctives on:
+    vertices equal the per-vertex LBS sum, normals the plain area-weighted normals, joints the
+    joints-only path, sites the mesh."""
     import wearpose.body.model as model
 
     body = BodyModel(make_tiny_asset(posedirs=True), dtype=torch.float64)
     monkeypatch.setattr(model, "SKIN_CHUNK_VERTEX_FRAMES", 3 * body.num_vertices)  # chunks of 3 frames
+    monkeypatch.setattr(model, "POSE_BLOCK_FRAMES", 6)  # pose correctives 6 frames (2 chunks) per product
     N = 11
     g = torch.Generator().manual_seed(1)
     R = axis_angle_to_matrix(torch.randn(N, 24, 3, generator=g, dtype=torch.float64) * 0.5)
@@ -220,3 +222,20 @@ def test_lowest_height_matches_the_skinned_mesh(dtype) -> None:
         assert low.shape == (40,) and low.dtype == dtype
         assert float((low - full).abs().max()) < tol and float((low - full).abs().mean()) < 0.005
     assert len(body._support_vertices()) < body.num_vertices / 3  # only the hull vertices are read
+
+
+def test_normals_with_autograd() -> None:
+    """The face cross product is the same arithmetic with and without autograd (bit-equal), and
+    normals through the sparse face operators have correct gradients."""
+    from wearpose.body.model import _cross_dim1
+
+    g = torch.Generator().manual_seed(4)
+    a, b = torch.randn(50, 3, 4, generator=g), torch.randn(50, 3, 4, generator=g)
+    with torch.no_grad():
+        plain = _cross_dim1(a, b)
+    tracked = _cross_dim1(a.clone().requires_grad_(), b)
+    assert tracked.requires_grad and torch.equal(plain, tracked.detach())
+    np.testing.assert_allclose(plain.numpy(), torch.linalg.cross(a, b, dim=1).numpy(), atol=1e-6)
+    body = BodyModel(make_tiny_asset(), dtype=torch.float64)
+    aa = (torch.randn(2, 72, generator=g, dtype=torch.float64) * 0.3).requires_grad_()
+    assert torch.autograd.gradcheck(lambda x: body(x, return_normals=True).normals, (aa,))

@@ -2,19 +2,12 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from functools import lru_cache
 
 import torch
 
 from wearpose.body.skeleton import PARENTS
-
-
-#: Batches up to this size (flattened) use the level-by-level path of :func:`forward_kinematics`:
-#: there the cost is per torch call (9 levels instead of 23 joints, ~1.6x faster at B = 1
-#: measured); larger batches are bandwidth-bound and the per-joint loop is faster (0.7x at 1024).
-LEVEL_FK_MAX_BATCH = 64
 
 
 @lru_cache(maxsize=16)
@@ -73,8 +66,8 @@ def forward_kinematics(
     joint from its parent is ``rest_joints[j] - rest_joints[parent]`` expressed in the parent's
     frame.
 
-    Small batches (up to :data:`LEVEL_FK_MAX_BATCH`) go one tree level at a time (9 levels for
-    SMPL instead of 23 joints); larger ones joint by joint. Both compute the same products.
+    Goes one tree level at a time (8 products for SMPL instead of 23 joints) when the joint
+    order allows it, else joint by joint; both compute the same products (bit-equal).
 
     Args:
         local_rot: ``(..., J, 3, 3)`` rotation of each joint relative to its parent (joint 0:
@@ -92,7 +85,7 @@ def forward_kinematics(
     rest_joints = rest_joints.expand(*batch, J, 3)
     par = tuple(int(p) for p in parents)
     plan = _level_plan(par) if J > 1 else None
-    if plan is not None and math.prod(batch) <= LEVEL_FK_MAX_BATCH:
+    if plan is not None:
         return _fk_levels(local_rot, rest_joints, par, plan)
     return _fk_loop(local_rot, rest_joints, parents)
 

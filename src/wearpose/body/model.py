@@ -8,6 +8,7 @@ asset as on SMPL.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -50,30 +51,79 @@ class SiteOutput:
 #: frames at a time, a patch of sites as many frames as make the same number of vertex-frames.
 SKIN_CHUNK_VERTEX_FRAMES = 8 * 13718
 
+#: Frames whose pose correctives (``(n, 207) @ (207, 3 V)``) are one matrix product: the pose
+#: directions (34 MB for SMPL's mesh) are read once per block instead of once per skinning chunk.
+POSE_BLOCK_FRAMES = 128
+
+
+@dataclass
+class _FaceOps:
+    """Sparse operators of a mesh's faces (:func:`_face_ops`), CSR, the buffers' dtype and device."""
+
+    edge1: torch.Tensor  #: (F, V): row f gives x[f1] - x[f0] (exact: entries -1 and +1)
+    edge2: torch.Tensor  #: (F, V): x[f2] - x[f0]
+    incidence: torch.Tensor  #: (V, F): 1 where vertex v is a corner of face f
+
+
+def _face_ops(faces: torch.Tensor, num_vertices: int, dtype: torch.dtype) -> _FaceOps:
+    """Build the :class:`_FaceOps` of ``faces`` ``(F, 3)``: a gather of face corners along the
+    vertex rows and the scatter of face normals back to their corners, as sparse products
+    (``index_select`` along the last dim of a component-major ``(3, n, V)`` tensor takes torch's
+    slow per-index path: ~10x the whole sparse version on the 13,718-vertex mesh)."""
+    f = faces.detach().cpu().numpy().astype(np.int64)
+    F = len(f)
+    rows = np.arange(F)
+
+    def csr(r: np.ndarray, c: np.ndarray, v: np.ndarray, shape: tuple[int, int]) -> torch.Tensor:
+        coo = torch.sparse_coo_tensor(torch.as_tensor(np.stack([r, c])), torch.as_tensor(v, dtype=dtype), shape,
+                                      check_invariants=True)
+        with warnings.catch_warnings():  # torch calls its CSR layout beta; products with it are tested here
+            warnings.filterwarnings("ignore", message="Sparse CSR tensor support is in beta")
+            return coo.coalesce().to_sparse_csr().to(faces.device)
+
+    pm = np.r_[-np.ones(F), np.ones(F)]
+    return _FaceOps(csr(np.r_[rows, rows], np.r_[f[:, 0], f[:, 1]], pm, (F, num_vertices)),
+                    csr(np.r_[rows, rows], np.r_[f[:, 0], f[:, 2]], pm, (F, num_vertices)),
+                    csr(f.ravel(), np.repeat(rows, 3), np.ones(3 * F), (num_vertices, F)))
+
+
+def _cross_dim1(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Cross product over dim 1 of ``(F, 3, n)`` tensors (``torch.linalg.cross`` along a middle
+    dim was 10x slower). Without autograd the components are written into one buffer; with it,
+    stacked: the same multiplications and subtractions either way (bit-equal)."""
+    pairs = ((1, 2), (2, 0), (0, 1))
+    if torch.is_grad_enabled() and (a.requires_grad or b.requires_grad):
+        return torch.stack([a[:, j] * b[:, k] - a[:, k] * b[:, j] for j, k in pairs], 1)
+    out = torch.empty_like(a)
+    for i, (j, k) in enumerate(pairs):
+        torch.mul(a[:, j], b[:, k], out=out[:, i]).sub_(a[:, k] * b[:, j])
+    return out
+
+
+def _normals_vmajor(Y: torch.Tensor, ops: _FaceOps) -> torch.Tensor:
+    """Area-weighted unit vertex normals, vertex-major: ``Y`` ``(V, 3 n)`` (row v: the x of n
+    frames, then their y, then z) -> ``(V, 3, n)``.
+
+    Face edges are sparse products over whole rows, the face normals (2 x area) are scattered
+    back to the corners by one sparse product, each vertex summing its faces in face order."""
+    n = Y.shape[1] // 3
+    fn = _cross_dim1((ops.edge1 @ Y).view(-1, 3, n), (ops.edge2 @ Y).view(-1, 3, n))  # (F, 3, n)
+    nv = (ops.incidence @ fn.view(-1, 3 * n)).view(-1, 3, n)
+    x, y, z = nv[:, 0], nv[:, 1], nv[:, 2]
+    return nv / torch.sqrt(x * x + y * y + z * z).clamp_min(1e-12).unsqueeze(1)
+
 
 def _normals_cmajor(Y: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
-    """Area-weighted unit vertex normals, component-major: ``Y`` ``(3, n, V')`` -> ``(3, n, V')``.
-
-    Each row holds one coordinate of one frame over all vertices, so the face gathers and the
-    scatter back stay inside a row (a few tens of kB, in cache) and the cross product and norm
-    are element-wise on contiguous rows (the vertex-major layout was ~2x slower, mostly in
-    strided reductions over the 3 components)."""
+    """Area-weighted unit vertex normals of a small patch, component-major: ``Y`` ``(3, n, V')``
+    -> ``(3, n, V')``; faces ``(F', 3)`` local ids. A vertex sums its faces' normals corner 0's
+    faces first, then corner 1's, then 2's, each in face order: its normal does not depend on
+    which other vertices share the patch."""
     f0, f1, f2 = faces[:, 0], faces[:, 1], faces[:, 2]
     x0 = Y.index_select(2, f0)
     a, b = Y.index_select(2, f1) - x0, Y.index_select(2, f2) - x0  # (3, n, F)
     fn = torch.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])  # |fn| = 2 area
     n = torch.zeros_like(Y).index_add(2, f0, fn).index_add(2, f1, fn).index_add(2, f2, fn)
     return n / torch.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).clamp_min(1e-12)
-
-
-def _vertex_normals(verts: torch.Tensor, faces: torch.Tensor, num_vertices: int) -> torch.Tensor:
-    """Area-weighted vertex normals. verts ``(N, V', 3)``, faces ``(F, 3)`` indexing ``V'`` (= ``num_vertices``)."""
-    if verts.shape[1] != num_vertices:
-        raise ShapeError(f"verts: expected (N, {num_vertices}, 3), got {tuple(verts.shape)}")
-    step = max(1, SKIN_CHUNK_VERTEX_FRAMES // max(1, num_vertices))
-    out = [_normals_cmajor(verts[a:a + step].permute(2, 0, 1), faces).permute(1, 2, 0)
-           for a in range(0, verts.shape[0], step)]
-    return torch.cat(out) if len(out) > 1 else out[0].contiguous()
 
 
 @dataclass
@@ -198,8 +248,9 @@ class BodyModel(nn.Module):
             batch = torch.broadcast_shapes(*shapes) if shapes else torch.Size([])
         except RuntimeError as exc:
             raise ShapeError(f"pose/betas/trans batch shapes do not broadcast: {shapes}") from exc
-        eye = torch.eye(3, dtype=self.dtype, device=self.device)
-        R = (R if R is not None else eye.expand(NUM_JOINTS, 3, 3)).expand(*batch, NUM_JOINTS, 3, 3)
+        if R is None:
+            R = torch.eye(3, dtype=self.dtype, device=self.device).expand(NUM_JOINTS, 3, 3)
+        R = R.expand(*batch, NUM_JOINTS, 3, 3)
         b = (betas.to(self.dtype) if betas is not None else torch.zeros(self.num_betas, dtype=self.dtype, device=self.device))
         t = (trans.to(self.dtype) if trans is not None else torch.zeros(3, dtype=self.dtype, device=self.device))
         n = int(np.prod(batch)) if len(batch) else 1
@@ -221,7 +272,7 @@ class BodyModel(nn.Module):
         the previous implementation and of :mod:`wearpose.estimators.empose.fastgrad` (vertices
         as the rows of the skinning-weight product, so a vertex's rounding does not depend on
         which other vertices are in the patch): template ``(V'*3,)``, shape dirs ``(S, V'*3)``,
-        weights ``(V', 24)``, pose dirs ``(207, V'*3)``. Cached (:meth:`_patch`, :meth:`_patch_buffers`)."""
+        weights ``(V', 24)``, pose dirs ``(207, V'*3)``. Cached (:meth:`_patch`, :meth:`_mesh_buffers`)."""
         if vidx is not None:
             n = len(vidx)
             pd = None
@@ -235,51 +286,74 @@ class BodyModel(nn.Module):
             pd = self.posedirs.view(-1, self.num_vertices, 3).permute(2, 0, 1).contiguous()
         return v_t.T.unsqueeze(1).contiguous(), sd.permute(1, 2, 0).contiguous(), w.T.contiguous(), pd
 
-    def _skin(self, vidx: torch.Tensor | None, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor,
-              normals_faces: torch.Tensor | None = None,
-              buffers: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None] | None = None,
-              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
-        """Skin a subset of vertices (``vidx`` or all). Flat batch ``N``. Returns verts (N, V', 3),
-        joints (N, 24, 3), global rot (N, 24, 3, 3), rest joints (N, 24, 3) and, when
-        ``normals_faces`` (faces indexing the V' vertices) is given, unit vertex normals (N, V', 3).
-
-        Works component-major, ``(3, n, V')``, a chunk of frames at a time (see
-        ``SKIN_CHUNK_VERTEX_FRAMES``): every step is one matrix product or an element-wise op
-        on contiguous rows."""
-        v_t, sd, w, pd = buffers if buffers is not None else self._patch_buffers(vidx)
-        patch = vidx is not None
-        Vp = w.shape[0] if patch else w.shape[1]
+    def _skin_prefix(self, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor, pose_features: bool
+                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """What every skinned vertex needs, flat batch ``N``: rest joints ``(N, 24, 3)``, global
+        rotations ``(N, 24, 3, 3)``, posed joints with ``trans`` ``(N, 24, 3)``, skinning
+        transforms ``A`` ``(N, 24, 12)`` (joint j: ``x -> G_j (x - J_rest_j) + J_j + trans``,
+        G's columns then the translation) and, if asked, pose features ``(N, 207)``."""
         J_rest = self.J_template + torch.einsum("jcs,ns->njc", self.J_shapedirs, betas)  # (N, 24, 3)
         G, J = forward_kinematics(R, J_rest, self.parents)  # (N, 24, 3, 3), (N, 24, 3)
-        # Skinning transform of joint j: x -> G_j (x - J_rest_j) + J_j, stored as G's columns then t.
         t = J - (G @ J_rest.unsqueeze(-1)).squeeze(-1)  # (N, 24, 3)
         A = torch.cat([G.transpose(-1, -2).reshape(-1, NUM_JOINTS, 9), t + trans[:, None]], dim=-1)  # (N, 24, 12)
-        feat = (R[:, 1:] - torch.eye(3, dtype=R.dtype, device=R.device)).reshape(R.shape[0], -1) if pd is not None else None
-        # A patch (sites) goes in one chunk: its frames' rounding must not depend on which other
-        # sites share the call (a kit's sensor must read the same with or without the others).
-        step = max(1, SKIN_CHUNK_VERTEX_FRAMES // max(1, Vp)) if vidx is None else R.shape[0]
-        verts, normals = [], []
-        for a in range(0, R.shape[0], step):
-            n = min(step, R.shape[0] - a)
-            if patch:  # vertex-major products (see _skin_buffers), then component-major
-                vs = v_t + betas[a:a + n] @ sd  # (n, V'*3)
-                if pd is not None:
-                    vs = vs + feat[a:a + n] @ pd
-                vs = vs.view(n, Vp, 3).permute(2, 0, 1)  # (3, n, V')
-                T = (w @ A[a:a + n].permute(1, 2, 0).reshape(NUM_JOINTS, 12 * n)).view(Vp, 12, n).permute(1, 2, 0)
-            else:
-                vs = v_t + betas[a:a + n] @ sd  # (3, n, V') shaped rest vertices
-                if pd is not None:
-                    vs = vs + feat[a:a + n] @ pd  # + pose correctives
-                T = A[a:a + n].permute(2, 0, 1) @ w  # (12, n, V')
+        feat = (R[:, 1:] - torch.eye(3, dtype=R.dtype, device=R.device)).reshape(R.shape[0], -1) if pose_features else None
+        return J_rest, G, J + trans[:, None], A, feat
+
+    def _skin_mesh(self, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor, normals: bool
+                   ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """Skin the whole mesh. Flat batch ``N``. Returns verts (N, V, 3), joints (N, 24, 3),
+        global rot (N, 24, 3, 3), rest joints (N, 24, 3) and, if ``normals``, unit vertex
+        normals (N, V, 3).
+
+        Component-major, ``(3, n, V)``, a chunk of frames at a time (``SKIN_CHUNK_VERTEX_FRAMES``):
+        every step is one matrix product or an element-wise op on contiguous rows; the pose
+        correctives of ``POSE_BLOCK_FRAMES`` frames are one product. Each chunk is written into
+        the preallocated outputs; its normals go vertex-major (:func:`_normals_vmajor`)."""
+        v_t, sd, w, pd = self._mesh_buffers()
+        ops = self._face_ops() if normals else None
+        J_rest, G, J, A, feat = self._skin_prefix(R, betas, trans, pd is not None)
+        N, V = R.shape[0], w.shape[1]
+        step = max(1, SKIN_CHUNK_VERTEX_FRAMES // max(1, V))
+        block = max(1, POSE_BLOCK_FRAMES // step) * step
+        verts = A.new_empty(N, V, 3)
+        nrm = A.new_empty(N, V, 3) if ops is not None else None
+        P = None  # (3, block, V) pose correctives of the current block
+        for a in range(0, N, step):
+            n = min(step, N - a)
+            vs = v_t + betas[a:a + n] @ sd  # (3, n, V) shaped rest vertices
+            if pd is not None and feat is not None:
+                if a % block == 0:
+                    P = feat[a:a + block] @ pd
+                vs = vs + P[:, a % block:a % block + n]  # + pose correctives
+            T = A[a:a + n].permute(2, 0, 1) @ w  # (12, n, V)
             X = torch.addcmul(T[9:12], T[0:3], vs[0:1])
             X = torch.addcmul(X, T[3:6], vs[1:2])
-            X = torch.addcmul(X, T[6:9], vs[2:3])  # (3, n, V')
-            if normals_faces is not None:
-                normals.append(_normals_cmajor(X, normals_faces).permute(1, 2, 0))
-            verts.append(X.permute(1, 2, 0))
-        cat = lambda xs: torch.cat(xs) if len(xs) > 1 else xs[0].contiguous()  # noqa: E731
-        return cat(verts), J + trans[:, None], G, J_rest, (cat(normals) if normals_faces is not None else None)
+            X = torch.addcmul(X, T[6:9], vs[2:3])  # (3, n, V)
+            verts[a:a + n].copy_(X.permute(1, 2, 0))
+            if nrm is not None and ops is not None:
+                Y = X.reshape(3 * n, V).t().contiguous()  # (V, 3 n)
+                nrm[a:a + n].copy_(_normals_vmajor(Y, ops).permute(2, 0, 1))
+        return verts, J, G, J_rest, nrm
+
+    def _skin_patch(self, pt: _Patch, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor
+                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Skin a patch of sites in one chunk (its frames' rounding must not depend on which
+        other sites share the call: a kit's sensor reads the same with or without the others).
+        Returns verts (N, V', 3), normals (N, V', 3), joints (N, 24, 3), global rot (N, 24, 3, 3).
+
+        Vertex-major products (see :meth:`_skin_buffers`), then component-major ``(3, n, V')``."""
+        v_t, sd, w, pd = pt.buffers
+        _, G, J, A, feat = self._skin_prefix(R, betas, trans, pd is not None)
+        n, Vp = R.shape[0], w.shape[0]
+        vs = v_t + betas @ sd  # (n, V'*3)
+        if pd is not None and feat is not None:
+            vs = vs + feat @ pd
+        vs = vs.view(n, Vp, 3).permute(2, 0, 1)  # (3, n, V')
+        T = (w @ A.permute(1, 2, 0).reshape(NUM_JOINTS, 12 * n)).view(Vp, 12, n).permute(1, 2, 0)
+        X = torch.addcmul(T[9:12], T[0:3], vs[0:1])
+        X = torch.addcmul(X, T[3:6], vs[1:2])
+        X = torch.addcmul(X, T[6:9], vs[2:3])  # (3, n, V')
+        return X.permute(1, 2, 0), _normals_cmajor(X, pt.faces).permute(1, 2, 0), J, G
 
     def forward(self, pose: torch.Tensor | None = None, betas: torch.Tensor | None = None,
                 trans: torch.Tensor | None = None, *, return_vertices: bool = True,
@@ -300,7 +374,7 @@ class BodyModel(nn.Module):
         """
         R, b, t, batch = self._batch(pose, betas, trans)
         if return_vertices:
-            verts, J, G, J_rest, normals = self._skin(None, R, b, t, self.faces if return_normals else None)
+            verts, J, G, J_rest, normals = self._skin_mesh(R, b, t, return_normals)
         else:
             J_rest = self.rest_joints(b)
             G, J = forward_kinematics(R, J_rest, self.parents)
@@ -405,9 +479,9 @@ class BodyModel(nn.Module):
             raise ShapeError(f"vertex ids must be in [0, {self.num_vertices}), got {vids.tolist()}")
         R, b, t, batch = self._batch(pose, betas, trans)
         pt = self._patch(vids, tids)
-        verts, J, G, _, normals = self._skin(pt.vidx, R, b, t, pt.faces, pt.buffers)
-        p, n = verts[:, pt.site], normals[:, pt.site]
-        e = verts[:, pt.tangent] - p
+        verts, normals, J, G = self._skin_patch(pt, R, b, t)
+        p, n = verts.index_select(1, pt.site), normals.index_select(1, pt.site)
+        e = verts.index_select(1, pt.tangent) - p
         e = e - (e * n).sum(-1, keepdim=True) * n
         tan = e / e.norm(dim=-1, keepdim=True).clamp_min(1e-12)
         bit = torch.linalg.cross(n, tan, dim=-1)
@@ -419,32 +493,34 @@ class BodyModel(nn.Module):
         """The local patch of these sites (site and tangent vertices and the sites' one-ring
         faces), its local ids and sliced skinning buffers: built once per site list, device and
         dtype (a call at B = 1 used to spend most of its time here)."""
-        # Buffers replaced (.to) or written in place (load_state_dict) invalidate the slices.
-        state = tuple((b.data_ptr(), b._version) for b in self.buffers())
-        key = (tuple(int(v) for v in vids), tuple(int(v) for v in tids), str(self.device), self.dtype, state)
-        cache = self._patches
-        if len(cache) > 64:
-            cache.clear()
-        if key not in cache:
+        def make() -> _Patch:
             patch_faces = np.unique(np.concatenate([self._faces_of(int(v)) for v in vids])) if len(vids) else np.zeros(0, np.int64)
             faces = self.faces.cpu().numpy()[patch_faces].reshape(-1, 3)
             used = np.unique(np.concatenate([vids, tids, faces.ravel()]))
             local = lambda x: torch.as_tensor(np.searchsorted(used, x), dtype=torch.long, device=self.device)  # noqa: E731
             vidx = torch.as_tensor(used, dtype=torch.long, device=self.device)
-            cache[key] = _Patch(vidx, local(faces), local(vids), local(tids), self._skin_buffers(vidx))
-        return cache[key]
+            return _Patch(vidx, local(faces), local(vids), local(tids), self._skin_buffers(vidx))
 
-    def _patch_buffers(self, vidx: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
-        """:meth:`_skin_buffers` of the whole mesh (``vidx`` None), cached like a patch; a subset uncached."""
-        if vidx is not None:
-            return self._skin_buffers(vidx)
+        return self._cached(("sites", tuple(int(v) for v in vids), tuple(int(v) for v in tids)), make)
+
+    def _cached(self, name: Any, make: Any) -> Any:
+        """``make()`` cached per ``name``, device, dtype and buffer state (buffers replaced by ``.to``
+        or written in place by ``load_state_dict`` give a new entry)."""
         state = tuple((b.data_ptr(), b._version) for b in self.buffers())
-        key = ("full mesh", str(self.device), self.dtype, state)
+        key = (name, str(self.device), self.dtype, state)
         if key not in self._patches:
             if len(self._patches) > 64:
                 self._patches.clear()
-            self._patches[key] = self._skin_buffers(None)
+            self._patches[key] = make()
         return self._patches[key]
+
+    def _mesh_buffers(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """:meth:`_skin_buffers` of the whole mesh, cached."""
+        return self._cached("full mesh", lambda: self._skin_buffers(None))
+
+    def _face_ops(self) -> _FaceOps:
+        """:func:`_face_ops` of the mesh, cached."""
+        return self._cached("face ops", lambda: _face_ops(self.faces, self.num_vertices, self.dtype))
 
     def _neighbour(self, v: int) -> int:
         f = self.faces.cpu().numpy()[self._faces_of(v)[0]]
