@@ -1,13 +1,13 @@
 """Body model throughput, start-up and corpus load time, optionally against an older checkout.
 
-Run: ``python benchmarks/body.py [--baseline /tmp/old/src] [--repeats N] [--threads 1]``
-(``git worktree add /tmp/old <commit>`` gives a baseline). Prints a table and writes
+Run: ``python benchmarks/body.py [--baseline /tmp/old/src --baseline-commit <commit>] [--repeats N]
+[--threads 1]`` (``git archive <commit> src | tar -x -C /tmp/old`` gives a baseline). Prints a table and writes
 ``benchmarks/results/body.json`` (+ ``body.md``). Measures (CPU, float32, no grad, one thread by
 default), every path interleaved call by call with the baseline's, so load hits both alike:
 
 - full-mesh forward with vertex normals, without normals, joints only (FK, no skinning) and the
   12 sensor sites (``BodyModel.sites``), at B = 1 and B = 1024: median seconds per call and
-  frames/s, and new / baseline speed-ups;
+  and p99 seconds per call, frames/s, and new / baseline speed-ups;
 - start-up: whole-process wall time of ``python -c "import torch"`` and ``"import
   wearpose.body"`` (this checkout and the baseline's), interleaved, median of ``--imports``;
 - corpus: time to load every clip of the prepared store (``wearpose data prepare`` first).
@@ -51,6 +51,15 @@ def _paths(body: Any) -> dict[str, Any]:
     }
 
 
+def _commit() -> str | None:
+    """This checkout's git commit (``None`` outside a git checkout)."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=SRC.parent, capture_output=True, text=True, check=True)
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return out.stdout.strip() or None
+
+
 def _import_times(baseline: Path | None, repeats: int) -> dict[str, Any]:
     cmds = {"import torch": ("import torch", str(SRC)), "import wearpose.body": ("import wearpose.body", str(SRC))}
     if baseline is not None:
@@ -73,6 +82,7 @@ def _import_times(baseline: Path | None, repeats: int) -> dict[str, Any]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--baseline", type=Path, default=None, help="an older checkout's src/ folder to compare with")
+    ap.add_argument("--baseline-commit", default=None, help="the baseline's commit, recorded with the results")
     ap.add_argument("--repeats", type=int, default=20, help="calls per path at B = 1 (B = 1024: a fifth, >= 3)")
     ap.add_argument("--imports", type=int, default=5, help="fresh processes per import command")
     ap.add_argument("--threads", type=int, default=1)
@@ -104,10 +114,12 @@ def main() -> None:
             times = time_calls(fns, reps)
             for k in new_p:
                 med = float(np.median(times[("new", k)]))
-                row = {"path": k, "batch": B, "median_s": med, "frames_per_s": B / med, "calls": reps}
+                row = {"path": k, "batch": B, "median_s": med, "p99_s": float(np.percentile(times[("new", k)], 99)),
+                       "frames_per_s": B / med, "calls": reps}
                 if old is not None:
                     bmed = float(np.median(times[("baseline", k)]))
-                    row.update({"baseline_median_s": bmed, "speedup_vs_baseline": bmed / med})
+                    row.update({"baseline_median_s": bmed, "baseline_p99_s": float(np.percentile(times[("baseline", k)], 99)),
+                                "speedup_vs_baseline": bmed / med})
                     row["max_abs_diff_vs_baseline"] = site_diff if k == "12 sensor sites" else (
                         mesh_diff if k.startswith("full mesh + ") else None)
                 rows.append(row)
@@ -143,17 +155,22 @@ def main() -> None:
     result = {
         "machine": machine0, "reference": ref0, "reference_end": reference_timing(), "machine_end": machine_info(),
         "threads": args.threads, "baseline": str(args.baseline) if args.baseline else None,
+        "baseline_commit": args.baseline_commit, "commit": _commit(),
         "asset_id": body.asset_id, "vertices": body.num_vertices,
         "forward": rows, "ratios": ratios, "imports": imports, "corpus_load": corpus,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     md = [f"# BodyModel throughput ({args.threads} thread(s), {body.num_vertices} vertices, asset {body.asset_id})", "",
-          f"Reference: {ref0['loop']} best {ref0['best_ms']:.1f} ms ({ref0['gflops']:.1f} GFLOP/s); "
-          f"load average {machine0['load_average']}. Baseline: {result['baseline'] or 'none'}.", "",
-          "| path | batch | median ms | frames/s | speed-up vs baseline |", "| --- | --- | --- | --- | --- |"]
-    md += [f"| {r['path']} | {r['batch']} | {1000 * r['median_s']:.2f} | {r['frames_per_s']:,.0f} | "
-           f"{(str(round(r['speedup_vs_baseline'], 2)) + 'x') if 'speedup_vs_baseline' in r else ''} |" for r in rows]
+          f"Reference: {ref0['loop']} best {ref0['best_ms']:.1f} ms ({ref0['gflops']:.1f} GFLOP/s) at the start, "
+          f"{result['reference_end']['best_ms']:.1f} ms at the end; load average {machine0['load_average']} -> "
+          f"{result['machine_end']['load_average']}. Code: {result['commit'] or 'this checkout'}; baseline: "
+          f"{result['baseline_commit'] or result['baseline'] or 'none'}. Calls interleaved with the baseline's.", "",
+          "| path | batch | median ms | p99 ms | frames/s | baseline median ms | speed-up vs baseline |",
+          "| --- | --- | --- | --- | --- | --- | --- |"]
+    md += [f"| {r['path']} | {r['batch']} | {1000 * r['median_s']:.2f} | {1000 * r['p99_s']:.2f} | {r['frames_per_s']:,.0f} | "
+           + (f"{1000 * r['baseline_median_s']:.2f} | {r['speedup_vs_baseline']:.2f}x |" if "speedup_vs_baseline" in r else " | |")
+           for r in rows]
     md += ["", "Sites (12) vs full mesh, same run: " + ", ".join(f"{k} {v:.1f}x" for k, v in ratios.items()), "",
            "Start-up (whole process, median of " + str(args.imports) + "): " + ", ".join(
                f"`{k}` {v:.2f} s" for k, v in imports["median_s"].items())
