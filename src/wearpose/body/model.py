@@ -353,7 +353,10 @@ class BodyModel(nn.Module):
         X = torch.addcmul(T[9:12], T[0:3], vs[0:1])
         X = torch.addcmul(X, T[3:6], vs[1:2])
         X = torch.addcmul(X, T[6:9], vs[2:3])  # (3, n, V')
-        return X.permute(1, 2, 0), _normals_cmajor(X, pt.faces).permute(1, 2, 0), J, G
+        # Normals before the vertices' copy: autograd sums X's gradient in the order of its uses,
+        # and EM-POSE's closed-form gradient is pinned to this order (tests/estimators/test_empose_fastgrad).
+        nrm = _normals_cmajor(X, pt.faces).permute(1, 2, 0)
+        return X.permute(1, 2, 0).contiguous(), nrm.contiguous(), J, G
 
     def forward(self, pose: torch.Tensor | None = None, betas: torch.Tensor | None = None,
                 trans: torch.Tensor | None = None, *, return_vertices: bool = True,
@@ -480,8 +483,8 @@ class BodyModel(nn.Module):
         R, b, t, batch = self._batch(pose, betas, trans)
         pt = self._patch(vids, tids)
         verts, normals, J, G = self._skin_patch(pt, R, b, t)
-        p, n = verts.index_select(1, pt.site), normals.index_select(1, pt.site)
-        e = verts.index_select(1, pt.tangent) - p
+        p, n = verts[:, pt.site], normals[:, pt.site]
+        e = verts[:, pt.tangent] - p
         e = e - (e * n).sum(-1, keepdim=True) * n
         tan = e / e.norm(dim=-1, keepdim=True).clamp_min(1e-12)
         bit = torch.linalg.cross(n, tan, dim=-1)
