@@ -16,11 +16,17 @@ Seeding: callers draw from a generator seeded per clip (the simulator's
 :func:`wearpose.sensors.random_body_shape` uses the clip's simulation seed with its own stream
 key), so a clip's wearer is reproducible and the seed namespaces that keep evaluation draws
 apart from training draws keep evaluation bodies apart too.
+
+Height (:func:`standing_height`): the body at zero pose (SMPL's T-pose, arms horizontal),
+highest skin point minus lowest (crown of the head minus the soles), the measure the asset's
+build reports against ``beta[0]`` (``tools/build_body_asset.py``).
 """
 
 from __future__ import annotations
 
 import torch
+
+from typing import Any
 
 from wearpose.errors import ConfigError
 
@@ -43,4 +49,18 @@ def sample_betas(generator: torch.Generator, num_betas: int = 10, limit: float =
     return b.to(dtype)
 
 
-__all__ = ["BETA_LIMIT", "sample_betas"]
+def zero_pose_vertices(body: Any, betas: torch.Tensor) -> torch.Tensor:
+    """The skin of ``body`` at zero pose (T-pose), zero translation: ``(..., V, 3)`` m, model
+    frame (Y up), for betas ``(..., S)``."""
+    with torch.no_grad():
+        return body(None, torch.as_tensor(betas).to(device=body.device, dtype=body.dtype), None).vertices
+
+
+def standing_height(body: Any, betas: torch.Tensor) -> torch.Tensor:
+    """Standing height of the body of ``betas`` ``(..., S)`` (module doc): ``(...)`` m, the
+    vertical extent of its zero-pose skin (:func:`zero_pose_vertices`)."""
+    y = zero_pose_vertices(body, betas)[..., 1]
+    return y.amax(-1) - y.amin(-1)
+
+
+__all__ = ["BETA_LIMIT", "sample_betas", "standing_height", "zero_pose_vertices"]

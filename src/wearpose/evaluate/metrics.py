@@ -50,7 +50,7 @@ __all__ = [
     "root_relative_global_rotations", "mask_joint_rotations", "joint_angle_errors",
     "joint_position_errors", "mpjpe", "pa_mpjpe", "procrustes_align", "mpjae", "mpjae_groups",
     "sip_error", "global_angular_error", "positional_error", "mesh_error", "jerk", "jitter",
-    "cumulative_translation_error", "stance_foot_speed", "StanceSpeed", "to_report_units", "compute_all",
+    "cumulative_translation_error", "stance_foot_speed", "StanceSpeed", "shape_errors", "ShapeErrors", "to_report_units", "compute_all",
     "format_table",
 ]
 
@@ -791,6 +791,37 @@ def stance_foot_speed(feet: torch.Tensor, fps: float, height_tol: float = 0.05, 
         empty = torch.zeros(0, dtype=torch.float64)
         return StanceSpeed(empty, empty.long(), empty.long(), 0, empty)
     return StanceSpeed(torch.cat(speeds), torch.cat(foot), torch.cat(frame), len(travel), torch.stack(travel))
+
+
+class ShapeErrors(NamedTuple):
+    """:func:`shape_errors`: an estimated body shape against the true one, at zero pose."""
+
+    height_error: torch.Tensor  #: ``(...)`` m, ``|height(estimate) - height(truth)|``
+    height_difference: torch.Tensor  #: ``(...)`` m, ``height(estimate) - height(truth)`` (signed: + too tall)
+    zero_pose_vertex_error: torch.Tensor  #: ``(...)`` m, mean vertex distance at zero pose
+
+
+def shape_errors(body: Any, betas_pred: torch.Tensor, betas_true: torch.Tensor) -> ShapeErrors:
+    """How far an estimated body shape is from the true one (EM-POSE estimates it, Sec. 5.3).
+
+    Both bodies at zero pose (T-pose) and zero translation on ``body``: the standing height
+    difference (:func:`wearpose.body.shapes.standing_height`, crown to soles) and the mean
+    distance between corresponding skin vertices (no alignment: at zero pose and zero
+    translation a shape's skin sits where the model puts it, so a wrong shape's offset counts).
+
+    Args:
+        body: the :class:`wearpose.body.BodyModel` both shapes belong to.
+        betas_pred, betas_true: ``(..., S)`` shape coefficients (broadcast).
+
+    Returns:
+        :class:`ShapeErrors`, each ``(...)`` in metres.
+    """
+    from wearpose.body.shapes import standing_height, zero_pose_vertices
+
+    bp, bt = torch.broadcast_tensors(_check_tensor(betas_pred, "betas_pred"), _check_tensor(betas_true, "betas_true"))
+    dh = standing_height(body, bp) - standing_height(body, bt)
+    dv = (zero_pose_vertices(body, bp) - zero_pose_vertices(body, bt)).norm(dim=-1).mean(-1)
+    return ShapeErrors(dh.abs(), dh, dv)
 
 
 # --------------------------------------------------------------------------------------------
