@@ -155,14 +155,20 @@ def test_breakdown_pools_clips_by_source_and_class(tmp_path: Path) -> None:
     assert "| squat | 1 | 50 | 80 | 60 |" in md and "| walk | 1 | 100 | 10 | - |" in md, md
 
 
-def test_empose_result_has_breakdowns_that_pool_to_the_headline(tmp_path: Path,
-                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+def _tiny_empose_on_fake_store(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, clips: int) -> tuple[Path, FakeStore, Path]:
+    """A tiny EM-POSE 12 checkpoint, ``clips`` synthetic test clips as the default store, and an
+    ``--out`` stem: (checkpoint, store, stem)."""
     torch.manual_seed(0)
     ck = tmp_path / "tiny12.pt"
     EmposeEstimator(EmposeConfig.preset("tiny", 12)).save(ck)
-    store = FakeStore(tmp_path, {"test": 3})
+    store = FakeStore(tmp_path, {"test": clips})
     monkeypatch.setattr("wearpose.motion.CorpusStore", lambda *a, **k: store)
-    out = tmp_path / "t"
+    return ck, store, tmp_path / "t"
+
+
+def test_empose_result_has_breakdowns_that_pool_to_the_headline(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    ck, store, out = _tiny_empose_on_fake_store(tmp_path, monkeypatch, 3)
     res = runner.invoke(app, ["evaluate", str(ck), "--json", "--out", str(out)])
     assert res.exit_code == 0, res.output
     m = json.loads(res.stdout[res.stdout.index("{"):])["models"]["tiny12"]
@@ -189,3 +195,52 @@ def test_source_and_protocol_options_are_checked(tmp_path: Path) -> None:
     assert res.exit_code == 2 and "--per-family" in res.output, res.output
     res = runner.invoke(app, ["evaluate", "empose12_cpu", "--protocol", "lab"])
     assert res.exit_code == 2 and "'lab'" in res.output and "--protocol" in res.output, res.output
+
+
+@pytest.mark.budget(25)  # three tiny EM-POSE evaluations on the full body asset
+def test_heldout_bodies_through_the_command(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 23.6 / 24.5: ``--bodies heldout`` records the wearers and EM-POSE's shape figures;
+    the default is the clips' own body."""
+    from wearpose.estimators.bodies import heldout_betas
+
+    ck, store, out = _tiny_empose_on_fake_store(tmp_path, monkeypatch, 2)
+    res = runner.invoke(app, ["evaluate", str(ck), "--json", "--bodies", "heldout", "--seed", "1", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    r = json.loads(res.stdout[res.stdout.index("{"):])
+    assert r["bodies"] == "heldout" and set(r["betas"]) == set(store.clips(split="test"))
+    for cid, b in r["betas"].items():
+        assert b == pytest.approx(heldout_betas(cid, 1).tolist(), abs=1e-4)
+    m = r["models"]["tiny12"]
+    assert m["height_error_median_cm"] >= 0 and m["zero_pose_vertex_error_median_mm"] > 0
+    assert all("height_error_cm" in c for c in m["per_clip"])
+    md = out.with_suffix(".md").read_text()
+    assert "## Body shape estimate" in md and "held-out body shape per clip" in md, md
+    res = runner.invoke(app, ["evaluate", str(ck), "--json", "--seed", "1"])
+    plain = json.loads(res.stdout[res.stdout.index("{"):])
+    assert (plain["bodies"], plain["betas"]) == ("corpus", {})
+    assert plain["models"]["tiny12"]["mpjpe_mm"] != m["mpjpe_mm"]
+    res = runner.invoke(app, ["evaluate", str(ck), "--bodies", "tall"])
+    assert res.exit_code == 2 and "--bodies" in res.output and "'tall'" in res.output, res.output
+
+
+def test_heldout_bodies_in_a_single_model_protocol(tmp_path: Path) -> None:
+    """Every declared protocol gets the wearers through evaluate_model; BiRAE reads joint
+    rotations only, which a re-fit keeps, so its figures do not change (its wearers are recorded)."""
+    from tests.estimators.test_empose import FakeStore as Store
+    from wearpose.estimators.birae import BiraeConfig, BiraeEstimator
+    from wearpose.estimators.bodies import heldout_betas
+    from wearpose.estimators.run import open_model
+    from wearpose.evaluate.protocols import evaluate_model
+
+    class _Store(Store):
+        def provenance(self) -> dict:
+            return {"root": str(self.root)}
+
+    torch.manual_seed(0)
+    path = BiraeEstimator(BiraeConfig.preset("tiny")).save(tmp_path / "b.pt")
+    src, store = open_model(path), _Store(tmp_path, {"test": 2})
+    worn = evaluate_model(src, store=store, seed=4, bodies="heldout")
+    own = evaluate_model(src, store=store, seed=4)
+    assert (worn["bodies"], own["bodies"], own["betas"]) == ("heldout", "corpus", {})
+    assert worn["betas"] == {c: pytest.approx(heldout_betas(c, 4).tolist(), abs=1e-4) for c in worn["clip_ids"]}
+    assert worn["metrics"]["mpjae_all_deg"] == pytest.approx(own["metrics"]["mpjae_all_deg"], abs=1e-6)

@@ -121,7 +121,7 @@ def _render_protocol(r: dict[str, Any]) -> None:
     for k in keys:
         t.add_row(k, *(f"{m['metrics'][k]:.3g}" if k in m["metrics"] else "-" for m in r["models"].values()))
     console.print(t)
-    console.print(f"protocol: {first['protocol']}", soft_wrap=False)
+    console.print(f"protocol: {first['protocol']}; bodies {first.get('bodies', 'corpus')}", soft_wrap=False)
     _render_breakdown(r["models"])
     for p in r.get("written", []):
         console.print(f"wrote {p}")
@@ -158,7 +158,13 @@ def _render(r: dict[str, Any]) -> None:
                   f"{m['mpjae_deg']:.1f} ± {m['mpjae_std_deg']:.1f}", str(m["frames"]), str(m.get("epoch")),
                   f"{m['seconds']:.1f}")
     console.print(t)
-    console.print(f"{r['joints']} joints; mean ± std over frames with every sensor valid; {r['subjects']}.")
+    console.print(f"{r['joints']} joints; mean ± std over frames with every sensor valid; {r['subjects']}; "
+                  f"bodies {r.get('bodies', 'corpus')}.")
+    for name, m in r["models"].items():
+        if "height_error_median_cm" in m:  # the EM-POSE family's shape estimate
+            console.print(f"{name}: body shape, median over clips: height error {m['height_error_median_cm']:.1f} cm "
+                          f"({m['height_difference_median_cm']:+.1f} cm), zero-pose vertex error "
+                          f"{m['zero_pose_vertex_error_median_mm']:.1f} mm")
     _render_breakdown(r["models"])
     for p in r.get("written", []):
         console.print(f"wrote {p}")
@@ -190,6 +196,9 @@ def evaluate(
                                                     "(unseen lab: a model trained on another lab's clips)."),
     per_family: Optional[int] = typer.Option(None, "--per-family", min=1,
                                              help="--protocol unseen-motion: clips per family (default 6)."),
+    bodies: str = typer.Option("corpus", help="Wearers: corpus (each clip's own body, beta = 0) or heldout (a body "
+                                              "per clip from the held-out shape stream, seeded per clip, the clip "
+                                              "re-fitted to it; the same body for every model)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (progress goes to stderr)."),
 ) -> None:
     """Evaluate checkpoints on simulated held-out recordings with the paper's metrics.
@@ -209,6 +218,7 @@ def evaluate(
     Another method: wearpose evaluate pip_cpu --clips 2 --json
     Unseen motion: wearpose evaluate birae6_cpu --protocol unseen-motion --out results/unseen_birae6
     Unseen lab: wearpose evaluate empose12_cpu --source cmu_daz
+    Held-out wearers: wearpose evaluate empose12_cpu --bodies heldout
     """
     import torch
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -223,6 +233,10 @@ def evaluate(
         raise typer.BadParameter(f"expected default or none, got {noise!r}", param_hint="--noise")
     if split == "train":
         err_console.print("[yellow]warning[/]: the train split measures fit, not held-out accuracy")
+    from wearpose.estimators.bodies import BODIES
+
+    if bodies not in BODIES:
+        raise typer.BadParameter(f"expected {' or '.join(BODIES)}, got {bodies!r}", param_hint="--bodies")
 
     ckpts: dict[str, Path] = {}
     sources: dict[str, ModelSource] = {}
@@ -253,18 +267,19 @@ def evaluate(
             from wearpose.evaluate.protocols import compare_models
 
             res = compare_models(next(iter(compare.values())), ckpts, split, clips, noise=noise, seed=seed,
-                                 offsets=offsets, spread=spread, store=store, progress=tick)
+                                 offsets=offsets, spread=spread, store=store, progress=tick, bodies=bodies)
         else:
             from wearpose.evaluate.protocols import evaluate_model
 
             res = {"split": split, "store": store.provenance(),
                    "models": {n: evaluate_model(src, split=split, clips=clips, seed=seed, noise=noise,
-                                                store=store, progress=tick, frame_stride=frame_stride)
+                                                store=store, progress=tick, frame_stride=frame_stride,
+                                                bodies=bodies)
                               for n, src in sources.items()}}
             for n, r in res["models"].items():
                 r["model"] = n
     command = "wearpose " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    res.update(command=command, protocol_clips=protocol, source_filter=source)
+    res.update(command=command, protocol_clips=protocol, source_filter=source, bodies=bodies)
     if out is not None and compared:
         extra = {"command": command, **({"note": note} if note else {})}
         from wearpose.evaluate.protocols import breakdown_sections

@@ -17,7 +17,8 @@ figures:
 - ``imuposer``: the IMU-only baseline's upper-body MPJPE on the same clips.
 
 Every result has the same top-level keys: ``model``, ``method``, ``kit``, ``split``, ``clips``,
-``clip_ids``, ``frames``, ``seed``, ``noise``, ``protocol``, ``store`` (which store and corpus
+``clip_ids``, ``frames``, ``seed``, ``noise``, ``bodies`` and ``betas`` (the wearers:
+:mod:`wearpose.estimators.bodies`), ``protocol``, ``store`` (which store and corpus
 version the clips came from: :meth:`wearpose.motion.CorpusStore.provenance`), ``metrics`` (flat,
 report units, the unit in the key), ``per_clip`` (each clip's figures), ``breakdown``
 (:func:`breakdown`: the per-clip figures grouped by source and by motion class) and ``detail``
@@ -35,6 +36,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from wearpose.errors import ConfigError
+from wearpose.estimators.bodies import clip_bodies, wearer_store, wearers
 from wearpose.estimators.method import resolve
 from wearpose.estimators.run import ModelSource
 from wearpose.motion import CorpusStore
@@ -59,10 +61,13 @@ def protocols() -> dict[str, str]:
 
 def evaluate_model(source: ModelSource, *, split: str = "test", clips: int | None = None, seed: int = 0,
                    noise: str = "default", store: CorpusStore | None = None,
-                   progress: Progress | None = None, frame_stride: int = 1) -> dict[str, Any]:
+                   progress: Progress | None = None, frame_stride: int = 1, bodies: str = "corpus") -> dict[str, Any]:
     """``source``'s figures under its method's protocol (module doc) on the first ``clips``
     clips of ``split`` (all when None), scoring every ``frame_stride``-th frame (the shipped
-    MI-Poser and IMUPoser cards were measured with 4).
+    MI-Poser and IMUPoser cards were measured with 4), each clip on the wearer ``bodies``
+    gives it (:mod:`wearpose.estimators.bodies`: ``"corpus"`` the clip's own body,
+    ``"heldout"`` a held-out body per clip, re-fitted before the protocol sees it; the
+    result's ``bodies`` and ``betas``, clip id -> the wearer's betas, say which).
 
     Raises:
         ConfigError: the method has no protocol here, or the split holds no clips (a table of
@@ -76,12 +81,15 @@ def evaluate_model(source: ModelSource, *, split: str = "test", clips: int | Non
     if not store.clips(split=split):
         raise ConfigError(f"corpus store {store.root}: the {split!r} split has no clips; prepare one with a "
                           f"{split} split (wearpose data prepare) or choose another --split")
-    out = resolve(known[source.method])(source.make(), store, split, clips, seed, noise, progress, frame_stride)
+    est = source.make()
+    worn = wearer_store(store, bodies, getattr(est, "body", None), seed)
+    out = resolve(known[source.method])(est, worn, split, clips, seed, noise, progress, frame_stride)
     parts = breakdown(out.get("per_clip", []), store)
     return {"model": source.name, "method": source.method, "kit": source.kit, "split": split,
             "clips": len(out["clip_ids"]), "seed": seed, "noise": noise, "frame_stride": frame_stride,
             "store": store.provenance(), "sources": sorted(parts["source"]),
-            "checkpoint": str(source.path) if source.path else None, **out, "breakdown": parts}
+            "checkpoint": str(source.path) if source.path else None, **out, "breakdown": parts,
+            "bodies": bodies, "betas": clip_bodies(worn, out["clip_ids"])}
 
 
 def compare_models(compare: str, checkpoints: dict[str, Path], split: str, clips: int | None, *,
@@ -214,7 +222,8 @@ def write_result(result: dict[str, Any], path_stem: str | Path, *, title: str, p
     first = next(iter(result["models"].values()))
     md = [f"# {title}", "", f"Produced by `{produced_by}` (`wearpose.evaluate.protocols.evaluate_model`).", "",
           f"{first['split']} split, {first['clips']} clips, {first['frames']} frames, kit {first['kit']}, seed "
-          f"{first['seed']}, noise {first['noise']}.", "", markdown_table(result), "",
+          f"{first['seed']}, noise {first['noise']}; {wearers(first.get('bodies', 'corpus'))}.", "",
+          markdown_table(result), "",
           f"Protocol: {first['protocol']}.", *breakdown_sections(result["models"]), "",
           "Clips: " + ", ".join(f"`{c}`" for c in first["clip_ids"])]
     if note:

@@ -12,11 +12,18 @@ clip only once for all models):
   drawn for training; the recording carries those offsets (the calibrated ``O_p`` EM-POSE
   assumes; the baselines ignore them);
 - only frames where every sensor is valid count (EM-POSE Sec. 6.2);
+- wearers (``bodies``, :mod:`wearpose.estimators.bodies`): the clip's own body (``"corpus"``,
+  beta = 0) or a held-out body per clip (``"heldout"``), the clip re-fitted to it before it is
+  simulated;
 - ground truth: the clip's pose with the root expressed in the EM source frame (like every
-  estimate) and its betas; joints from the same body model, zero translation;
+  estimate) and its wearer's betas; joints from the same body model, zero translation;
 - metrics (:mod:`wearpose.evaluate`) on the 15 major joints: MPJPE (root-aligned), PA-MPJPE
   (Procrustes-aligned), MPJAE (root-relative global rotations); mean and standard deviation over
-  all evaluated frames of all clips, in mm and degrees.
+  all evaluated frames of all clips, in mm and degrees;
+- the shape estimate (EM-POSE estimates one body shape per sequence, Sec. 5.3): per clip the
+  height error (standing height of the estimated body vs the wearer's, cm) and the zero-pose
+  vertex error (mean skin vertex distance at zero pose, mm), :func:`wearpose.evaluate.metrics.shape_errors`;
+  their medians and means over clips.
 
 :func:`table2_markdown` renders the result in the structure of the paper's Table 2 (rows
 ResNet, BiRNN, LGD-RNN), :func:`write_table2` writes ``.md`` + ``.json``.
@@ -120,6 +127,26 @@ def _clip_row(cid: str, errs: Mapping[str, list[torch.Tensor]]) -> dict[str, Any
     return row
 
 
+def _shape_row(body: Any, betas_pred: torch.Tensor, betas_true: torch.Tensor) -> dict[str, float]:
+    """One clip's shape figures (:func:`wearpose.evaluate.metrics.shape_errors`) in report units."""
+    from wearpose.evaluate.metrics import shape_errors
+
+    e = shape_errors(body, betas_pred.reshape(-1), betas_true.reshape(-1))
+    return {"height_error_cm": float(e.height_error) * 100.0, "height_difference_cm": float(e.height_difference) * 100.0,
+            "zero_pose_vertex_error_mm": float(e.zero_pose_vertex_error) * 1000.0}
+
+
+def _shape_summary(rows: list[dict[str, Any]]) -> dict[str, float]:
+    """Median and mean over clips of :func:`_shape_row`'s figures (none when no clip has them)."""
+    out: dict[str, float] = {}
+    for k in ("height_error_cm", "height_difference_cm", "zero_pose_vertex_error_mm"):
+        x = torch.tensor([r[k] for r in rows if k in r], dtype=torch.float64)
+        if x.numel():
+            name, unit = k.rsplit("_", 1)
+            out[f"{name}_median_{unit}"], out[f"{name}_mean_{unit}"] = float(x.median()), float(x.mean())
+    return out
+
+
 def _provenance(store: Any) -> dict[str, Any] | None:
     """Which store and corpus version the clips came from (:meth:`wearpose.motion.CorpusStore.provenance`;
     None for a stand-in store without it)."""
@@ -129,8 +156,8 @@ def _provenance(store: Any) -> dict[str, Any] | None:
 
 def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: int | None = None, *,
                     noise: str = "default", seed: int = 0, store: Any = None, progress: Any = None,
-                    offsets: str = "random", spread: float = UNSEEN_SPREAD, clips: Sequence[str] | None = None
-                    ) -> dict[str, Any]:
+                    offsets: str = "random", spread: float = UNSEEN_SPREAD, clips: Sequence[str] | None = None,
+                    bodies: str = "corpus") -> dict[str, Any]:
     """Evaluate several checkpoints on the same simulated recordings (module doc).
 
     Args:
@@ -146,15 +173,20 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         offsets: evaluation subjects, :data:`SUBJECT_MODES` (``unseen``: EM-POSE Table 4, wider
             distribution scaled by ``spread``).
         clips: explicit clip ids of ``split`` (instead of the first ``limit``).
+        bodies: the wearers, :data:`wearpose.estimators.bodies.BODIES` (module doc).
 
     Returns:
-        ``{"split", "clips", "frames", "noise", "seed", "kit", "joints", "models": {name: {
+        ``{"split", "clips", "frames", "noise", "seed", "kit", "joints", "bodies", "betas" (clip
+        id -> the held-out wearer's betas; ``{}`` for ``"corpus"``), "models": {name: {
         "mpjpe_mm", "mpjpe_std_mm", "pa_mpjpe_mm", "pa_mpjpe_std_mm", "mpjae_deg", "mpjae_std_deg",
-        "frames", "method", "checkpoint", "epoch", "val_mpjpe_mm", "data_fingerprint",
-        "train_command", "seconds", "per_clip": [{"clip", "frames", "mpjpe_mm", "pa_mpjpe_mm",
-        "mpjae_deg"}]}}}``.
+        "height_error_median_cm", "height_error_mean_cm", "height_difference_median_cm", ...,
+        "zero_pose_vertex_error_median_mm", ..., "frames", "method", "checkpoint", "epoch",
+        "val_mpjpe_mm", "data_fingerprint", "train_command", "seconds", "per_clip": [{"clip",
+        "frames", "mpjpe_mm", "pa_mpjpe_mm", "mpjae_deg", "height_error_cm",
+        "height_difference_cm", "zero_pose_vertex_error_mm"}]}}}``.
     """
     from wearpose.body.skeleton import MAJOR_JOINTS
+    from wearpose.estimators.bodies import clip_bodies, wearer_store
     from wearpose.estimators.empose.baselines import load_any
     from wearpose.estimators.empose.data import recording_from_clip
     from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
@@ -169,7 +201,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
             raise ConfigError(f"evaluate_models: {name!r} is for kit {e.kit_name} at {e.fps} Hz on body "
                               f"{e.body_asset_id}, but the first model is for kit {first.kit_name} at {first.fps} Hz "
                               f"on body {first.body_asset_id}; one table needs one setting")
-    store = store or CorpusStore()
+    store = wearer_store(store or CorpusStore(), bodies, first.body, seed)
     ids = list(clips) if clips is not None else store.clips(split=split)[: limit or None]
     errs: dict[str, dict[str, list[torch.Tensor]]] = {n: {"pe": [], "pa": [], "ae": []} for n in ests}
     secs = {n: 0.0 for n in ests}
@@ -189,7 +221,10 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
             errs[name]["pe"].append(mpjpe(pj, r["joints"], MAJOR_JOINTS)[ok])
             errs[name]["pa"].append(pa_mpjpe(pj, r["joints"], MAJOR_JOINTS)[ok])
             errs[name]["ae"].append(mpjae(track.local_rot, r["pose"])[ok])
-            per_clip[name].append(_clip_row(cid, errs[name]))
+            row = _clip_row(cid, errs[name])
+            if getattr(track, "betas", None) is not None:  # the family's shape estimate
+                row.update(_shape_row(est.body, track.betas, r["betas"]))
+            per_clip[name].append(row)
         frames += int(ok.sum())
         if progress is not None:
             progress(i + 1, len(ids))
@@ -199,7 +234,8 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
                                         _stats(errs[name]["ae"], 180.0 / math.pi))
         src = checkpoints[name]
         models[name] = {"mpjpe_mm": m1, "mpjpe_std_mm": s1, "pa_mpjpe_mm": m2, "pa_mpjpe_std_mm": s2,
-                        "mpjae_deg": m3, "mpjae_std_deg": s3, "frames": sum(int(x.numel()) for x in errs[name]["pe"]),
+                        "mpjae_deg": m3, "mpjae_std_deg": s3, **_shape_summary(per_clip[name]),
+                        "frames": sum(int(x.numel()) for x in errs[name]["pe"]),
                         "method": est.name, "checkpoint": str(src) if isinstance(src, (str, Path)) else None,
                         "epoch": est.meta.get("epoch"), "val_mpjpe_mm": est.meta.get("val_mpjpe_mm"),
                         "data_fingerprint": est.data_fingerprint, "train_command": est.train_command,
@@ -213,7 +249,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
     return {"split": split, "clips": len(ids), "frames": frames, "noise": noise, "seed": seed, "kit": first.kit_name,
             "rate_hz": first.fps, "body_asset": first.body_asset_id, "joints": "15 major (DIP/EM-POSE)",
             "offsets": offsets, "spread": spread if offsets == "unseen" else None, "subjects": subjects,
-            "store": _provenance(store), "models": models}
+            "bodies": bodies, "betas": clip_bodies(store, ids), "store": _provenance(store), "models": models}
 
 
 def table2_markdown(result: Mapping[str, Any], digits: int = 1) -> str:
@@ -222,6 +258,8 @@ def table2_markdown(result: Mapping[str, Any], digits: int = 1) -> str:
     models = result["models"]
     cols = [("mpjpe_mm", "mpjpe_std_mm", "MPJPE [mm]"), ("pa_mpjpe_mm", "pa_mpjpe_std_mm", "PA-MPJPE [mm]"),
             ("mpjae_deg", "mpjae_std_deg", "MPJAE [°]")]
+    from wearpose.estimators.bodies import wearers
+
     n_s = {"em12": 12, "em6": 6}.get(result.get("kit", ""), "")
     best = {k: min((m[k] for m in models.values() if not math.isnan(m[k])), default=math.nan) for k, _, _ in cols}
     lines = ["| Model | " + " | ".join(c[2] for c in cols) + " |", "| --- | " + " | ".join("---" for _ in cols) + " |"]
@@ -235,8 +273,26 @@ def table2_markdown(result: Mapping[str, Any], digits: int = 1) -> str:
     lines.append(f"Split `{result['split']}` ({result['clips']} clips, {result['frames']} frames with all sensors "
                  f"valid), kit `{result['kit']}` at {result.get('rate_hz', 0):g} Hz, simulated EM noise "
                  f"`{result['noise']}`, {result.get('subjects', '')}, seed {result['seed']}; "
-                 f"{result['joints']} joints; mean ± std over frames.")
+                 f"{result['joints']} joints; mean ± std over frames; {wearers(result.get('bodies', 'corpus'))}.")
     return "\n".join(lines)
+
+
+def shape_markdown(result: Mapping[str, Any], digits: int = 1) -> list[str]:
+    """Markdown lines: the shape estimate of each model (:func:`evaluate_models`' height and
+    zero-pose vertex errors, median and mean over clips); none when no model has them."""
+    models = {n: m for n, m in result["models"].items() if "height_error_median_cm" in m}
+    if not models:
+        return []
+    lines = ["", "## Body shape estimate", "",
+             "Per clip: the estimated body (one shape per sequence) against the wearer at zero pose; "
+             "median (mean) over clips. Height difference: + = estimated taller.", "",
+             "| Model | height error [cm] | height difference [cm] | zero-pose vertex error [mm] |",
+             "| --- | --- | --- | --- |"]
+    for name, m in models.items():
+        cells = [f"{m[f'{k}_median_{u}']:.{digits}f} ({m[f'{k}_mean_{u}']:.{digits}f})"
+                 for k, u in (("height_error", "cm"), ("height_difference", "cm"), ("zero_pose_vertex_error", "mm"))]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def write_table2(result: Mapping[str, Any], path_stem: str | Path, extra: Mapping[str, Any] | None = None) -> tuple[Path, Path]:
@@ -256,8 +312,8 @@ def write_table(result: Mapping[str, Any], path_stem: str | Path, *, title: str 
     stem.parent.mkdir(parents=True, exist_ok=True)
     md = [f"# {title}", "",
           f"Produced by `{produced_by}` "
-          "(`wearpose.estimators.empose.evaluate.evaluate_models`).", "", table2_markdown(result), "",
-          "## Models", "", "| Model | method | checkpoint | epoch | val MPJPE [mm] | parameters | estimate time [s] |",
+          "(`wearpose.estimators.empose.evaluate.evaluate_models`).", "", table2_markdown(result),
+          *shape_markdown(result), "", "## Models", "", "| Model | method | checkpoint | epoch | val MPJPE [mm] | parameters | estimate time [s] |",
           "| --- | --- | --- | --- | --- | --- | --- |"]
     for name, m in result["models"].items():
         v = m.get("val_mpjpe_mm")

@@ -10,7 +10,9 @@ error of the upper-body joints (:data:`~.config.UPPER_BODY`, as MI-Poser aligns 
 joint and per motion type (:func:`wearpose.motion.store.motion_class`: the corpus description
 without its style, e.g. ``wave-left-hand``; a procedural clip's family),
 on clip frames only (not the T-pose) where every input sensor is valid, in cm. Ground truth and
-estimate are posed on the same (mean-shape) body; the ground-truth root orientation is expressed
+estimate are posed on the same body, the wearer's (the corpus clips' mean shape, or the
+held-out wearer of ``wearpose evaluate --bodies heldout``: MI-Poser calibrates the wearer in
+the T-pose and has no shape of its own); the ground-truth root orientation is expressed
 in the calibrated world (the calibration's alignment of the simulated VIO world).
 
 ``frame_stride`` evaluates every k-th clip frame: each estimate depends only on its own 40-frame
@@ -41,14 +43,16 @@ from wearpose.motion.store import motion_class
 CM = 100.0
 
 
-def joint_errors(body: Any, pred_rot: torch.Tensor, gt_rot: torch.Tensor) -> torch.Tensor:
+def joint_errors(body: Any, pred_rot: torch.Tensor, gt_rot: torch.Tensor, betas: torch.Tensor | None = None
+                 ) -> torch.Tensor:
     """Root-aligned joint position errors ``(N, 24)`` m of two local-rotation tracks ``(N, 24, 3, 3)``
-    posed on ``body`` (mean shape)."""
+    posed on ``body`` with the wearer's shape ``betas`` ``(10,)`` (None: the mean shape; the
+    corpus clips' own body is the mean shape, so this is the same)."""
     from wearpose.evaluate.metrics import joint_position_errors
 
     with torch.no_grad():
-        a = body(pred_rot, None, None, return_vertices=False).joints
-        b = body(gt_rot.to(pred_rot.dtype), None, None, return_vertices=False).joints
+        a = body(pred_rot, betas, None, return_vertices=False).joints
+        b = body(gt_rot.to(pred_rot.dtype), betas, None, return_vertices=False).joints
     return joint_position_errors(a, b)
 
 
@@ -130,7 +134,7 @@ def evaluate_miposer(estimators: dict[str, Any], split: str = "test", limit: int
                 res = r["calibration"] if cond == "calibrated" else uncalibrated(r["calibration"])
                 R, p = calibrated_inputs(raw, res)
                 rot, _ = est.infer(R, p, f)
-                tables[name][cond].add(mtype, joint_errors(est.body, rot, r["pose"][f]), cid)
+                tables[name][cond].add(mtype, joint_errors(est.body, rot, r["pose"][f], r["betas"]), cid)
         if progress is not None:
             progress(k + 1, len(ids))
     return {"split": split, "clips": len(ids), "seed": seed, "noise": noise, "frame_stride": frame_stride,
@@ -167,7 +171,8 @@ def evaluate_imuposer(est: Any, split: str = "test", limit: int | None = None, *
         r = simulate_imu_clip(store.load(cid), est.config, est.body, clip_seed(cid, seed, "eval-imu"), noise=noise)
         rot = est.infer(r["R"], r["a"])
         f = _frames(r["valid"].all(1), 0, frame_stride)
-        table.add(motion_class(store.entry(cid)), joint_errors(est.body, rot[f], r["pose"][f]), cid)
+        table.add(motion_class(store.entry(cid)), joint_errors(est.body, rot[f], r["pose"][f], r["motion"].betas),
+                  cid)
         if progress is not None:
             progress(k + 1, len(ids))
     return {"split": split, "clips": len(ids), "seed": seed, "noise": noise, "frame_stride": frame_stride,

@@ -124,20 +124,17 @@ def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int 
     """Evaluate several estimators (name -> :class:`PipEstimator`, all with one body) on the same
     simulated clips (module doc); ``min_travel`` > 0 keeps only the clips whose
     :func:`clip_travel_m` reaches it (m; applied before ``limit``). ``bodies``: ``"corpus"``
-    (default) the clips' own body (beta = 0); ``"heldout"`` a wearer per clip drawn from the
-    body asset's shape space in the held-out stream of the evaluation seed
-    (:func:`wearpose.sensors.random_body_shape`; never a training draw), the clip re-fitted to it
-    (its shape is part of the known initial state). Returns ``{"rows": {name: {...}}, "clips",
-    "frames", ...}``."""
-    from wearpose.errors import ConfigError
+    (default) the clips' own body (beta = 0); ``"heldout"`` each clip's held-out wearer
+    (:mod:`wearpose.estimators.bodies`: the same body for every method; never a training draw),
+    the clip re-fitted to it (its shape is part of the known initial state). Returns
+    ``{"rows": {name: {...}}, "clips", "frames", ...}``."""
+    from wearpose.estimators.bodies import wearer_store
     from wearpose.motion import CorpusStore
 
-    if bodies not in ("corpus", "heldout"):
-        raise ConfigError(f"bodies must be 'corpus' or 'heldout', got {bodies!r}")
-    store = store or CorpusStore()
-    ids = store.clips(split=split)
     first = next(iter(variants.values()))
     body, cfg = first.body, first.config
+    store = wearer_store(store or CorpusStore(), bodies, body, seed)
+    ids = store.clips(split=split)
     if min_travel > 0:
         ids = [cid for cid in ids if clip_travel_m(store.load(cid), cfg.rate) >= min_travel]
     if limit and limit < len(ids):
@@ -147,8 +144,7 @@ def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int 
     frames = 0
     gt_zmp = [0.0, 0]
     for c, cid in enumerate(ids):
-        r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, seed, "pip-eval"), noise=noise,
-                          shape="heldout" if bodies == "heldout" else None)
+        r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, seed, "pip-eval"), noise=noise)
         T = int(r["x"].shape[0])
         frames += T
         gt = body(r["pose"], r["betas"], r["trans"], return_normals=False)
