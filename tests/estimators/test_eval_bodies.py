@@ -55,6 +55,7 @@ def test_empose_is_simulated_and_scored_on_the_wearer(tmp_path: Path, body: Body
     from wearpose.estimators.empose.evaluate import evaluate_models, simulate_eval_clip
     from wearpose.estimators.empose.model import VirtualSensors
     from wearpose.estimators.empose.estimator import _sites
+    from wearpose.body.shapes import standing_height
     from wearpose.evaluate.metrics import shape_errors
 
     torch.manual_seed(0)
@@ -86,6 +87,7 @@ def test_empose_is_simulated_and_scored_on_the_wearer(tmp_path: Path, body: Body
         assert row["height_error_cm"] == pytest.approx(float(e.height_error) * 100, abs=1e-3)
         assert row["height_difference_cm"] == pytest.approx(float(e.height_difference) * 100, abs=1e-3)
         assert row["zero_pose_vertex_error_mm"] == pytest.approx(float(e.zero_pose_vertex_error) * 1000, abs=1e-2)
+        assert row["wearer_height_cm"] == pytest.approx(float(standing_height(body, heldout_betas(cid, 3))) * 100, abs=1e-3)
     m = res["models"]["m"]
     rows = m["per_clip"]
     assert m["height_error_median_cm"] == pytest.approx(float(torch.tensor([r["height_error_cm"] for r in rows],

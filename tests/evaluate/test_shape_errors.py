@@ -39,6 +39,7 @@ def test_shape_errors_of_a_known_difference(body: BodyModel) -> None:
     # beta[0] = +1 is 10.85 cm taller on this asset (1.7994 vs 1.6909 m)
     assert float(e.height_difference) == pytest.approx(0.1085, abs=2e-3)
     assert float(e.height_error) == pytest.approx(float(e.height_difference))
+    assert float(e.height_true) == pytest.approx(float(standing_height(body, true)))
     back = shape_errors(body, true, tall)
     assert float(back.height_difference) == pytest.approx(-float(e.height_difference), abs=1e-6)
     assert float(back.height_error) == pytest.approx(float(e.height_error), abs=1e-6)

@@ -799,6 +799,7 @@ class ShapeErrors(NamedTuple):
     height_error: torch.Tensor  #: ``(...)`` m, ``|height(estimate) - height(truth)|``
     height_difference: torch.Tensor  #: ``(...)`` m, ``height(estimate) - height(truth)`` (signed: + too tall)
     zero_pose_vertex_error: torch.Tensor  #: ``(...)`` m, mean vertex distance at zero pose
+    height_true: torch.Tensor  #: ``(...)`` m, the true body's standing height
 
 
 def shape_errors(body: Any, betas_pred: torch.Tensor, betas_true: torch.Tensor) -> ShapeErrors:
@@ -819,9 +820,10 @@ def shape_errors(body: Any, betas_pred: torch.Tensor, betas_true: torch.Tensor) 
     from wearpose.body.shapes import standing_height, zero_pose_vertices
 
     bp, bt = torch.broadcast_tensors(_check_tensor(betas_pred, "betas_pred"), _check_tensor(betas_true, "betas_true"))
-    dh = standing_height(body, bp) - standing_height(body, bt)
+    ht = standing_height(body, bt)
+    dh = standing_height(body, bp) - ht
     dv = (zero_pose_vertices(body, bp) - zero_pose_vertices(body, bt)).norm(dim=-1).mean(-1)
-    return ShapeErrors(dh.abs(), dh, dv)
+    return ShapeErrors(dh.abs(), dh, dv, ht)
 
 
 # --------------------------------------------------------------------------------------------

@@ -133,7 +133,8 @@ def _shape_row(body: Any, betas_pred: torch.Tensor, betas_true: torch.Tensor) ->
 
     e = shape_errors(body, betas_pred.reshape(-1), betas_true.reshape(-1))
     return {"height_error_cm": float(e.height_error) * 100.0, "height_difference_cm": float(e.height_difference) * 100.0,
-            "zero_pose_vertex_error_mm": float(e.zero_pose_vertex_error) * 1000.0}
+            "zero_pose_vertex_error_mm": float(e.zero_pose_vertex_error) * 1000.0,
+            "wearer_height_cm": float(e.height_true) * 100.0}
 
 
 def _shape_summary(rows: list[dict[str, Any]]) -> dict[str, float]:
@@ -183,7 +184,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         "zero_pose_vertex_error_median_mm", ..., "frames", "method", "checkpoint", "epoch",
         "val_mpjpe_mm", "data_fingerprint", "train_command", "seconds", "per_clip": [{"clip",
         "frames", "mpjpe_mm", "pa_mpjpe_mm", "mpjae_deg", "height_error_cm",
-        "height_difference_cm", "zero_pose_vertex_error_mm"}]}}}``.
+        "height_difference_cm", "zero_pose_vertex_error_mm", "wearer_height_cm"}]}}}``.
     """
     from wearpose.body.skeleton import MAJOR_JOINTS
     from wearpose.estimators.bodies import clip_bodies, wearer_store
