@@ -140,7 +140,54 @@ def test_traced_online_step_equals_eager_and_follows_weight_changes(body: BodyMo
                 with torch.no_grad():
                     e.model.head.bias.add_(0.05)
                     e.model.update.net[0].weight.mul_(1.05)
+                    e.model.rnn.weight_hh_l1.mul_(1.05)  # the written-out LSTM cell's fused weights follow
         a, b = traced.step(frame), eager.step(frame)
         assert torch.allclose(a.local_rot, b.local_rot, atol=1e-6), k
         assert torch.allclose(a.betas, b.betas, atol=1e-6), k
     assert traced._traced is not None
+
+
+def test_set_iterations_runs_n_updates_like_a_model_built_with_n(body: BodyModel) -> None:
+    """``set_iterations`` (``wearpose bench latency ... --set iterations=4``): the online step then
+    equals that of an estimator configured with that N and the same weights, and the trace is
+    rebuilt; a negative or fractional N is refused."""
+    from wearpose.errors import ConfigError
+    from wearpose.estimators.empose import EmposeConfig
+
+    cfg = EmposeConfig.preset("tiny", 12).override(iterations=1)
+    torch.manual_seed(0)
+    changed = EmposeEstimator(cfg, body=body)
+    built = EmposeEstimator(cfg.override(iterations=3), body=body)
+    built.model.load_state_dict(changed.model.state_dict())
+    r = simulate_clip(synthetic_motion(6, T=8), cfg, body, seed=2, noise="default")
+    frames = list(iter_frames(recording_from_clip(r, cfg), changed.sensor_names))
+    for e in (changed, built):
+        e.set_offsets(torch.as_tensor(r["off_R"]), torch.as_tensor(r["off_t"]))
+    one = changed.step(frames[0])
+    changed.set_iterations(3)
+    assert changed.config.iterations == 3 and changed.model.cfg.iterations == 3
+    for k, frame in enumerate(frames):
+        a, b = changed.step(frame), built.step(frame)
+        assert torch.equal(a.local_rot, b.local_rot) and torch.equal(a.betas, b.betas), k
+    assert not torch.equal(one.local_rot, built.step(frames[0]).local_rot)  # N changed the output
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ConfigError, match="whole number of LGD updates"):
+            changed.set_iterations(bad)
+
+
+def test_written_out_lstm_step_equals_nn_lstm(body: BodyModel) -> None:
+    """``LGDRNN.initial_step`` (the online LSTM cell as addmm + gates, no oneDNN kernel) gives
+    ``nn.LSTM``'s outputs and state to float rounding, over several frames."""
+    from wearpose.estimators.empose import EmposeConfig
+
+    torch.manual_seed(0)
+    m = EmposeEstimator(EmposeConfig.preset("tiny", 12), body=body).model.eval()
+    x = torch.randn(1, 10, m.in_dim)
+    with torch.no_grad():
+        ref, (h_ref, c_ref) = m.initial(x)
+        z = torch.zeros(m.cfg.rnn_layers, 1, m.cfg.hidden)
+        state = (z, z)
+        for t in range(10):
+            out, state = m.initial_step(x[:, t], state)
+            assert torch.allclose(out, ref[:, t], atol=1e-6, rtol=0), t
+    assert torch.allclose(state[0], h_ref, atol=1e-6) and torch.allclose(state[1], c_ref, atol=1e-6)

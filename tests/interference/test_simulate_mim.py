@@ -114,6 +114,32 @@ def test_rotation_correction_and_degraded_flag():
     assert out2["level"][200] > 1.0 > out2["level"][50]
 
 
+class _KalmanAlways(MIM):
+    """MIM with its trusted-position Kalman filter run whatever the config (as before issue 25)."""
+
+    def reset(self) -> None:
+        super().reset()
+        self._use_kf = True
+
+
+@pytest.mark.parametrize("position", ["none", "hold", "odometry"])
+def test_skipping_the_unused_kalman_filter_changes_no_output(position):
+    """Without a position test or "fusion" the Kalman filter is skipped (issue 25, MIM's cost): the
+    outputs equal those of the filter run every frame, bit for bit, through a correction and a
+    degraded stretch."""
+    R, p, gyro = _clean_stream()
+    acc = np.random.default_rng(0).normal(0.0, 0.3, p.shape)
+    Rm = _ramp(R, 100, 10, 20, 10.0)
+    Rm[200:330] = _ramp(R, 200, 5, 125, 12.0)[200:330]
+    cfg = MIMConfig(position=position, max_correction_s=0.5)
+    skip, full = MIM(cfg), _KalmanAlways(cfg)
+    assert not skip._use_kf and full._use_kf
+    a, b = skip.process(Rm, p, gyro, acc, FPS), full.process(Rm, p, gyro, acc, FPS)
+    assert a["corrected"].any() and a["degraded"].any()
+    for k in a:
+        assert np.array_equal(a[k], b[k]), k
+
+
 def _ramp(R: np.ndarray, start: int, rise: int, hold: int, deg: float) -> np.ndarray:
     """``R`` with a rotation offset growing linearly to ``deg`` over ``rise`` frames, held ``hold`` frames."""
     Rm = R.copy()

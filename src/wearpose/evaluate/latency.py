@@ -114,8 +114,8 @@ def import_baseline(src: str | Path, module: str, package: str = "wearpose") -> 
 
 #: Config fields and estimator attributes that change what one online step costs (recorded beside
 #: every figure): EM-POSE's LGD iterations N, BiRAE's MC-dropout samples M, window and online
-#: mode, MI-Poser's window, the networks' widths, PIP's physics.
-COST_SETTINGS = ("iterations", "mc_samples", "window", "online", "physics", "dual_pd", "hidden", "width",
+#: mode, MI-Poser's window and metal-interference mitigation, the networks' widths, PIP's physics.
+COST_SETTINGS = ("iterations", "mc_samples", "window", "online", "physics", "dual_pd", "mim", "hidden", "width",
                  "d_model", "layers", "rnn_layers")
 
 
@@ -133,6 +133,9 @@ def cost_settings(est: Any) -> dict[str, Any]:
 
 
 def _parse(value: str) -> Any:
+    """``--set`` value: ``true``/``false`` (any case) -> bool, ``a,b`` -> int tuple, else int, float or str."""
+    if value.lower() in ("true", "false"):
+        return value.lower() == "true"
     if "," in value:
         return tuple(int(v) for v in value.split(","))
     for kind in (int, float):
@@ -162,7 +165,7 @@ def apply_settings(est: Any, settings: dict[str, str]) -> None:
         elif key in COST_SETTINGS and getattr(est, key, None) is not None:
             setattr(est, key, value)
         else:
-            have = [k for k in COST_SETTINGS if getattr(est, k, None) is not None]
+            have = [k for k in COST_SETTINGS if callable(getattr(est, f"set_{k}", None)) or getattr(est, k, None) is not None]
             raise ConfigError(f"--set {key}={raw}: {type(est).__name__} has no setting {key!r} that can be changed "
                               f"after loading (it has: {', '.join(have) or 'none'})")
 

@@ -50,6 +50,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import math
+
 import numpy as np
 
 from wearpose.errors import ConfigError, ShapeError
@@ -143,35 +145,36 @@ _FORECASTERS: dict[str, Any] = {}
 
 class _Kalman:
     """Constant-acceleration-input Kalman filter of one 3-D point: state ``x``, ``v`` (3,) and a
-    2 x 2 covariance shared by the three axes (same noise on each). The accelerometer drives the
+    symmetric 2 x 2 covariance shared by the three axes (same noise on each), kept as the three
+    Python floats ``p00``, ``p01``, ``p11`` (a per-frame 2 x 2 numpy array cost more than its
+    arithmetic; the same IEEE operations, so the same numbers). The accelerometer drives the
     prediction; trusted EM positions (and, in ``"fusion"``, N-BEATS forecasts) are measurements."""
 
-    __slots__ = ("x", "v", "P")
+    __slots__ = ("x", "v", "p00", "p01", "p11")
 
-    def __init__(self, x: np.ndarray, v: np.ndarray, P: np.ndarray):
-        self.x, self.v, self.P = x, v, P
+    def __init__(self, x: np.ndarray, v: np.ndarray, p00: float = 0.0, p01: float = 0.0, p11: float = 0.0):
+        self.x, self.v = x, v
+        self.p00, self.p01, self.p11 = float(p00), float(p01), float(p11)
 
     def copy(self) -> "_Kalman":
-        return _Kalman(self.x.copy(), self.v.copy(), self.P.copy())
+        return _Kalman(self.x.copy(), self.v.copy(), self.p00, self.p01, self.p11)
 
     def predict(self, a: np.ndarray, dt: float, q: float) -> None:
         self.x = self.x + self.v * dt + 0.5 * a * dt * dt
         self.v = self.v + a * dt
-        P = self.P
-        p00 = P[0, 0] + 2 * dt * P[0, 1] + dt * dt * P[1, 1] + q * 0.25 * dt ** 4
-        p01 = P[0, 1] + dt * P[1, 1] + q * 0.5 * dt ** 3
-        p11 = P[1, 1] + q * dt * dt
-        self.P = np.array([[p00, p01], [p01, p11]])
+        p00, p01, p11 = self.p00, self.p01, self.p11
+        self.p00 = p00 + 2 * dt * p01 + dt * dt * p11 + q * 0.25 * dt ** 4
+        self.p01 = p01 + dt * p11 + q * 0.5 * dt ** 3
+        self.p11 = p11 + q * dt * dt
 
     def update(self, z: np.ndarray, r: float) -> None:
-        P = self.P
-        S = P[0, 0] + r
-        k0, k1 = P[0, 0] / S, P[1, 0] / S
+        p00, p01, p11 = self.p00, self.p01, self.p11
+        S = p00 + r
+        k0, k1 = p00 / S, p01 / S
         e = z - self.x
         self.x = self.x + k0 * e
         self.v = self.v + k1 * e
-        self.P = np.array([[P[0, 0] - k0 * P[0, 0], P[0, 1] - k0 * P[0, 1]],
-                           [P[0, 1] - k0 * P[0, 1], P[1, 1] - k1 * P[0, 1]]])
+        self.p00, self.p01, self.p11 = p00 - k0 * p00, p01 - k0 * p01, p11 - k1 * p01
 
 
 class MIM:
@@ -210,6 +213,13 @@ class MIM:
         self._degraded = False
         self._R_long: np.ndarray | None = None
         self._t_degraded = 0.0
+        # The trusted-position Kalman filter feeds only the position test and the "fusion"
+        # correction; without them (the estimator's default: position "none", no position test)
+        # it is not run at all (its state never reaches an output).
+        self._use_kf = cfg.pos_threshold_cm > 0 or cfg.position == "fusion"
+        self._th = float(np.radians(cfg.threshold_deg))
+        self._release = float(np.radians(cfg.release_deg))
+        self._blend: tuple[float, float] | None = None  # (dt, level low-pass factor) for the last dt
 
     # ----------------------------------------------------------------- position correction
     def _sigma_f(self, k: int) -> float:
@@ -244,7 +254,7 @@ class MIM:
             # Eq. 1: trusted EM position at the anchor, velocity differenced over trusted EM positions
             ps = [b[4] for b in buf[:len(buf) - L + 1]][-(cfg.velocity_frames + 1):]
             v = (ps[-1] - ps[0]) / ((len(ps) - 1) * dt) if len(ps) > 1 else np.zeros(3)
-            self._corr = _Kalman(anchor[4].copy(), v, np.zeros((2, 2)))
+            self._corr = _Kalman(anchor[4].copy(), v)
             for a in accs:
                 self._corr.predict(a, dt, 0.0)
         elif m == "fusion":
@@ -260,7 +270,7 @@ class MIM:
                 for a in accs:
                     x = self._forecaster(np.asarray(h[-self.input_len:]))[0] + 0.5 * a * dt * dt
                     h.append(x)
-                self._corr = _Kalman(x, np.zeros(3), np.zeros((2, 2)))
+                self._corr = _Kalman(x, np.zeros(3))
                 self._eq3_hist = h
             else:
                 self._corr = None
@@ -327,20 +337,22 @@ class MIM:
         cfg = self.config
         r_em = cfg.em_sigma_m ** 2
         q = cfg.acc_sigma ** 2
+        use_kf = self._use_kf
         if self._gyro_prev is None:
             self._gyro_prev, self._p_out = gyro.copy(), p_em.copy()
-            self._kf = _Kalman(p_em.copy(), np.zeros(3), np.diag([r_em, 1.0]))
-            self._buf.append((R_em.copy(), np.eye(3), self._kf.copy(), acc.copy(), p_em.copy(), True))
+            self._kf = _Kalman(p_em.copy(), np.zeros(3), r_em, 0.0, 1.0) if use_kf else None
+            self._buf.append((R_em.copy(), np.eye(3), self._kf.copy() if use_kf else None, acc.copy(), p_em.copy(), True))
             self._hist.append(p_em.copy())
             return {"R": R_em, "p": p_em, "interfered": False, "corrected": False, "level": 0.0,
                     "degraded": False, "discrepancy": 0.0}
         w = 0.5 * (self._gyro_prev + gyro)
         self._gyro_prev = gyro.copy()
         dR = exp_so3(w * dt)
-        th = np.radians(cfg.threshold_deg)
+        th = self._th
         pth = cfg.pos_threshold_cm / 100.0
         R_prev = self._buf[-1][0]
-        self._kf.predict(acc, dt, q)
+        if use_kf:
+            self._kf.predict(acc, dt, q)
         corrected = False
         interfered = False
         trusted = False
@@ -353,17 +365,18 @@ class MIM:
             self._t_degraded += dt
             d = angle_between(self._R_long, R_em)
             score = d / th
-            if d < np.radians(cfg.release_deg) or self._t_degraded > cfg.reanchor_s:
+            if d < self._release or self._t_degraded > cfg.reanchor_s:
                 self._degraded = False
                 self._flag = False
                 R_ref = R_em
                 trusted = True
-                self._kf = _Kalman(p_em.copy(), np.zeros(3), np.diag([r_em, 1.0]))
+                if use_kf:
+                    self._kf = _Kalman(p_em.copy(), np.zeros(3), r_em, 0.0, 1.0)
         elif self._flag:
             d = angle_between(R_ref, R_em)
-            dp = float(np.linalg.norm(p_em - self._kf.x))
+            dp = float(np.linalg.norm(p_em - self._kf.x)) if pth > 0 else 0.0
             score = max(d / th, dp / pth if pth > 0 else 0.0)
-            if d > cfg.release_ratio * th or (pth > 0 and dp > cfg.release_ratio * pth + 3.0 * np.sqrt(self._kf.P[0, 0])):
+            if d > cfg.release_ratio * th or (pth > 0 and dp > cfg.release_ratio * pth + 3.0 * math.sqrt(self._kf.p00)):
                 interfered = True
             else:
                 self._flag = False
@@ -373,14 +386,17 @@ class MIM:
             k = min(cfg.span_frames, len(self._buf))
             buf = self._buf
             R_span = buf[-k][0]
-            kf = buf[-k][2].copy()
             for j in range(len(buf) - k + 1, len(buf)):
                 R_span = R_span @ buf[j][1]
-                kf.predict(buf[j][3], dt, 0.0)
             R_span = R_span @ dR
-            kf.predict(acc, dt, 0.0)
             d = angle_between(R_span, R_em)
-            dp = float(np.linalg.norm(p_em - kf.x))
+            dp = 0.0
+            if pth > 0:  # the position test: the trusted state span_frames ago, carried by the accelerometer
+                kf = buf[-k][2].copy()
+                for j in range(len(buf) - k + 1, len(buf)):
+                    kf.predict(buf[j][3], dt, 0.0)
+                kf.predict(acc, dt, 0.0)
+                dp = float(np.linalg.norm(p_em - kf.x))
             score = max(d / th, dp / pth if pth > 0 else 0.0)
             if d > th or (pth > 0 and dp > pth):
                 interfered = True
@@ -393,10 +409,11 @@ class MIM:
                     R_a = R_a @ self._buf[j][1]
                 R_ref = R_a @ dR
                 L = min(cfg.position_anchor_frames or cfg.anchor_frames, len(self._buf))
-                self._kf = self._buf[-L][2].copy()
-                for j in range(len(self._buf) - L + 1, len(self._buf)):
-                    self._kf.predict(self._buf[j][3], dt, q)
-                self._kf.predict(acc, dt, q)
+                if use_kf:
+                    self._kf = self._buf[-L][2].copy()
+                    for j in range(len(self._buf) - L + 1, len(self._buf)):
+                        self._kf.predict(self._buf[j][3], dt, q)
+                    self._kf.predict(acc, dt, q)
                 if cfg.position not in ("none", "hold"):
                     self._start_correction(L, acc, dt)
             else:
@@ -420,12 +437,13 @@ class MIM:
                 interfered = False
                 self._R_long = R_ref
                 self._t_degraded = 0.0
-        if trusted:
+        if trusted and use_kf:
             self._kf.update(p_em, r_em)
-        a = 1.0 - np.exp(-dt / max(cfg.level_tau_s, 1e-9))
-        self._level += a * (score - self._level)
+        if self._blend is None or self._blend[0] != dt:
+            self._blend = (dt, float(1.0 - np.exp(-dt / max(cfg.level_tau_s, 1e-9))))
+        self._level += self._blend[1] * (score - self._level)
         self._p_out = p_out
-        self._buf.append((R_ref, dR, self._kf.copy(), acc.copy(), p_em.copy(), trusted))
+        self._buf.append((R_ref, dR, self._kf.copy() if use_kf else None, acc.copy(), p_em.copy(), trusted))
         self._hist.append(np.array(p_out, dtype=np.float64))
         return {"R": R_out, "p": p_out, "interfered": bool(interfered), "corrected": corrected,
                 "level": float(self._level), "degraded": bool(self._degraded), "discrepancy": float(d)}

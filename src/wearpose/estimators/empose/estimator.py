@@ -16,13 +16,14 @@ source frame (the source rides on the lower back); no translation is estimated (
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 import torch
 
-from wearpose.errors import ShapeError
+from wearpose.errors import ConfigError, ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.config import EmposeConfig
@@ -52,8 +53,8 @@ class _OnlineStep(torch.nn.Module):
         self.sensors = sensors
 
     def forward(self, x, p, R, offR, offt, h, c):  # noqa: ANN001, ANN201 - traced
-        omega0, (h2, c2) = self.m.initial(x[None, None], (h, c))
-        last = self.m._refine_lean(omega0[0], x[None], p[None], R[None], offR[None], offt[None], self.sensors)[-1]
+        omega0, (h2, c2) = self.m.initial_step(x[None], (h, c))
+        last = self.m._refine_lean(omega0, x[None], p[None], R[None], offR[None], offt[None], self.sensors)[-1]
         return last["local_rot"][0], last["betas"][0], last["rec"][0], h2, c2
 
 
@@ -245,6 +246,24 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         return PoseTrack(rot, track.betas.clone(), trans, track.valid.clone(), track.fps, track.uncertainty,
                          {**track.extras, "frame": "world"})
 
+    # ------------------------------------------------------------------ settings
+    def set_iterations(self, n: int) -> None:
+        """Run ``n`` LGD updates per frame from now on (``config.iterations``, N of Eq. 5).
+
+        The update network is the same at every step, so any N runs; the shipped figures are at
+        the N the card states (the trained one). Other values are for timing (e.g. the paper's
+        N = 4 with ``wearpose bench latency empose12_cpu --set iterations=4``) or a study of N.
+        Resets the online state (the traced step is rebuilt for the new N).
+
+        Raises:
+            ConfigError: ``n`` is not a whole number >= 0.
+        """
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise ConfigError(f"EM-POSE iterations: expected a whole number of LGD updates >= 0, got {n!r}")
+        self.config = replace(self.config, iterations=n)
+        self.model.cfg = self.config
+        self.reset()
+
     # ------------------------------------------------------------------ online
     def reset(self) -> None:
         self._state = None
@@ -264,6 +283,8 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         S, H = len(self.sensor_names), m.cfg.hidden
         self.sensors.lean()
         m.update._fused_layers()  # built outside the trace (it is Python bookkeeping)
+        if m.cfg.init == "rnn":
+            m._fused_lstm()
 
         z = torch.zeros(m.cfg.rnn_layers, 1, H, device=self.device)
         eye = torch.eye(3, device=self.device).expand(S, 3, 3).contiguous()

@@ -228,6 +228,7 @@ class LGDRNN(nn.Module):
         else:  # "no RNN" ablation: one learned start for every frame (no temporal model at all)
             self.omega_init = nn.Parameter(torch.zeros(D))  # offset from omega_rest; see set_mean_start
         self.update = UpdateNet(2 * D + F, cfg.width, cfg.mlp_layers, D, cfg.dropout_mlp)
+        self._lstm_fused: tuple[tuple[int, ...], list[tuple[torch.Tensor, torch.Tensor]]] | None = None
 
     @torch.no_grad()
     def set_mean_start(self, pose6: torch.Tensor) -> None:
@@ -266,6 +267,42 @@ class LGDRNN(nn.Module):
             return (self.omega_init + self.omega_rest).expand(*x.shape[:-1], self.omega_dim), state
         h, state = self.rnn(self.input_dropout(x), state)
         return self.head(h) + self.omega_rest, state
+
+    def _fused_lstm(self) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """Per LSTM layer ``(W, b)``: ``W = [W_ih, W_hh]^T`` ``(F_l + H, 4H)`` and ``b = b_ih + b_hh``
+        ``(4H,)``, so one ``addmm`` gives a layer's four gates; rebuilt whenever a weight changed
+        (tensor version counters)."""
+        key = module_version(self.rnn)
+        if self._lstm_fused is None or self._lstm_fused[0] != key:
+            r = self.rnn
+            layers = [(torch.cat([getattr(r, f"weight_ih_l{k}"), getattr(r, f"weight_hh_l{k}")], 1).detach().t()
+                       .contiguous(), (getattr(r, f"bias_ih_l{k}") + getattr(r, f"bias_hh_l{k}")).detach())
+                      for k in range(r.num_layers)]
+            self._lstm_fused = (key, layers)
+        return self._lstm_fused[1]
+
+    def initial_step(self, x: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor]
+                     ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
+        """:meth:`initial` for one frame in eval mode: ``x`` ``(B, S * 12)``, ``state`` ``(h, c)``
+        each ``(rnn_layers, B, hidden)`` -> ``Omega^(0)`` ``(B, D)`` and the new state.
+
+        The LSTM cell written out (one ``addmm`` per layer for the four gates, PyTorch's gate
+        order i, f, g, o): equal to ``nn.LSTM`` up to float rounding (the audit of issue 25 found
+        ``nn.LSTM``'s oneDNN kernel costing 1.2 ms per layer per frame at batch 1, 20x the
+        arithmetic)."""
+        x = self.select_inputs(x)
+        if self.cfg.init == "mean":
+            return (self.omega_init + self.omega_rest).expand(*x.shape[:-1], self.omega_dim), state
+        h0, c0 = state
+        hs, cs = [], []
+        inp = x
+        for k, (W, b) in enumerate(self._fused_lstm()):
+            i, f, g, o = torch.addmm(b, torch.cat([inp, h0[k]], -1), W).chunk(4, -1)
+            c = torch.sigmoid(f) * c0[k] + torch.sigmoid(i) * torch.tanh(g)
+            inp = torch.sigmoid(o) * torch.tanh(c)
+            hs.append(inp)
+            cs.append(c)
+        return self.head(inp) + self.omega_rest, (torch.stack(hs), torch.stack(cs))
 
     def refine(self, omega0: torch.Tensor, x: torch.Tensor, meas_p: torch.Tensor, meas_R: torch.Tensor,
                off_R: torch.Tensor, off_t: torch.Tensor, sensors: VirtualSensors, *, train: bool

@@ -36,7 +36,7 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 import torch
 
-from wearpose.errors import ShapeError
+from wearpose.errors import ConfigError, ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.inputs import InputSpec, OnlineInput, canonical_input, on_first_grid
@@ -254,6 +254,19 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
     def set_calibration(self, calibration: Any) -> None:
         """The ``miposer-tpose`` calibration :meth:`step` applies (None: sensor poses as they are)."""
         self._calibration = calibration
+
+    def set_mim(self, on: bool) -> None:
+        """Metal-interference mitigation on the wrist EM streams on or off (``mim`` of the
+        constructor); resets the online state. ``wearpose bench latency miposer_cpu --set mim=true``
+        times the step with it.
+
+        Raises:
+            ConfigError: ``on`` is not a bool.
+        """
+        if not isinstance(on, bool):
+            raise ConfigError(f"MI-Poser mim: expected true or false, got {on!r}")
+        self.mim = on
+        self.reset()
 
     def reset(self) -> None:
         self._R: list[torch.Tensor] = []

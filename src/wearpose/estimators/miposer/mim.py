@@ -156,17 +156,20 @@ def step_mim(mims: list[Any], frame: Any, names: Sequence[str], cols: Sequence[i
     :meth:`~wearpose.estimators.inputs.OnlineInput.index`); the frame's ``angular_velocity`` /
     ``acceleration`` rows of the wrists in MIM's convention (NaN -> 0). ``mims`` holds one MIM
     per wrist (created on first use)."""
-    R, p = R.clone(), p.clone()
+    # float64 numpy copies made once per frame (not per wrist and per tensor row); outputs written
+    # into them and converted back once: the same roundings as row by row.
+    Rn = R.detach().cpu().numpy().astype(np.float64)
+    pn = p.detach().cpu().numpy().astype(np.float64)
     n_cols = len(frame.names)
-    gy = np.asarray(frame.channels.get("angular_velocity", np.full((n_cols, 3), np.nan)), dtype=np.float64)
-    ac = np.asarray(frame.channels.get("acceleration", np.full((n_cols, 3), np.nan)), dtype=np.float64)
+    gy = np.nan_to_num(np.asarray(frame.channels.get("angular_velocity", np.full((n_cols, 3), np.nan)), dtype=np.float64))
+    ac = np.nan_to_num(np.asarray(frame.channels.get("acceleration", np.full((n_cols, 3), np.nan)), dtype=np.float64))
     info: dict[str, Any] = {}
     for j, n in enumerate(names[1:]):
         if mims[j] is None:
             mims[j] = make_mim(mim_config)
         k = int(cols[j + 1])
-        o = mims[j].step(R[j + 1].double().numpy(), p[j + 1].double().numpy(), np.nan_to_num(gy[k]), np.nan_to_num(ac[k]), dt)
-        R[j + 1] = torch.as_tensor(o["R"], dtype=R.dtype)
-        p[j + 1] = torch.as_tensor(o["p"], dtype=p.dtype)
+        o = mims[j].step(Rn[j + 1].copy(), pn[j + 1].copy(), gy[k], ac[k], dt)
+        Rn[j + 1], pn[j + 1] = o["R"], o["p"]
         info[n] = {k2: o[k2] for k2 in ("interfered", "corrected", "degraded", "level")}
-    return R, p, info
+    return (torch.from_numpy(Rn).to(dtype=R.dtype, device=R.device),
+            torch.from_numpy(pn).to(dtype=p.dtype, device=p.device), info)
