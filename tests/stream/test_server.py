@@ -155,6 +155,20 @@ def test_null_estimator_passes_any_stream_through() -> None:
     assert r["invalid_pose_frames"] == 5  # frames 10-14 have a dropped sensor
 
 
+def test_estimator_factory_applies_cost_settings_to_every_estimator() -> None:
+    """``wearpose serve --set online=stream``: each subject's estimator is made in BiRAE's
+    streaming mode; a setting the estimator lacks fails when the factory is first called."""
+    from wearpose.errors import ConfigError
+    from wearpose.stream import estimator_factory
+
+    make = estimator_factory("birae3_cpu", settings={"online": "stream", "mc_samples": "0"})
+    a, b = make(), make()
+    assert a is not b and a.online == b.online == "stream" and a.mc_samples == 0
+    assert estimator_factory("birae3_cpu")().online == "window"
+    with pytest.raises(ConfigError, match="no setting 'iterations'"):
+        estimator_factory("birae3_cpu", settings={"iterations": "4"})()
+
+
 def test_replay_reports_a_backlog_it_stopped_waiting_for() -> None:
     rec = tiny_recording(40)
 

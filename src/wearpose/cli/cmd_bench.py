@@ -54,7 +54,15 @@ def _render(res: dict[str, Any]) -> None:
     t.add_row("CPU", f"{c['median_ms']:.2f}", f"{c['p99_ms']:.2f}", f"{c['max_ms']:.2f}")
     for key, v in res["stages_ms"].items():
         t.add_row(f"  {key}", f"{v['median_ms']:.2f}", f"{v['p99_ms']:.2f}", f"{v['max_ms']:.2f}")
+    if "baseline" in res:
+        b, sp = res["baseline"], res["speedup"]
+        t.add_row("baseline wall", *(f"{b['online_ms'][k]:.2f}" for k in ("median_ms", "p99_ms", "max_ms")))
+        t.add_row("baseline CPU", *(f"{b['online_cpu_ms'][k]:.2f}" for k in ("median_ms", "p99_ms", "max_ms")))
+        t.add_row("speed-up", f"{sp['median']:.2f}x", f"{sp['p99']:.2f}x", "")
     console.print(t)
+    if "baseline" in res:
+        console.print(f"baseline {res['baseline']['commit'] or res['baseline']['src']}; output rotations differ by "
+                      f"at most {res['max_abs_diff_local_rot']:.1e}" + "".join(f"; {n}" for n in res['baseline']['notes']))
     ok = "within" if res["p99_within_frame_period"] else "OVER"
     load = ", ".join(f"{x:.2f}" for x in res["machine"]["load_average"])
     console.print(f"p99 {ok} the frame period ({res['frame_period_ms']:.2f} ms); settings "
@@ -77,6 +85,11 @@ def latency_cmd(
     settings: Optional[list[str]] = typer.Option(None, "--set", help="KEY=VALUE: change a cost setting the "
                                                  "estimator has (repeatable), e.g. --set online=stream, "
                                                  "--set window=130,30, --set mc_samples=0."),
+    baseline: Optional[Path] = typer.Option(None, help="An older checkout's src/ folder (git worktree add /tmp/old "
+                                                       "COMMIT): its code times the same model on the same frames, "
+                                                       "interleaved; speed-ups and output difference reported."),
+    budget_hz: Optional[float] = typer.Option(None, min=1e-3, help="Compare p99 with this rate's frame period "
+                                                                  "(default: the model's rate)."),
     out: Optional[Path] = typer.Option(None, help="Write OUT.json and OUT.md (the table, settings, machine)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
@@ -87,11 +100,14 @@ def latency_cmd(
     Example: wearpose bench latency empose12_cpu --frames 300 --threads 1 --json
     A recording of your own: wearpose bench latency pip_cpu --recording recs/imu6.npz
     BiRAE's streaming mode: wearpose bench latency birae6_cpu --set online=stream
+    Against an older commit at 120 Hz: wearpose bench latency empose12_cpu --set iterations=4
+    --baseline /tmp/old/src --budget-hz 120
     """
     import torch
 
+    from wearpose.cli.models import parse_settings
     from wearpose.errors import ConfigError
-    from wearpose.evaluate.latency import machine_info, reference_timing, step_latency
+    from wearpose.evaluate.latency import machine_info, open_baseline, reference_timing, step_latency
     from wearpose.estimators.run import open_model
     from wearpose.recording import load_recording
 
@@ -105,10 +121,13 @@ def latency_cmd(
             raise ConfigError(f"--model {model!r} has no kit of its own: give --kit (the kit to simulate) or --recording")
         rec, rec_name = _procedural_recording(use_kit, motion, seed), f"procedural {motion} (eval seed {seed}), kit {use_kit}"
     machine = machine_info()
-    pairs = dict(s.split("=", 1) for s in settings or [] if "=" in s)
-    if len(pairs) != len(settings or []):
-        raise typer.BadParameter(f"{settings}: expected KEY=VALUE", param_hint="--set")
-    res = step_latency(source, rec, frames=frames, warmup=warmup, path=recording or "<procedural>", settings=pairs)
+    pairs = parse_settings(settings)
+    base = open_baseline(baseline, model) if baseline is not None else None
+    res = step_latency(source, rec, frames=frames, warmup=warmup, path=recording or "<procedural>", settings=pairs,
+                       baseline=base)
+    if budget_hz is not None:
+        res.update({"frame_period_ms": 1000.0 / budget_hz, "budget_hz": budget_hz,
+                    "p99_within_frame_period": bool(res["online_ms"]["p99_ms"] <= 1000.0 / budget_hz)})
     machine_end = machine_info()
     res.update({"threads": threads, "recording": rec_name, "reference": reference_timing(),
                 "machine": {**machine, "load_average_end": machine_end["load_average"]},
@@ -122,6 +141,21 @@ def latency_cmd(
     _emit(res, as_json, _render)
 
 
+def _baseline_rows(res: dict[str, Any]) -> list[str]:
+    """Markdown rows of the baseline's timings and the speed-ups (none without a baseline)."""
+    if "baseline" not in res:
+        return []
+    b, sp = res["baseline"], res["speedup"]
+    row = lambda name, d: f"| {name} | {d['median_ms']:.2f} | {d['p99_ms']:.2f} | {d['max_ms']:.2f} |"  # noqa: E731
+    return [row(f"baseline wall ({(b['commit'] or b['src'])[:7]})", b["online_ms"]),
+            row(f"baseline CPU ({(b['commit'] or b['src'])[:7]})", b["online_cpu_ms"]),
+            f"| speed-up (baseline / this) | {sp['median']:.2f}x | {sp['p99']:.2f}x | |", "",
+            f"Baseline: `{b['src']}` at {b['commit']}, settings `{json.dumps(b['settings'])}`, stepped through the "
+            f"same frames interleaved with this version (alternating which goes first); CPU median speed-up "
+            f"{sp['cpu_median']:.2f}x; output rotations differ by at most {res['max_abs_diff_local_rot']:.1e}"
+            + "".join(f"; {n}" for n in b["notes"]) + "."]
+
+
 def latency_markdown(res: dict[str, Any]) -> str:
     """The result as a markdown table with its settings and machine (for benchmarks/results/)."""
     s, c = res["online_ms"], res["online_cpu_ms"]
@@ -133,7 +167,8 @@ def latency_markdown(res: dict[str, Any]) -> str:
         f"| wall | {s['median_ms']:.2f} | {s['p99_ms']:.2f} | {s['max_ms']:.2f} |",
         f"| CPU | {c['median_ms']:.2f} | {c['p99_ms']:.2f} | {c['max_ms']:.2f} |",
         *[f"| stage {k} | {v['median_ms']:.2f} | {v['p99_ms']:.2f} | {v['max_ms']:.2f} |"
-          for k, v in res["stages_ms"].items()], "",
+          for k, v in res["stages_ms"].items()],
+        *_baseline_rows(res), "",
         f"{res['frames']} steps after {res['warmup']} warm-up steps at {res['rate_hz']:g} Hz (frame period "
         f"{res['frame_period_ms']:.2f} ms: p99 {'within' if res['p99_within_frame_period'] else 'over'}); "
         f"{res['threads']} thread(s); settings `{json.dumps(res['settings'])}`; recording: {res['recording']}.",

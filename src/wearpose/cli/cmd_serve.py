@@ -52,6 +52,9 @@ def serve(
     workers: int = typer.Option(2, min=1, help="Estimator steps running at once (each subject has its own estimator thread; "
                                         "subjects step in parallel up to this)."),
     threads: int = typer.Option(1, min=1, help="torch CPU threads per step."),
+    settings: Optional[List[str]] = typer.Option(None, "--set", help="KEY=VALUE: a cost setting of every subject's "
+                                                 "estimator (repeatable), as in wearpose bench latency, e.g. "
+                                                 "--set online=stream (BiRAE), --set mim=true (MI-Poser)."),
     warmup: int = typer.Option(30, min=0, help="Synthetic steps run on each new subject's estimator before it is ready "
                                         "(pays tracing / first-call costs before real frames; 0: none)."),
     token: Optional[str] = typer.Option(None, envvar="WEARPOSE_TOKEN",
@@ -120,9 +123,11 @@ def serve(
 
     Example: wearpose serve --model empose12_cpu --port 8765
 
+    Example: wearpose serve --model birae6_cpu --set online=stream
+
     Example: wearpose serve --model pip_cpu --input mvn --mvn-segments pelvis,head,left_forearm,right_forearm,left_lower_leg,right_lower_leg --output vmc
     """
-    from wearpose.cli.models import check_pose_weights
+    from wearpose.cli.models import check_pose_weights, parse_settings
     from wearpose.stream import estimator_factory, run_server
     from wearpose.stream.security import Limits, check_token, new_token, normalise_origin
 
@@ -130,8 +135,8 @@ def serve(
     token = new_token() if token is None else check_token(token)
     origins = [normalise_origin(o) for o in allow_origin or []]  # a typo fails now, not at the first page
     check_pose_weights(model)
-    factory = estimator_factory(model, method, threads)
-    factory()  # load once now: a checkpoint that does not fit --method fails here, not at the first subject
+    factory = estimator_factory(model, method, threads, parse_settings(settings))
+    factory()  # load once now: a checkpoint that does not fit --method, or a --set it lacks, fails here
 
     def started(server: Any) -> None:
         # One line a script can wait for (benchmarks/stream.py does).
@@ -326,7 +331,7 @@ def view_recording(
 
     Example: wearpose view-recording out/demo-em12/recording.npz --model empose12_cpu
     """
-    from wearpose.cli.models import check_pose_weights, recording_mismatch
+    from wearpose.cli.models import check_pose_weights, parse_settings, recording_mismatch
     from wearpose.errors import ShapeError
     from wearpose.estimators.run import open_model
     from wearpose.viewer.live import run_recording_viewer

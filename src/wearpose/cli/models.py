@@ -1,7 +1,8 @@
 """Model arguments shared by the commands that run an estimator (``estimate``, ``serve``,
 ``view-recording``, ``evaluate``): clear errors for names that are not pose-estimator weights,
-and for recordings that do not fit the weights (kit, rate). Resolving a model, fitting the
-rate and running it is :mod:`wearpose.estimators.run`'s."""
+and for recordings that do not fit the weights (kit, rate), and the ``--set KEY=VALUE`` cost
+settings of ``bench latency`` and ``serve``. Resolving a model, fitting the rate and running it
+is :mod:`wearpose.estimators.run`'s."""
 
 from __future__ import annotations
 
@@ -52,3 +53,17 @@ def recording_mismatch(recording: Path, source: ModelSource, exc: Exception) -> 
     return InputFileError(recording, f"does not fit {source.name} ({problem})",
                           f"a recording of kit {source.kit}{rate} with sensors {', '.join(source.sensors)} "
                           f"(e.g. {sim}), or weights for this recording's sensors")
+
+
+def parse_settings(values: list[str] | None) -> dict[str, str]:
+    """``--set KEY=VALUE`` options (repeatable) as ``{KEY: VALUE}``; the values are parsed and
+    checked against the estimator by :func:`wearpose.evaluate.latency.apply_settings`.
+
+    Raises:
+        typer.BadParameter: an option without ``=``.
+    """
+    pairs = dict(v.split("=", 1) for v in values or [] if "=" in v)
+    if len(pairs) != len(values or []):
+        bad = [v for v in values or [] if "=" not in v]
+        raise typer.BadParameter(f"{bad}: expected KEY=VALUE, e.g. online=stream", param_hint="--set")
+    return pairs

@@ -8,14 +8,20 @@ average, and code versions are compared as ratios measured in one run (:func:`im
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
+import itertools
 import os
 import platform
+import subprocess
 import sys
+import tempfile
 import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 import torch
@@ -109,6 +115,7 @@ def import_baseline(src: str | Path, module: str, package: str = "wearpose") -> 
     if not str(getattr(mod, "__file__", "")).startswith(src):
         raise ImportError(f"{module} came from {getattr(mod, '__file__', '?')}, not from {src}")
     mod.__dict__.setdefault("_baseline_modules", theirs)
+    mod.__dict__.setdefault("_baseline_src", src)
     return mod
 
 
@@ -170,8 +177,139 @@ def apply_settings(est: Any, settings: dict[str, str]) -> None:
                               f"after loading (it has: {', '.join(have) or 'none'})")
 
 
+@dataclass
+class Baseline:
+    """An older checkout's model, timed beside this one's (:func:`open_baseline`).
+
+    Attributes:
+        src: the older checkout's ``src`` folder; commit: its git commit (None if unknown).
+        run: that checkout's ``wearpose.estimators.run`` module (:func:`import_baseline`).
+        source: its :class:`~wearpose.estimators.run.ModelSource` of the same model.
+    """
+
+    src: str
+    commit: str | None
+    run: ModuleType
+    source: Any
+
+
+@contextmanager
+def baseline_modules(mod: ModuleType, package: str = "wearpose") -> Iterator[None]:
+    """Run the older checkout's code of :func:`import_baseline`'s ``mod``: its modules stand in
+    ``sys.modules`` (and its ``src`` first on ``sys.path``) for the duration, so imports it does
+    inside functions (lazy imports, the estimator registry's modules) load its own code; modules
+    first imported meanwhile are kept with it. This version's modules are restored after."""
+    theirs: dict[str, ModuleType] = mod.__dict__["_baseline_modules"]
+    src: str = mod.__dict__["_baseline_src"]
+    mine = {k: v for k, v in sys.modules.items() if k == package or k.startswith(package + ".")}
+    for k in mine:
+        del sys.modules[k]
+    sys.modules.update(theirs)
+    sys.path.insert(0, src)
+    try:
+        yield
+    finally:
+        sys.path.remove(src)
+        for k in [k for k in sys.modules if k == package or k.startswith(package + ".")]:
+            theirs[k] = sys.modules.pop(k)
+        sys.modules.update(mine)
+
+
+def open_baseline(src: str | Path, model: str) -> Baseline:
+    """``model`` (shipped weights name, checkpoint or weight-free estimator) opened by an older
+    checkout's code (``src``: its ``src`` folder, e.g. of ``git worktree add /tmp/old <commit>``)."""
+    src = str(Path(src).resolve())
+    run = import_baseline(src, "wearpose.estimators.run")
+    with baseline_modules(run):
+        source = run.open_model(model)
+    try:
+        commit = subprocess.run(["git", "-C", src, "rev-parse", "HEAD"], capture_output=True, text=True,
+                                check=True).stdout.strip() or None
+    except (OSError, subprocess.CalledProcessError):
+        commit = None
+    return Baseline(src, commit, run, source)
+
+
+def _apply_baseline_settings(est: Any, settings: dict[str, str]) -> list[str]:
+    """:func:`apply_settings` on the older code's estimator; a setting its code cannot change
+    after loading (e.g. EM-POSE's N before ``set_iterations``) is set in its config (and its
+    network's, ``model.cfg``) instead. Returns notes naming every such setting."""
+    from wearpose.errors import ConfigError
+
+    notes = []
+    for key, raw in settings.items():
+        try:
+            apply_settings(est, {key: raw})
+        except ConfigError:
+            cfg = getattr(est, "config", None)
+            if key not in COST_SETTINGS or not dataclasses.is_dataclass(cfg) or not hasattr(cfg, key):
+                raise
+            est.config = dataclasses.replace(cfg, **{key: _parse(raw)})
+            if getattr(getattr(est, "model", None), "cfg", None) is cfg:
+                est.model.cfg = est.config
+            est.reset()
+            notes.append(f"{key} set in the baseline's config (its code has no setter)")
+    return notes
+
+
+@dataclass
+class _Run:
+    """One estimator stepped through its frames: timings and outputs."""
+
+    label: str
+    est: Any
+    frames: list[Any]
+    wall: list[float] = field(default_factory=list)
+    cpu: list[float] = field(default_factory=list)
+    parts: dict[str, list[float]] = field(default_factory=dict)
+    rots: list[Any] = field(default_factory=list)
+
+    def step(self, k: int, timed: bool, keep: bool) -> None:
+        from wearpose.errors import ConfigError
+
+        t0, c0 = time.perf_counter(), time.thread_time()
+        try:
+            pose = self.est.step(self.frames[k])
+        except Exception as exc:  # OfflineOnlyError of either version (bidirectional networks)
+            if type(exc).__name__ == "OfflineOnlyError":
+                raise ConfigError(f"{self.label} has no online step: {exc}") from None
+            raise
+        if timed:
+            self.wall.append(time.perf_counter() - t0)
+            self.cpu.append(time.thread_time() - c0)
+            for key, v in (getattr(pose, "extras", None) or {}).items():
+                if key.endswith("_ms") and isinstance(v, (int, float)):
+                    self.parts.setdefault(key, []).append(float(v) / 1000)
+        if keep:
+            self.rots.append(pose.local_rot)
+
+    def summary(self) -> dict[str, Any]:
+        return {"online_ms": latency_stats(self.wall), "online_cpu_ms": latency_stats(self.cpu),
+                "stages_ms": {key: latency_stats(v) for key, v in self.parts.items()}}
+
+
+def _ready(run: ModuleType, source: Any, recording: Any, path: str | Path, settings: dict[str, str],
+           baseline: bool) -> tuple[Any, Any, str | None, list[str]]:
+    """Estimator of ``source`` readied for ``recording`` by the ``run`` module of one code version."""
+    from wearpose.errors import ConfigError
+
+    # resample=True: kits mixing rates by design (MI-Poser: 60 Hz headset, 120 Hz EM) are stepped
+    # at the trained rate too, as a stream at that rate delivers them (integer decimation only).
+    rec, note = run.fit_rate(source, path, recording, True)
+    est = source.make()
+    if not est.sensor_names:
+        raise ConfigError(f"{source.name}: the estimator names its sensors only once it sees a whole recording "
+                          "(offline only, e.g. segments); the latency bench times online steps")
+    notes = _apply_baseline_settings(est, settings) if baseline else []
+    if not baseline:
+        apply_settings(est, settings)
+    run.start_online(est, rec)
+    return est, rec, note, notes
+
+
 def step_latency(source: Any, recording: Any, *, frames: int = 300, warmup: int = 10,
-                 path: str | Path = "<recording>", settings: dict[str, str] | None = None) -> dict[str, Any]:
+                 path: str | Path = "<recording>", settings: dict[str, str] | None = None,
+                 baseline: Baseline | None = None) -> dict[str, Any]:
     """Online step latency of one model on one recording, as the stream server runs it.
 
     The recording is brought to the model's rate (:func:`wearpose.estimators.run.fit_rate`, every
@@ -182,60 +320,77 @@ def step_latency(source: Any, recording: Any, *, frames: int = 300, warmup: int 
     set-up) are not counted. Every step is timed in wall time and in the calling thread's CPU
     time (``time.thread_time``, which other processes' load does not inflate).
 
+    With ``baseline`` (:func:`open_baseline`) the older checkout's estimator of the same model is
+    readied the same way by its own code and stepped through the same frames, interleaved frame
+    by frame (which one goes first alternates), so load hits both alike.
+
     Args:
         source: a :class:`wearpose.estimators.run.ModelSource` (:func:`~wearpose.estimators.run.open_model`).
         recording: a :class:`wearpose.recording.Recording` with the model's sensors.
         frames: steps timed (fewer when the recording is shorter: ``frames`` in the result says).
-        settings: cost settings changed before the run (:func:`apply_settings`).
+        settings: cost settings changed before the run (:func:`apply_settings`; on the baseline too).
+        baseline: an older version of the model to time beside it.
 
     Returns:
         ``model``, ``method``, ``kit``, ``rate_hz``, ``frame_period_ms``, ``settings``
         (:func:`cost_settings`), ``online_ms`` and ``online_cpu_ms`` (:func:`latency_stats`: the
         same keys for every method), ``stages_ms`` (the same statistics of every ``*_ms`` timing
         the estimator reports in its frames' ``extras``, e.g. PIP's ``kin_ms`` / ``physics_ms``),
-        ``p99_within_frame_period``, ``frames``, ``warmup``, ``note``.
+        ``p99_within_frame_period``, ``frames``, ``warmup``, ``note``; with a baseline also
+        ``baseline`` (``src``, ``commit``, its ``settings``, ``notes`` and the same statistics),
+        ``speedup`` (baseline / this version: ``median``, ``p99``, ``cpu_median``) and
+        ``max_abs_diff_local_rot`` (largest difference of the two versions' output rotations).
     """
+    from wearpose.estimators import run as this_run
     from wearpose.estimators.base import iter_frames
-    from wearpose.estimators.run import fit_rate, start_online
 
-    from wearpose.errors import ConfigError
-    from wearpose.estimators.base import OfflineOnlyError
+    settings = settings or {}
+    est, rec, note, _ = _ready(this_run, source, recording, path, settings, False)
+    new = _Run(source.name, est, list(itertools.islice(iter_frames(rec, est.sensor_names), warmup + frames)))
+    runs = [new]
+    old: _Run | None = None
+    notes: list[str] = []
+    if baseline is not None:
+        with tempfile.TemporaryDirectory() as tmp:
+            # The recording crosses to the older code as a file (its own classes check their inputs'
+            # types): written by this version, read by that one, the same samples.
+            from wearpose.recording import save_recording
 
-    # resample=True: kits mixing rates by design (MI-Poser: 60 Hz headset, 120 Hz EM) are stepped
-    # at the trained rate too, as a stream at that rate delivers them (integer decimation only).
-    rec, note = fit_rate(source, path, recording, True)
-    est = source.make()
-    if not est.sensor_names:
-        raise ConfigError(f"{source.name}: the estimator names its sensors only once it sees a whole recording "
-                          "(offline only, e.g. segments); the latency bench times online steps")
-    apply_settings(est, settings or {})
-    start_online(est, rec)
-    wall: list[float] = []
-    cpu: list[float] = []
-    parts: dict[str, list[float]] = {}  # the estimator's own timings of its stages (PIP: kin_ms, physics_ms)
-    for k, frame in enumerate(iter_frames(rec, est.sensor_names)):
-        if k >= warmup + frames:
-            break
-        t0, c0 = time.perf_counter(), time.thread_time()
-        try:
-            pose = est.step(frame)
-        except OfflineOnlyError as exc:  # bidirectional networks (imuposer, empose-birnn)
-            raise ConfigError(f"{source.name} has no online step: {exc}") from None
-        if k >= warmup:
-            wall.append(time.perf_counter() - t0)
-            cpu.append(time.thread_time() - c0)
-            for key, v in (getattr(pose, "extras", None) or {}).items():
-                if key.endswith("_ms") and isinstance(v, (int, float)):
-                    parts.setdefault(key, []).append(float(v) / 1000)
+            file = save_recording(recording, Path(tmp) / "rec.npz")
+            with baseline_modules(baseline.run):
+                from wearpose.estimators.base import iter_frames as old_iter_frames  # the baseline's own
+                from wearpose.recording import load_recording
+
+                old_est, old_rec, _, notes = _ready(baseline.run, baseline.source, load_recording(file),
+                                                    path, settings, True)
+                old_frames = itertools.islice(old_iter_frames(old_rec, old_est.sensor_names), warmup + frames)
+                old = _Run(f"{source.name} (baseline)", old_est, list(old_frames))
+        runs.append(old)
+    n = min(len(r.frames) for r in runs)
+    for k in range(n):
+        for r in (runs if k % 2 == 0 else runs[::-1]):
+            if r is old:
+                with baseline_modules(baseline.run):
+                    r.step(k, k >= warmup, True)
+            else:
+                r.step(k, k >= warmup, old is not None)
     rate = float(est.fps) if getattr(est, "fps", 0) else float(rec.sensor(est.sensor_names[0]).info.rate)
-    stats = latency_stats(wall)
-    return {"model": source.name, "method": source.method, "kit": source.kit or getattr(est, "kit", None),
-            "rate_hz": rate, "frame_period_ms": 1000.0 / rate, "settings": cost_settings(est),
-            "online_ms": stats, "online_cpu_ms": latency_stats(cpu),
-            "stages_ms": {key: latency_stats(v) for key, v in parts.items()},
-            "p99_within_frame_period": bool(stats["p99_ms"] <= 1000.0 / rate), "frames": len(wall),
-            "warmup": warmup, "note": note}
+    res = {"model": source.name, "method": source.method, "kit": source.kit or getattr(est, "kit", None),
+           "rate_hz": rate, "frame_period_ms": 1000.0 / rate, "settings": cost_settings(est), **new.summary()}
+    res.update({"p99_within_frame_period": bool(res["online_ms"]["p99_ms"] <= 1000.0 / rate),
+                "frames": len(new.wall), "warmup": warmup, "note": note})
+    if old is not None:
+        b = old.summary()
+        res["baseline"] = {"src": baseline.src, "commit": baseline.commit, "settings": cost_settings(old.est),
+                           "notes": notes, **b}
+        res["speedup"] = {"median": b["online_ms"]["median_ms"] / res["online_ms"]["median_ms"],
+                          "p99": b["online_ms"]["p99_ms"] / res["online_ms"]["p99_ms"],
+                          "cpu_median": b["online_cpu_ms"]["median_ms"] / res["online_cpu_ms"]["median_ms"]}
+        res["max_abs_diff_local_rot"] = max(float((a.float() - c.float()).abs().max())
+                                            for a, c in zip(new.rots, old.rots))
+    return res
 
 
 __all__ = ["reference_timing", "latency_stats", "machine_info", "time_calls", "import_baseline",
-           "COST_SETTINGS", "cost_settings", "apply_settings", "step_latency"]
+           "baseline_modules", "Baseline", "open_baseline", "COST_SETTINGS", "cost_settings", "apply_settings",
+           "step_latency"]

@@ -1133,12 +1133,16 @@ def _warm_up(est: Estimator, hello: Hello, steps: int, seed: int = 0) -> None:
         log.warning("estimator warm-up failed after %d steps: %s", k, exc)
 
 
-def estimator_factory(model: str, method: str | None = None, threads: int | None = None) -> Callable[[], Estimator]:
+def estimator_factory(model: str, method: str | None = None, threads: int | None = None,
+                      settings: dict[str, str] | None = None) -> Callable[[], Estimator]:
     """``() -> Estimator`` for shipped weights (``wearpose.weights`` name, e.g. ``empose12_cpu``),
     a checkpoint file (read once, here: :func:`wearpose.estimators.run.open_model`), or ``"null"``
     (:class:`NullEstimator`, transport only); ``method`` overrides the registry name read from
-    the card/checkpoint."""
+    the card/checkpoint; ``settings`` are cost settings applied to every estimator made
+    (:func:`wearpose.evaluate.latency.apply_settings`, e.g. ``{"online": "stream"}`` for BiRAE's
+    streaming mode: the same ``--set`` as ``wearpose bench latency``)."""
     from wearpose.estimators.run import open_model
+    from wearpose.evaluate.latency import apply_settings
 
     if model == "null":
         return NullEstimator
@@ -1147,7 +1151,15 @@ def estimator_factory(model: str, method: str | None = None, threads: int | None
         import torch
 
         torch.set_num_threads(threads)
-    return factory
+    if not settings:
+        return factory
+
+    def make() -> Estimator:
+        est = factory()
+        apply_settings(est, settings)
+        return est
+
+    return make
 
 
 def run_server(estimator_factory: Callable[[], Estimator], host: str = "127.0.0.1", port: int = 8765,
