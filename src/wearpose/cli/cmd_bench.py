@@ -170,7 +170,8 @@ def latency_markdown(res: dict[str, Any]) -> str:
           for k, v in res["stages_ms"].items()],
         *_baseline_rows(res), "",
         f"{res['frames']} steps after {res['warmup']} warm-up steps at {res['rate_hz']:g} Hz (frame period "
-        f"{res['frame_period_ms']:.2f} ms: p99 {'within' if res['p99_within_frame_period'] else 'over'}); "
+        f"{res['frame_period_ms']:.2f} ms" + (f" of {res['budget_hz']:g} Hz" if res.get("budget_hz") else "")
+        + f": p99 {'within' if res['p99_within_frame_period'] else 'over'}); "
         f"{res['threads']} thread(s); settings `{json.dumps(res['settings'])}`; recording: {res['recording']}.",
         f"Machine reference ({res['reference']['loop']}): {res['reference']['best_ms']:.1f} ms best; load average "
         f"{load} at the start, {', '.join(f'{x:.2f}' for x in res['machine']['load_average_end'])} at the end.", ""])

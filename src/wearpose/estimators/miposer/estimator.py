@@ -29,6 +29,7 @@ wrist streams are checked/corrected frame by frame at 60 Hz (``MIM.step``).
 
 from __future__ import annotations
 
+import time
 import warnings
 from pathlib import Path
 from typing import Any, Iterator, Mapping
@@ -289,8 +290,10 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
             dt = 1.0 / self.fps if self._prev_t is None else max(1e-4, frame.timestamp - self._prev_t)
             if self._mims is None:
                 self._mims = [None] * (len(names) - 1)
+            t0 = time.perf_counter()
             R, p, extras["interference"] = step_mim(self._mims, frame, names, self._input.index(frame.names), R, p, dt,
                                                     self.mim_config)
+            extras["mim_ms"] = 1000.0 * (time.perf_counter() - t0)  # MIM's share of the step (bench latency stages)
         self._prev_t = frame.timestamp
         wR, wp = em_to_world(R[:1].expand(len(names) - 1, 3, 3), p[:1].expand(len(names) - 1, 3), R[1:], p[1:])
         Rw = torch.cat([R[:1].double(), wR])
