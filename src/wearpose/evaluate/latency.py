@@ -345,27 +345,26 @@ def step_latency(source: Any, recording: Any, *, frames: int = 300, warmup: int 
     from wearpose.estimators.base import iter_frames
 
     settings = settings or {}
-    est, rec, note, _ = _ready(this_run, source, recording, path, settings, False)
-    new = _Run(source.name, est, list(itertools.islice(iter_frames(rec, est.sensor_names), warmup + frames)))
-    runs = [new]
     old: _Run | None = None
     notes: list[str] = []
-    if baseline is not None:
-        with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp:
+        if baseline is not None:
             # The recording crosses to the older code as a file (its own classes check their inputs'
-            # types): written by this version, read by that one, the same samples.
-            from wearpose.recording import save_recording
+            # types); both versions read that file, each with its own loader: the same samples.
+            from wearpose.recording import load_recording, save_recording
 
             file = save_recording(recording, Path(tmp) / "rec.npz")
+            recording = load_recording(file)
             with baseline_modules(baseline.run):
                 from wearpose.estimators.base import iter_frames as old_iter_frames  # the baseline's own
-                from wearpose.recording import load_recording
+                from wearpose.recording import load_recording as old_load
 
-                old_est, old_rec, _, notes = _ready(baseline.run, baseline.source, load_recording(file),
-                                                    path, settings, True)
+                old_est, old_rec, _, notes = _ready(baseline.run, baseline.source, old_load(file), path, settings, True)
                 old_frames = itertools.islice(old_iter_frames(old_rec, old_est.sensor_names), warmup + frames)
                 old = _Run(f"{source.name} (baseline)", old_est, list(old_frames))
-        runs.append(old)
+        est, rec, note, _ = _ready(this_run, source, recording, path, settings, False)
+        new = _Run(source.name, est, list(itertools.islice(iter_frames(rec, est.sensor_names), warmup + frames)))
+    runs = [new] if old is None else [new, old]
     n = min(len(r.frames) for r in runs)
     for k in range(n):
         for r in (runs if k % 2 == 0 else runs[::-1]):
