@@ -13,6 +13,7 @@ largest difference, the machine reference and the load. Writes ``OUT.json`` and 
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import shlex
 import sys
@@ -51,6 +52,7 @@ def _stepper(step_mim: Callable[..., Any], data: tuple[np.ndarray, ...], cfg: An
     R, p, gyro, acc = data
     T = R.shape[0]
     state = {"t": 0, "mims": [None, None]}
+    takes_cols = "cols" in inspect.signature(step_mim).parameters
     Rh = np.eye(3)[None]
 
     def call() -> None:
@@ -59,7 +61,8 @@ def _stepper(step_mim: Callable[..., Any], data: tuple[np.ndarray, ...], cfg: An
         pt = torch.from_numpy(np.concatenate([np.zeros((1, 3)), p[t]]).astype(np.float32))
         frame = SimpleNamespace(names=NAMES, channels={"angular_velocity": np.concatenate([np.zeros((1, 3)), gyro[t]]),
                                                        "acceleration": np.concatenate([np.zeros((1, 3)), acc[t]])})
-        Ro, po, _ = step_mim(state["mims"], frame, NAMES, Rt, pt, 1.0 / FPS, cfg)
+        cols = (range(len(NAMES)),) if takes_cols else ()  # the frame's columns (newer step_mim takes them)
+        Ro, po, _ = step_mim(state["mims"], frame, NAMES, *cols, Rt, pt, 1.0 / FPS, cfg)
         if len(outs) < T:
             outs.append((Ro, po))
         state["t"] = (t + 1) % T
