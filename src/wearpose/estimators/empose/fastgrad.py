@@ -14,6 +14,8 @@ source-relative frame), but:
 - forward kinematics composes rotations by pointer jumping (4 rounds for SMPL's 9 tree levels
   instead of a loop over 24 joints), and joint positions are one sum over each joint's chain;
 - normals are evaluated at the site vertices only (an incidence-matrix product);
+- gathers along the joint / vertex axis are ``index_select`` (a third of advanced indexing's cost
+  for these sizes, the same values);
 - the backward pass is written out (chain rule through the Gram-Schmidt 6D decoding, shape,
   FK, linear blend skinning, area-weighted normals, tangent projection, offsets (Eq. 4) and the
   source-relative transform), so no graph is built; the FK part is closed form over subtrees
@@ -181,7 +183,7 @@ class LeanSensorGrad:
         y = yr / n2
         Rp = torch.stack([x, y, _cross(x, y)], dim=-1)  # (N, 20, 3, 3) columns
         Lr = self.eye.repeat(N, NUM_JOINTS, 1, 1)
-        Lr[:, self.pred] = Rp
+        Lr.index_copy_(1, self.pred, Rp)
         Jr = self.J_t + (beta @ self.J_sdT).view(N, NUM_JOINTS, 3)  # (N, 24, 3)
         vs = self.v_t + (beta @ self.sdT).view(N, self.U, 3)  # (N, U, 3)
         if self.pd is not None:
@@ -192,29 +194,29 @@ class LeanSensorGrad:
         eye = self.eye.expand(N, 1, 3, 3)
         G = Lr
         for anc in self.jumps:
-            G = _bmm(torch.cat([G, eye], 1)[:, anc], G)
-        Gpar = torch.cat([G, eye], 1)[:, self.parent_ext]  # parent's global rotation (I for the root)
+            G = _bmm(torch.cat([G, eye], 1).index_select(1, anc), G)
+        Gpar = torch.cat([G, eye], 1).index_select(1, self.parent_ext)  # parent's global rotation (I for the root)
         # J_k = sum over the chain a of k: Gpar_a off_a (off_0 = Jr_0): one product and one sum.
-        off = Jr - Jr[:, self.parent_or_self] * self.not_root
+        off = Jr - Jr.index_select(1, self.parent_or_self) * self.not_root
         J = self.chainT @ _bmv(Gpar, off)
         t = J - _bmv(G, Jr)
         A = torch.cat([G.reshape(N, NUM_JOINTS, 9), t], dim=-1)  # (N, 24, 12)
         T = self.w @ A  # (N, U, 12)
         M = T[..., :9].reshape(N, self.U, 3, 3)
         verts = _bmv(M, vs) + T[..., 9:]
-        V0, V1, V2 = verts[:, self.f0], verts[:, self.f1], verts[:, self.f2]
+        V0, V1, V2 = verts.index_select(1, self.f0), verts.index_select(1, self.f1), verts.index_select(1, self.f2)
         e1, e2 = V1 - V0, V2 - V0
         nr = self.inc @ _cross(e1, e2)  # (N, K, 3)
         nn_ = nr.norm(dim=-1, keepdim=True).clamp_min(1e-12)
         n = nr / nn_
-        p = verts[:, self.li]
-        e = verts[:, self.lt] - p
+        p = verts.index_select(1, self.li)
+        e = verts.index_select(1, self.lt) - p
         s = _dot(e, n)
         ep = e - s * n
         ne = ep.norm(dim=-1, keepdim=True).clamp_min(1e-12)
         tan = ep / ne
         Rs = torch.stack([tan, _cross(n, tan), n], dim=-1)  # (N, K, 3, 3)
-        Rss, ps = Rs[:, self.index], p[:, self.index]
+        Rss, ps = Rs.index_select(1, self.index), p.index_select(1, self.index)
         Rv = _bmm(Rss, off_R)
         dp = ps + _bmv(Rss, off_t) - p[:, self.src].unsqueeze(1)
         Rsrc = Rs[:, self.src].unsqueeze(1)  # (N, 1, 3, 3)
@@ -278,6 +280,6 @@ class LeanSensorGrad:
         if self.pd is not None:
             gL[:, 1:] += (gvs.reshape(N, -1) @ self.pd.t()).view(N, NUM_JOINTS - 1, 3, 3)
         # Gram-Schmidt: R = [x, y, x cross y], x = a1/|a1|, y = (a2 - (x.a2) x)/|.|.
-        gR = gL[:, self.pred]
+        gR = gL.index_select(1, self.pred)
         ga1, ga2 = _frame_backward(x, y, a2, d, n1, n2, gR[..., 0], gR[..., 1], gR[..., 2])
         return torch.cat([torch.cat([ga1, ga2], -1).reshape(N, -1), gbeta], dim=-1)
