@@ -47,7 +47,8 @@ def _stream(T: int, seed: int = 0) -> tuple[np.ndarray, ...]:
     return Ri, p, w + rng.normal(0, 0.01, (T, 2, 3)), rng.normal(0, 0.5, (T, 2, 3))
 
 
-def _stepper(step_mim: Callable[..., Any], data: tuple[np.ndarray, ...], cfg: Any, outs: list[Any]) -> Callable[[], None]:
+def _stepper(step_mim: Callable[..., Any], data: tuple[np.ndarray, ...], cfg: Any,
+             outs: list[Any]) -> Callable[[], None]:
     """One call = one frame of ``step_mim`` (both wrists), cycling through the stream."""
     R, p, gyro, acc = data
     T = R.shape[0]

@@ -61,8 +61,9 @@ def _render(res: dict[str, Any]) -> None:
         t.add_row("speed-up", f"{sp['median']:.2f}x", f"{sp['p99']:.2f}x", "")
     console.print(t)
     if "baseline" in res:
+        notes = "".join(f"; {n}" for n in res["baseline"]["notes"])
         console.print(f"baseline {res['baseline']['commit'] or res['baseline']['src']}; output rotations differ by "
-                      f"at most {res['max_abs_diff_local_rot']:.1e}" + "".join(f"; {n}" for n in res['baseline']['notes']))
+                      f"at most {res['max_abs_diff_local_rot']:.1e}{notes}")
     ok = "within" if res["p99_within_frame_period"] else "OVER"
     load = ", ".join(f"{x:.2f}" for x in res["machine"]["load_average"])
     console.print(f"p99 {ok} the frame period ({res['frame_period_ms']:.2f} ms); settings "

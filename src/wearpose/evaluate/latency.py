@@ -172,7 +172,8 @@ def apply_settings(est: Any, settings: dict[str, str]) -> None:
         elif key in COST_SETTINGS and getattr(est, key, None) is not None:
             setattr(est, key, value)
         else:
-            have = [k for k in COST_SETTINGS if callable(getattr(est, f"set_{k}", None)) or getattr(est, k, None) is not None]
+            have = [k for k in COST_SETTINGS
+                    if callable(getattr(est, f"set_{k}", None)) or getattr(est, k, None) is not None]
             raise ConfigError(f"--set {key}={raw}: {type(est).__name__} has no setting {key!r} that can be changed "
                               f"after loading (it has: {', '.join(have) or 'none'})")
 

@@ -341,7 +341,8 @@ class MIM:
         if self._gyro_prev is None:
             self._gyro_prev, self._p_out = gyro.copy(), p_em.copy()
             self._kf = _Kalman(p_em.copy(), np.zeros(3), r_em, 0.0, 1.0) if use_kf else None
-            self._buf.append((R_em.copy(), np.eye(3), self._kf.copy() if use_kf else None, acc.copy(), p_em.copy(), True))
+            kf = self._kf.copy() if use_kf else None
+            self._buf.append((R_em.copy(), np.eye(3), kf, acc.copy(), p_em.copy(), True))
             self._hist.append(p_em.copy())
             return {"R": R_em, "p": p_em, "interfered": False, "corrected": False, "level": 0.0,
                     "degraded": False, "discrepancy": 0.0}

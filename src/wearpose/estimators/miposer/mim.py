@@ -161,8 +161,9 @@ def step_mim(mims: list[Any], frame: Any, names: Sequence[str], cols: Sequence[i
     Rn = R.detach().cpu().numpy().astype(np.float64)
     pn = p.detach().cpu().numpy().astype(np.float64)
     n_cols = len(frame.names)
-    gy = np.nan_to_num(np.asarray(frame.channels.get("angular_velocity", np.full((n_cols, 3), np.nan)), dtype=np.float64))
-    ac = np.nan_to_num(np.asarray(frame.channels.get("acceleration", np.full((n_cols, 3), np.nan)), dtype=np.float64))
+    nan = np.full((n_cols, 3), np.nan)
+    gy = np.nan_to_num(np.asarray(frame.channels.get("angular_velocity", nan), dtype=np.float64))
+    ac = np.nan_to_num(np.asarray(frame.channels.get("acceleration", nan), dtype=np.float64))
     info: dict[str, Any] = {}
     for j, n in enumerate(names[1:]):
         if mims[j] is None:
