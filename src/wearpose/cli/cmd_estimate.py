@@ -41,7 +41,8 @@ def estimate(
     a command that makes a fitting one. `--model segments` needs no weights: a dense kit's
     segments take their calibrated sensors' orientations (any sensors on known sites with a
     pelvis sensor, e.g. `wearpose recording import ximu3`). The motion is written upright with
-    its feet on the floor (the result's `placement` and `floor` say how).
+    its feet on the floor (the result's `placement` and `floor` say how, and so does the file:
+    GLB asset.extras, an npz key, a BVH's sidecar OUT.json; docs/formats.md).
 
     Example: wearpose estimate out/demo-em12/recording.npz --model empose12_cpu --out out/estimate.bvh
     """
@@ -51,7 +52,7 @@ def estimate(
     from wearpose.calibration import CalibrationError
     from wearpose.errors import InputFileError, ShapeError
     from wearpose.estimators.run import estimate_recording, open_model
-    from wearpose.export import export_motion
+    from wearpose.export import export_motion, sidecar_path
     from wearpose.recording import load_recording
 
     if out.suffix not in (".bvh", ".npz", ".glb"):
@@ -83,7 +84,8 @@ def estimate(
                            "estimated_frame": run.estimated.extras.get("frame", "world"),
                            "translation": run.estimated.trans is not None,
                            "placement": track.extras.get("placement", "as estimated"),
-                           "floor": track.extras.get("floor"), "written": str(path)}
+                           "floor": track.extras.get("floor"), "written": str(path),
+                           "metadata": str(sidecar_path(path) if path.suffix == ".bvh" else path)}
     if run.note:
         res["resampled"] = run.recording.meta.get("resampled")
     _emit(res, as_json, lambda r: console.print(_kv_table(f"estimate of {recording.name} by {model}", r)))

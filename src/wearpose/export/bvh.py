@@ -11,16 +11,21 @@ OFFSET 0. Leaves (head, hands, feet) get an End Site 5 cm along their bone.
 :func:`wearpose.motion.read_smpl_bvh` reads such a file back to a :class:`MotionSequence` without retargeting
 (recognised by its joint names and tree), so our own exports round-trip exactly up to the
 printed precision.
+
+BVH has no metadata field (and comment lines break many parsers), so the file's frame and the
+estimate's placement go into a sidecar ``<file>.json`` (:mod:`wearpose.export.meta`).
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from wearpose.body.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
+from wearpose.export.meta import export_metadata, sidecar_path
 from wearpose.fileio import atomic_write_text
 from wearpose.geometry import matrix_to_euler
 from wearpose.geometry.units import M_TO_CM, RAD_TO_DEG
@@ -44,6 +49,10 @@ def write_smpl_bvh(seq: MotionSequence, path: str | Path, rest_joints: torch.Ten
         rest_joints: ``(24, 3)`` rest joints (m) of the body the motion belongs to; they give the
             OFFSETs (``BodyModel.rest_joints(seq.betas)``).
         decimals: digits after the decimal point for channel values.
+
+    Returns:
+        The BVH path; its metadata sidecar (:func:`~wearpose.export.meta.sidecar_path`) is
+        written beside it.
     """
     rest = rest_joints.detach().to(torch.float64).cpu().numpy() * M_TO_CM
     lines = ["HIERARCHY"]
@@ -79,7 +88,9 @@ def write_smpl_bvh(seq: MotionSequence, path: str | Path, rest_joints: torch.Ten
     lines += ["MOTION", f"Frames: {seq.num_frames}", f"Frame Time: {1.0 / seq.fps:.9f}"]
     fmt = f"{{:.{decimals}f}}"
     lines += [" ".join(fmt.format(v) for v in row) for row in values]
-    return atomic_write_text(path, "\n".join(lines) + "\n")
+    out = atomic_write_text(path, "\n".join(lines) + "\n")
+    atomic_write_text(sidecar_path(out), json.dumps(export_metadata(seq, ".bvh"), indent=2) + "\n")
+    return out
 
 
 def _dfs_order() -> list[int]:

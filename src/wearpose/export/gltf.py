@@ -7,7 +7,9 @@ rotations, since SMPL joint frames are aligned with the body at rest), inverse b
 translation by ``-rest_joint``, and one animation with a rotation channel per joint (the SMPL
 local rotations as unit quaternions, glTF's (x, y, z, w) order) and a translation channel on the
 pelvis node (``rest_joints[0] + trans``). glTF is Y up, metres, right-handed: the same world as
-wearpose, so nothing is converted.
+wearpose, so nothing is converted. The document's ``asset.extras`` states that frame and how an
+estimate was placed (:mod:`wearpose.export.meta`), and so do the scene's ``extras`` (where
+Blender and trimesh look).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import torch
 
 from wearpose.body import PARENTS, BodyModel
 from wearpose.body.skeleton import JOINT_NAMES, NUM_JOINTS
+from wearpose.export.meta import export_metadata
 from wearpose.fileio import atomic_write_bytes
 from wearpose.geometry import matrix_to_quat
 from wearpose.motion.sequence import MotionSequence
@@ -111,10 +114,12 @@ def write_glb(seq: MotionSequence, path: str | Path, body: BodyModel) -> Path:
             node["children"] = kids
         nodes.append(node)
     nodes.append({"name": "body", "mesh": 0, "skin": 0})
+    meta = export_metadata(seq, ".glb")
     gltf = {
-        "asset": {"version": "2.0", "generator": "wearpose"},
+        "asset": {"version": "2.0", "generator": "wearpose", "extras": meta},
         "scene": 0,
-        "scenes": [{"nodes": [0, NUM_JOINTS]}],
+        # also the scene's extras: Blender shows them as the scene's custom properties, trimesh as scene.metadata
+        "scenes": [{"nodes": [0, NUM_JOINTS], "extras": meta}],
         "nodes": nodes,
         "meshes": [{"name": body.asset_id, "primitives": [{
             "attributes": {"POSITION": a_pos, "NORMAL": a_nrm, "JOINTS_0": a_jnt, "WEIGHTS_0": a_wgt},

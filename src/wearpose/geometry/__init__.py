@@ -56,6 +56,8 @@ from wearpose.geometry.frames import (
     MVN_TO_WEARPOSE,
     mvn_segment_to_wearpose,
     wearpose_to_mvn_segment,
+    WORLD_AXES,
+    world_frame_description,
 )
 from wearpose.geometry.units import (
     CM_TO_M,
@@ -76,6 +78,7 @@ __all__ = [
     "Z_UP_TO_Y_UP", "Y_UP_TO_Z_UP", "SMPL_TO_X_FORWARD_BODY", "change_world_rotation", "change_world_points",
     "MIRROR_X", "mirror_rotation", "mirror_points",
     "TO_UNITY", "to_unity_points", "to_unity_rotation", "to_unity_quat",
-    "MVN_TO_WEARPOSE", "mvn_segment_to_wearpose", "wearpose_to_mvn_segment",
+    "MVN_TO_WEARPOSE", "mvn_segment_to_wearpose", "wearpose_to_mvn_segment", "WORLD_AXES",
+    "world_frame_description",
     "CM_TO_M", "MM_TO_M", "M_TO_MM", "M_TO_CM", "INCH_TO_M", "DEG_TO_RAD", "RAD_TO_DEG", "GRAVITY",
 ]

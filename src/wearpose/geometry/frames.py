@@ -109,3 +109,34 @@ def wearpose_to_mvn_segment(R: torch.Tensor) -> torch.Tensor:
     """Inverse of :func:`mvn_segment_to_wearpose`."""
     C = MVN_TO_WEARPOSE.to(R)
     return C.T @ R @ C
+
+
+#: wearpose's world axes: up, the direction a body at zero pose faces, and its left (module doc).
+WORLD_AXES: dict[str, tuple[float, float, float]] = {"up": (0.0, 1.0, 0.0), "facing": (0.0, 0.0, 1.0),
+                                                     "left": (1.0, 0.0, 0.0)}
+
+
+def _axis_label(v: torch.Tensor) -> str:
+    """A unit axis vector ``(3,)`` as ``"+X"``, ``"-Z"``, ...; any other vector as its components."""
+    i = int(v.abs().argmax())
+    if abs(abs(float(v[i])) - 1.0) > 1e-9:
+        return "(" + ", ".join(f"{float(x):.6g}" for x in v) + ")"
+    return ("+" if float(v[i]) > 0 else "-") + "XYZ"[i]
+
+
+def world_frame_description(C: torch.Tensor | None = None, unit: str = "m") -> dict[str, str]:
+    """How a file's world is laid out, for the metadata a file states its frame in.
+
+    Args:
+        C: ``(3, 3)`` rotation from wearpose's world to the file's (e.g. :data:`Y_UP_TO_Z_UP`
+            for AMASS); default the identity (the file is in wearpose's world).
+        unit: the file's length unit (``"m"`` or ``"cm"``).
+
+    Returns:
+        ``{"up": "+Y", "facing": "+Z", "left": "+X", "handedness": "right", "units": unit}``: the
+        file's axes pointing up, the way a body at zero pose faces, and its left side.
+    """
+    M = torch.eye(3, dtype=torch.float64) if C is None else C.to(torch.float64)
+    out = {k: _axis_label(M @ torch.tensor(v, dtype=torch.float64)) for k, v in WORLD_AXES.items()}
+    hand = "right" if float(torch.linalg.det(M)) > 0 else "left"
+    return {**out, "handedness": hand, "units": unit}

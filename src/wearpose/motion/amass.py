@@ -21,6 +21,7 @@ Conversions:
 from __future__ import annotations
 
 import copy
+import json
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,9 @@ from wearpose.fileio import npz_problem
 from wearpose.geometry import Z_UP_TO_Y_UP, axis_angle_to_matrix, matrix_to_axis_angle
 from wearpose.motion.sequence import NUM_BETAS, MotionSequence
 from wearpose.motion.template import default_rest_joints
+
+#: npz key of an export's metadata (a JSON string; :mod:`wearpose.export.meta`).
+METADATA_KEY = "wearpose_metadata"
 
 _POSES_FORM = "(T, 156) SMPL-H or (T, 72) SMPL axis-angle, radians (at least 66 columns: 22 body joints)"
 
@@ -141,7 +145,7 @@ def read_amass(path: str | Path, rest_joints: torch.Tensor | None = None) -> Mot
 
 
 def save_amass(seq: MotionSequence, path: str | Path, rest_joints: torch.Tensor | None = None,
-               layout: str = "smplh", gender: str | None = None) -> Path:
+               layout: str = "smplh", gender: str | None = None, metadata: dict[str, Any] | None = None) -> Path:
     """Write ``seq`` as an AMASS-format npz (Z-up world), inverse of :func:`read_amass`.
 
     Args:
@@ -152,6 +156,8 @@ def save_amass(seq: MotionSequence, path: str | Path, rest_joints: torch.Tensor 
         layout: ``"smplh"`` -> ``poses`` ``(T, 156)``, body joints 0-21, fingers zero (SMPL's hand
             joints 22/23 are dropped); ``"smpl"`` -> ``(T, 72)`` with all 24 joints.
         gender: stored in ``gender`` (default ``seq.meta["gender"]`` or ``"neutral"``).
+        metadata: stored as a JSON string under :data:`METADATA_KEY` when given (the file's
+            frame and placement: :func:`wearpose.export.meta.export_metadata`).
 
     Returns:
         The path written. ``betas`` is padded with zeros to 16 for ``"smplh"``.
@@ -175,7 +181,8 @@ def save_amass(seq: MotionSequence, path: str | Path, rest_joints: torch.Tensor 
         poses = aa
         betas = seq.betas.to(torch.float64)
     t = (seq.trans.to(torch.float64) + J0) @ C - J0  # C^T (t' + J0) - J0, row-vector form
+    extra = {METADATA_KEY: np.array(json.dumps(metadata))} if metadata is not None else {}
     np.savez(path, poses=poses.reshape(T, -1).numpy(), trans=t.numpy(), betas=betas.numpy(),
              mocap_framerate=np.array(seq.fps, dtype=np.float64),
-             gender=np.array(gender or copy.deepcopy(seq.meta).get("gender", "neutral")))
+             gender=np.array(gender or copy.deepcopy(seq.meta).get("gender", "neutral")), **extra)
     return path
