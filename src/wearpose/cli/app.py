@@ -38,7 +38,10 @@ def _emit(obj: dict[str, Any], as_json: bool, render: Any) -> None:
 
 
 def _kv_table(title: str, rows: dict[str, Any]) -> Table:
+    """A two-column key/value table; long values (paths, names) fold onto more lines, never cut."""
     t = Table(title=title, show_header=False)
+    t.add_column("key", overflow="fold")
+    t.add_column("value", overflow="fold")
     for k, v in rows.items():
         t.add_row(escape(str(k)), escape(str(v)))
     return t
@@ -265,15 +268,15 @@ def demo(
     def render(r: dict[str, Any]) -> None:
         if r["mode"] == "sensors":
             t = Table(title=r.get("title", f"{r['clip']}: {kit}"))
-            t.add_column("metric")
-            t.add_column("value")
+            t.add_column("metric", overflow="fold")
+            t.add_column("value", overflow="fold")
             for k, v in r["metrics"].items():
                 t.add_row(k, f"{v:.2f}")
         else:
             t = Table(title=f"{r['clip']}: round trip vs original ({r['frames']} frames, {r['fps']:g} fps)")
-            t.add_column("metric")
+            t.add_column("metric", overflow="fold")
             for name in r["metrics"]:
-                t.add_column(name)
+                t.add_column(name, overflow="fold")
             keys = sorted({k for m in r["metrics"].values() for k in m})
             for k in keys:
                 t.add_row(k, *[f"{m.get(k, float('nan')):.3g}" for m in r["metrics"].values()])

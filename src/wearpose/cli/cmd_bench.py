@@ -49,7 +49,7 @@ def _render(res: dict[str, Any]) -> None:
     t = Table(title=f"{res['model']} online step, {res['frames']} frames at {res['rate_hz']:g} Hz "
                     f"({res['threads']} thread(s))")
     for col in ("", "median ms", "p99 ms", "max ms"):
-        t.add_column(col, justify="right" if col else "left")
+        t.add_column(col, justify="right" if col else "left", overflow="fold")
     t.add_row("wall", f"{s['median_ms']:.2f}", f"{s['p99_ms']:.2f}", f"{s['max_ms']:.2f}")
     t.add_row("CPU", f"{c['median_ms']:.2f}", f"{c['p99_ms']:.2f}", f"{c['max_ms']:.2f}")
     for key, v in res["stages_ms"].items():

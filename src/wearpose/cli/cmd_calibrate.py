@@ -11,9 +11,8 @@ from pathlib import Path
 from typing import Any, Optional
 
 import typer
-from rich.table import Table
 
-from wearpose.cli.app import _emit, app, console
+from wearpose.cli.app import _emit, _kv_table, app, console
 
 
 def _short(v: Any) -> str:
@@ -84,13 +83,9 @@ def calibrate(
 
     def render(r: dict[str, Any]) -> None:
         c = r["calibration"]
-        t = Table(title=f"calibration {c['method']} of {r['recording']}", show_header=False)
-        t.add_row("sensors", ", ".join(c["sensors"]))
-        for k, v in (c.get("quality") or {}).items():
-            t.add_row(k, _short(v))
+        rows = {"sensors": ", ".join(c["sensors"]), **{k: _short(v) for k, v in (c.get("quality") or {}).items()}}
         if c.get("scale") is not None:
-            t.add_row("scale", _short(c["scale"]))
-        t.add_row("written", r["written"])
-        console.print(t)
+            rows["scale"] = _short(c["scale"])
+        console.print(_kv_table(f"calibration {c['method']} of {r['recording']}", {**rows, "written": r["written"]}))
 
     _emit(payload, as_json, render)

@@ -83,8 +83,8 @@ def stream_emulate(
 
     def render(r: dict[str, Any]) -> None:
         t = Table(title=f"{recording.name} as {input_name} -> {r['target']}")
-        t.add_column("")
-        t.add_column("value")
+        t.add_column("", overflow="fold")
+        t.add_column("value", overflow="fold")
         for k in ("rate_hz", "frames_sent", "malformed_sent", "dropped_sensor_samples", "duration_s"):
             t.add_row(k, f"{r[k]:.3f}" if isinstance(r[k], float) else str(r[k]))
         console.print(t)

@@ -152,7 +152,7 @@ def _render(r: dict[str, Any]) -> None:
     t = Table(title=f"{r['split']} split: {r['clips']} clips, {r['frames']} frames, kit {r['kit']}, "
                     f"offsets {r['offsets']}, noise {r['noise']}")
     for col in ("model", "MPJPE [mm]", "PA-MPJPE [mm]", "MPJAE [°]", "frames", "epoch", "time [s]"):
-        t.add_column(col, justify="left" if col == "model" else "right")
+        t.add_column(col, justify="left" if col == "model" else "right", overflow="fold")
     for name, m in r["models"].items():
         t.add_row(name, f"{m['mpjpe_mm']:.1f} ± {m['mpjpe_std_mm']:.1f}", f"{m['pa_mpjpe_mm']:.1f} ± {m['pa_mpjpe_std_mm']:.1f}",
                   f"{m['mpjae_deg']:.1f} ± {m['mpjae_std_deg']:.1f}", str(m["frames"]), str(m.get("epoch")),

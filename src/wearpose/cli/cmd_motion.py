@@ -208,7 +208,7 @@ def motion_procedural(
     def render(r: dict[str, Any]) -> None:
         t = Table(title=f"procedural {family} ({namespace}, seed {seed})")
         for c in ("file", "clip", "frames", "seconds", "phases"):
-            t.add_column(c)
+            t.add_column(c, overflow="fold")
         for row in r["clips"]:
             t.add_row(escape(row["file"]), row["clip"], str(row["frames"]), str(row["seconds"]), escape(", ".join(row["phases"])))
         console.print(t)

@@ -209,8 +209,7 @@ def _check_conventions(f: Path, rec: Any) -> None:
 def _report_table(res: dict[str, Any]) -> Table:
     t = Table(title=f"recording import ({res['format']}) -> {res['out']}: {res['converted']} converted, {res['failed']} failed")
     for c in ("file", "frames", "sensors", "rate (Hz)", "valid %", "ground truth", "status"):
-        t.add_column(c, justify="right" if c in ("frames", "sensors", "rate (Hz)", "valid %") else "left",
-                     overflow="fold" if c in ("file", "rate (Hz)") else "ellipsis")
+        t.add_column(c, justify="right" if c in ("frames", "sensors", "rate (Hz)", "valid %") else "left", overflow="fold")
     for r in res["files"]:
         name = escape(Path(r["file"]).name)
         if not r["ok"]:

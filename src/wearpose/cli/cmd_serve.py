@@ -259,8 +259,8 @@ def stream_replay(
 
     def render(r: dict[str, Any]) -> None:
         t = Table(title=f"{recording.name} -> {url} (subject {subject}, {r['rate_hz']:.0f} Hz, {r['format']})")
-        t.add_column("")
-        t.add_column("value")
+        t.add_column("", overflow="fold")
+        t.add_column("value", overflow="fold")
         for k in ("frames_sent", "frames_expected", "poses_received", "frames_lost", "frames_shed_by_server",
                   "invalid_pose_frames"):
             t.add_row(k, str(r[k]))

@@ -9,9 +9,8 @@ from pathlib import Path
 from typing import Any, Optional
 
 import typer
-from rich.table import Table
 
-from wearpose.cli.app import _emit, app, console, err_console
+from wearpose.cli.app import _emit, _kv_table, app, console, err_console
 
 
 @app.command()
@@ -68,13 +67,11 @@ def simulate(
                           tpose=tpose, shapes=shapes)
 
     def render(r: dict[str, Any]) -> None:
-        t = Table(title=f"simulated {r['kit']} ({r['split'] or 'all splits'}) -> {r['out']}", show_header=False)
-        for k in ("selected", "simulated", "skipped", "failed", "excluded_nc", "executor", "workers", "seconds", "clips_per_s",
-                  "sensor_frames", "sensor_frames_per_s"):
-            t.add_row(k, f"{r[k]:,}" if isinstance(r[k], int) else str(r[k]))
-        t.add_row("written", f"{r['bytes'] / 1e6:.1f} MB")
-        t.add_row("index", r["index"])
-        console.print(t)
+        keys = ("selected", "simulated", "skipped", "failed", "excluded_nc", "executor", "workers", "seconds", "clips_per_s",
+                "sensor_frames", "sensor_frames_per_s")
+        rows = {k: f"{r[k]:,}" if isinstance(r[k], int) else str(r[k]) for k in keys}
+        rows.update(written=f"{r['bytes'] / 1e6:.1f} MB", index=r["index"])
+        console.print(_kv_table(f"simulated {r['kit']} ({r['split'] or 'all splits'}) -> {r['out']}", rows))
         for cid, err in r["failures"].items():
             err_console.print(f"[red]failed[/] {cid}: {err}")
 
