@@ -145,8 +145,12 @@ def _stamp_is_current() -> bool:
 # (2026-12-02, load 8-14): 303 s CPU over all commands (the log prints each command's CPU); a
 # demo's cost is mostly fixed (miposer 18.4 s CPU at 2 s of clip vs 21.7 s at 10 s, load 3-4).
 # The fresh-machine CI run of 2c8556c (quiet machine) took 289.6 s: 10 s under the old 300 s
-# budget, so the budget is 360 s (README unchanged; the commands themselves got slower: not measured per command).
-@pytest.mark.budget(360)
+# budget, so the budget was 360 s. The latest clean CI run took 158.8 s (quiet machine, 2 cores, load ~1.5):
+# the budget is issue 22's "under 3 minutes", 180 s. Per command most of it is the interpreter and
+# torch's import (2.3 s CPU of doctor's 3.6, info's 3.0, data info's 2.8, view's 3.1, recording import's
+# 5.6 s, 2026-12-03): each of these needs torch (doctor checks it, info/view build the body, data info and
+# recording import reach it through wearpose.motion / wearpose.recording), so no lazy import removes it.
+@pytest.mark.budget(180)
 def test_readme_commands_run_in_written_order(tmp_path: Path) -> None:
     try:
         shared = _shared_dir()
