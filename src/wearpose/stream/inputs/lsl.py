@@ -31,6 +31,7 @@ liblsl, and ``wearpose serve`` / ``wearpose stream emulate`` take ``--lsl-loopba
 from __future__ import annotations
 
 import asyncio
+import math
 import os
 import threading
 from pathlib import Path
@@ -263,6 +264,12 @@ class LslInput(LiveInput):
                 self.malformed(exc)
 
     def _frame(self, row: np.ndarray, t: float) -> DeviceFrame:
+        # The sender sets each time stamp: a NaN or infinite one (or one so far from the first that
+        # the frame number overflows) is a malformed sample, not an exception in the pull callback.
+        k = (t - self._t0) * self.rate if self._t0 is not None else 0.0
+        if not (math.isfinite(t) and math.isfinite(k)):
+            raise PacketError(f"LSL sample: time stamp {t!r} s is not finite or too far from the stream's first "
+                              f"({self._t0!r} s); expected seconds on the LSL clock (pylsl.local_clock())")
         S = len(self.sensors)
         valid = np.zeros(S, bool)
         chans: dict[str, np.ndarray] = {}
@@ -290,7 +297,7 @@ class LslInput(LiveInput):
             chans["orientation"][list(quats)] = quaternion_matrices(np.stack(list(quats.values())), "wxyz", "LSL")
         if self._t0 is None:
             self._t0 = t
-        return DeviceFrame(int(round((t - self._t0) * self.rate)) & 0xFFFFFFFF, t, valid, chans)
+        return DeviceFrame(int(round(k)) & 0xFFFFFFFF, t, valid, chans)
 
 
 # ------------------------------------------------------------------------- the emulator
