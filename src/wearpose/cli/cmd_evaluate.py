@@ -139,7 +139,7 @@ def _render_breakdown(models: dict[str, Any]) -> None:
     for kind in ("source", "class"):
         t = Table(title=f"by {kind}: {metric}")
         t.add_column(kind, overflow="fold")
-        t.add_column("clips", justify="right")
+        t.add_column("clips", justify="right", overflow="fold")
         for name in models:
             t.add_column(name, justify="right", overflow="fold")
         for g, row in first[kind].items():
