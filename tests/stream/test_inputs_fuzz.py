@@ -144,21 +144,35 @@ def _check_frame(f: DeviceFrame, S: int) -> None:
 
 
 # ------------------------------------------------------------------------- OSC
-OSC_ARG = F32 | st.integers(-2**31, 2**31 - 1) | st.text(max_size=6) | st.booleans() | st.binary(min_size=1, max_size=6)
+OSC_ARG = F32 | st.integers(-2**31, 2**31 - 1) | st.text(max_size=6) | st.booleans() | st.binary(max_size=6)
 OSC_ADDRESSES = st.sampled_from(["/quaternion", "/sensors", "/linear", "/a/quaternion", "/b/sensors"]) \
     | st.text(max_size=12).map(lambda s: "/" + s)
 NGIMU_QUAT = encode_bundle(1.8e9, [("/quaternion", [1.0, 0.0, 0.0, 0.0]), ("/sensors", [0.0] * 10),
                                    ("/linear", [0.0, 0.0, 0.0])])
 
 
-def _osc_message(addr: str, args: list) -> bytes:
-    """An OSC message with typed arguments (python-osc's builder), any address and values."""
-    from pythonosc.osc_message_builder import OscMessageBuilder
+def _osc_string(b: bytes) -> bytes:
+    """OSC 1.0 string: the bytes, a NUL, padded with NULs to a multiple of 4."""
+    return b + b"\x00" * (4 - len(b) % 4)
 
-    b = OscMessageBuilder(address=addr)
+
+def _osc_message(addr: str, args: list) -> bytes:
+    """An OSC 1.0 message, encoded here (python-osc's builder re-parses what it builds and fails
+    on some values): any address and typed arguments, float32 ``f``, int32 ``i``, string ``s``,
+    blob ``b``, booleans ``T``/``F``."""
+    tags, data = ",", b""
     for a in args:
-        b.add_arg(a)
-    return b.build().dgram
+        if isinstance(a, bool):
+            tags += "T" if a else "F"
+        elif isinstance(a, int):
+            tags, data = tags + "i", data + struct.pack(">i", a)
+        elif isinstance(a, float):
+            tags, data = tags + "f", data + struct.pack(">f", a)
+        elif isinstance(a, str):
+            tags, data = tags + "s", data + _osc_string(a.encode("utf-8", "surrogatepass"))
+        else:
+            tags, data = tags + "b", data + struct.pack(">i", len(a)) + a + b"\x00" * (-len(a) % 4)
+    return _osc_string(addr.encode("utf-8", "surrogatepass")) + _osc_string(tags.encode()) + data
 
 
 def _bundle(t: tuple[int, int], msgs: list[bytes]) -> bytes:
