@@ -45,14 +45,14 @@ def main() -> int:
     for name, row in plugin.rows.items():
         row["inputs_tried"] = mod.TRIED.get(name, 0)
     failed = [n for n, r in plugin.rows.items() if r["outcome"] != "passed"]
-    res = {"examples_per_test": args.examples, "inputs_tried": sum(mod.TRIED.values()), "failed_tests": failed,
+    res = {"command": f"python benchmarks/inputs_fuzz.py --examples {args.examples}", "examples_per_test": args.examples, "inputs_tried": sum(mod.TRIED.values()), "failed_tests": failed,
            "pytest_exit_code": int(code), "seconds": round(seconds, 1), "tests": plugin.rows, "commit": commit,
            "uncommitted_source_edits": dirty, "python": platform.python_version(),
            "load_average_at_end": os.getloadavg()}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(json.dumps(res, indent=2) + "\n")
     lines = ["# Live-input decoder fuzzing (MVN, OSC, LSL; hypothesis)", "",
-             f"`python benchmarks/inputs_fuzz.py --examples {args.examples}`; commit `{commit}`"
+             f"Produced by `{res['command']}`; commit `{commit}`"
              f"{' with uncommitted edits' if dirty else ''}; {seconds / 60:.1f} min on the shared 2-core machine "
              f"(load average at the end {res['load_average_at_end'][0]:.1f}).", "",
              "| test | inputs tried | outcome | seconds |", "| --- | --- | --- | --- |"]
