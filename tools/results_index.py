@@ -29,6 +29,7 @@ PRODUCERS = {
     "card_reproduction": "python benchmarks/card_reproduction.py (commit 2c8556c)",
     "convention_checks": "python benchmarks/convention_checks.py (80 clips per kit x 2 noise settings; commit d2f963b)",
     "foot_skate": "python benchmarks/foot_skate.py (60 clips per source x motion; commit 0a8dbc3)",
+    "inputs_fuzz": "python benchmarks/inputs_fuzz.py --examples 10000 (branch cli22 at 1d2b93f, before a rebase that left the decoders unchanged)",
     "live_inputs": "python benchmarks/live_inputs.py --wait 2400 (commit 521ba91)",
     "recording_fuzz": "python benchmarks/recording_fuzz.py --examples 1250 (commit 2906dca)",
     "simulate": "python benchmarks/simulate.py (em12, val split, 1 and 2 workers; commit eb3a866)",
