@@ -88,12 +88,13 @@ def test_make_builds_fresh_estimators_from_one_read(torch_loads: list[str]) -> N
 def test_wearpose_estimate_reads_its_checkpoint_once(as_path: bool, tmp_path: Path, torch_loads: list[str]) -> None:
     from typer.testing import CliRunner
 
-    from tests.cli.test_cmd_estimate import _kit_recording
+    from tests.sensors.sensor_testutils import smooth_motion
     from wearpose.cli.app import app
+    from wearpose.evaluate.conventions import kit_recording
     from wearpose.recording import save_recording
     from wearpose.weights import weight_path
 
-    rec = _kit_recording("em12", 30.0)
+    rec = kit_recording("em12", smooth_motion(T=60, fps=30.0, seed=1, dtype=torch.float32), 30.0)
     save_recording(rec, tmp_path / "rec.npz")
     model = str(weight_path("empose12_cpu")) if as_path else "empose12_cpu"
     torch_loads.clear()  # only what the command reads
