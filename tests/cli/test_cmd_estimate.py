@@ -244,15 +244,6 @@ def test_exports_state_their_frame_in_the_file(em12_30: Path, tmp_path: Path) ->
 STANDING_TOL_M = 0.03
 #: An export stands on the floor when its lowest vertex is within this of y = 0 in every standing frame (m).
 FLOOR_TOL_M = 0.05
-#: Kits whose export does not stand in every standing frame yet (measured 2026-12-03 on this walk):
-#: the EM estimates placed through the recorded source pose float 9.5-16.1 cm (em12) and 8.9-14.4 cm
-#: (em6) above the floor in all 55 walk frames, MI-Poser's is 5-6.5 cm up in 16 of 110. Part of it is the test's
-#: ground truth: prepend_tpose keeps the walk's pelvis height, so the straight-legged T-pose sinks
-#: 5-6 cm into the floor (and the estimates with a translation are floored on that first second),
-#: and the corpus walk itself rises 4 cm in 2 s. Not fixed here (recording.prepend_tpose feeds the
-#: shipped PIP/MI-Poser figures); strict, so a fix shows up as XPASS.
-FLOATING = {"em12": "walk 9.5-16.1 cm above the floor", "em6": "walk 8.9-14.4 cm above the floor",
-            "miposer": "16 of 110 walk frames 5-6.5 cm above the floor"}
 
 
 def _floor_problems(motion, body, standing) -> list[str]:
@@ -279,12 +270,11 @@ def _floor_problems(motion, body, standing) -> list[str]:
 
 @pytest.mark.corpus
 @pytest.mark.budget(40)  # PIP's physics and MI-Poser's calibration on 3 s
-@pytest.mark.parametrize("kit", [pytest.param(k, marks=pytest.mark.xfail(strict=True, reason=FLOATING[k]))
-                                 if k in FLOATING else k for k in [*DEMO_MODELS, "em12-no-source-pose"]])
+@pytest.mark.parametrize("kit", [*DEMO_MODELS, "em12-no-source-pose"])
 def test_exported_bvh_stands_on_the_floor(kit: str, walk, tmp_path: Path) -> None:
     """Every demo kit's estimate of a walk, exported as BVH and read back, stands in every
-    standing frame (the ground truth's feet on its floor: the walk; the prefix T-pose sinks into
-    it, see :data:`FLOATING`): lowest vertex within 5 cm of the floor, pelvis above the knees.
+    standing frame (the ground truth's feet on its floor: the walk; the prefix T-pose, which
+    recording.prepend_tpose sinks 5-6 cm into it, is not a standing frame): lowest vertex within 5 cm of the floor, pelvis above the knees.
     A copy of the export that rises 20 cm over the clip (first frame as exported, so the lowest
     point over all frames is unchanged) fails the same check: a body drifting up is caught. The
     BVH's sidecar states Y up."""
