@@ -16,7 +16,8 @@ from typing import Any, Sequence
 import numpy as np
 import torch
 
-from wearpose.calibration._common import F64, G_VEC, CalibrationError, t64, window_mask
+from wearpose.body import BodyModel
+from wearpose.calibration._common import F64, G_VEC, CalibrationError, chordal_mean, t64, window_mask
 from wearpose.calibration.empose import empose_offsets
 from wearpose.calibration.handeye import solve_axyb
 from wearpose.calibration.miposer import em_to_world, miposer_tpose
@@ -30,7 +31,6 @@ PAIR_TOLERANCE = 1e-6
 def _body(body: Any) -> Any:
     if body is not None:
         return body
-    from wearpose.body import BodyModel
 
     return BodyModel(dtype=torch.float64)
 
@@ -63,8 +63,6 @@ def _window_stack(streams: list[Any], window: tuple[float, float], channel: str,
 
 
 def _mean_pose(stream: Any, window: tuple[float, float], method: str) -> tuple[torch.Tensor, torch.Tensor]:
-    from wearpose.calibration._common import chordal_mean
-
     m = window_mask(stream.timestamps, window, f"calibrate({method}) sensor {stream.name!r}") & stream.valid
     if not m.any():
         raise CalibrationError(f"calibrate({method}): sensor {stream.name!r} has no valid frame in the window {window}")
@@ -172,6 +170,7 @@ def _pair(ta: np.ndarray, tb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _empose(rec: Any, body: Any, sensors: Sequence[str] | None, window: tuple[float, float] | None, **kwargs: Any) -> CalibrationResult:
+    # start-up: wearpose.motion.resample adds ~60 ms to import wearpose.calibration
     from wearpose.motion.resample import resample
 
     gt = rec.ground_truth
@@ -192,6 +191,7 @@ def _empose(rec: Any, body: Any, sensors: Sequence[str] | None, window: tuple[fl
     if ok.sum() < 2:
         raise CalibrationError("calibrate(empose-offsets): fewer than 2 sensor frames overlap the ground truth in time")
     sel = np.flatnonzero(ok)
+    # start-up: wearpose.motion.sequence adds ~70 ms to import wearpose.calibration
     from wearpose.motion.sequence import MotionSequence
 
     mm = MotionSequence(m.pose[idx[sel]].to(F64), m.betas.to(F64), m.trans[idx[sel]].to(F64), rate, {})
@@ -248,6 +248,7 @@ def apply_calibration(recording: Any, result: CalibrationResult) -> Any:
     if result.method not in ("tpose", "ipose"):
         raise CalibrationError(f"apply_calibration: only tpose/ipose calibrations change the data; got {result.method!r} "
                                "(store it with store_calibration)")
+    # start-up: wearpose.recording adds ~70 ms to import wearpose.calibration
     from wearpose.recording import SensorStream
 
     rec = recording.to_canonical()
@@ -282,6 +283,7 @@ def fit_imu_noise(recording: Any, window: tuple[float, float], sensors: Sequence
     """:func:`wearpose.sensors.imu.fit_static_noise` of ``sensors`` held still in ``window`` (s):
     the recording's declared units converted, acceleration as sensor-frame specific force.
     ``rate_hz`` in the result is the sensors' mean rate."""
+    # start-up: wearpose.sensors.imu adds ~100 ms to import wearpose.calibration
     from wearpose.sensors.imu import fit_static_noise
 
     rec = recording.to_canonical().declared_as(acc_frame="sensor", acc_gravity="included")

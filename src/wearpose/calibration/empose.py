@@ -115,6 +115,7 @@ def empose_offsets(sensor_R: torch.Tensor, sensor_p: torch.Tensor, motion, body,
     Returns:
         ``empose-offsets`` :class:`CalibrationResult` (see :func:`fit_offsets`).
     """
+    # start-up: wearpose.sensors adds ~110 ms to import wearpose.calibration
     from wearpose.sensors import apply_offsets, relative_to_source
 
     sR, sp = t64(sensor_R), t64(sensor_p)

@@ -95,7 +95,7 @@ class CalibrationResult:
 
     def to_em_offsets(self) -> Any:
         """``empose-offsets`` result -> :class:`wearpose.sensors.EMOffsets` (for ``simulate(offsets=...)``)."""
-        from wearpose.sensors import EMOffsets
+        from wearpose.sensors import EMOffsets  # start-up: wearpose.sensors adds ~110 ms to import wearpose.calibration
 
         if self.method != "empose-offsets":
             raise CalibrationError(f"to_em_offsets: needs an 'empose-offsets' calibration, this one is {self.method!r}")

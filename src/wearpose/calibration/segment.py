@@ -82,7 +82,7 @@ def pose_targets(body: Any, sites: Sequence[str], segments: Sequence[str], pose:
 
 
 def _segment_of(site: str) -> str:
-    from wearpose.sensors import SITE_SEGMENT
+    from wearpose.sensors import SITE_SEGMENT  # start-up: wearpose.sensors adds ~110 ms to import wearpose.calibration
 
     if site in SITE_SEGMENT:
         return SITE_SEGMENT[site]

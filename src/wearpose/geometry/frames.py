@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import torch
 
+from wearpose.geometry.rotations import matrix_to_quat
+
 #: Maps Z-up world coordinates (x, y, z) to Y-up (x, z, -y): a -90 deg rotation about X.
 Z_UP_TO_Y_UP = torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]], dtype=torch.float64)
 #: Inverse of :data:`Z_UP_TO_Y_UP`.
@@ -85,8 +87,6 @@ def to_unity_rotation(R: torch.Tensor) -> torch.Tensor:
 def to_unity_quat(R: torch.Tensor) -> torch.Tensor:
     """Rotations ``(..., 3, 3)`` in wearpose's world as Unity quaternions in Unity's component
     order ``(x, y, z, w)`` (the order of ``UnityEngine.Quaternion`` and of the VMC protocol)."""
-    from wearpose.geometry.rotations import matrix_to_quat
-
     q = matrix_to_quat(to_unity_rotation(R))  # (w, x, y, z)
     return torch.cat([q[..., 1:], q[..., :1]], dim=-1)
 

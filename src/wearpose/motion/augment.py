@@ -15,11 +15,12 @@ import math
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+import numpy as np
 import torch
 
 from wearpose.body.skeleton import MIRROR
-from wearpose.errors import ShapeError
-from wearpose.geometry import mirror_points, mirror_rotation
+from wearpose.errors import ConfigError, ShapeError
+from wearpose.geometry import mirror_points, mirror_rotation, rotation_y
 from wearpose.motion.sequence import MotionSequence
 
 
@@ -80,8 +81,6 @@ def rotate_heading(seq: MotionSequence, angle: float, root_rest: torch.Tensor | 
     Returns:
         A new sequence, ``meta["augment"]`` extended by ``"heading=<deg>"``.
     """
-    from wearpose.geometry import rotation_y
-
     Ry = rotation_y(torch.tensor(float(angle), dtype=seq.pose.dtype))
     pose = seq.pose.clone()
     pose[:, 0] = Ry @ pose[:, 0]
@@ -120,11 +119,7 @@ def jitter_sites(body: Any, radius: float, generator: torch.Generator, names: An
         body: a :class:`~wearpose.body.BodyModel`; radius: metres (0 = unchanged); generator: seeds
             the draw.
     """
-    import copy as _copy
-
-    import numpy as np
-
-    out = _copy.copy(body)
+    out = copy.copy(body)
     if radius <= 0:
         return out
     names = tuple(body.site_names if names is None else names)
@@ -174,8 +169,6 @@ class AugmentSettings:
     site_jitter_m: float = 0.0
 
     def __post_init__(self) -> None:
-        from wearpose.errors import ConfigError
-
         lo, hi = (float(x) for x in self.speed_range)
         if not (0.0 < lo <= hi):
             raise ConfigError(f"AugmentSettings.speed_range: expected (low, high) with 0 < low <= high, got {self.speed_range!r}")
@@ -195,8 +188,6 @@ class AugmentSettings:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> AugmentSettings:
         """The inverse of :meth:`to_dict`; an unknown key is refused, naming the known ones."""
-        from wearpose.errors import ConfigError
-
         unknown = sorted(set(d) - {f.name for f in fields(cls)})
         if unknown:
             raise ConfigError(f"augmentation settings: unknown key(s) {unknown}; known: {[f.name for f in fields(cls)]}")

@@ -13,6 +13,7 @@ from wearpose.motion.amass import read_amass
 from wearpose.motion.importer import MOTION_SUFFIXES, import_motion
 from wearpose.motion.paths import cache_dir, data_dir
 from wearpose.motion.sequence import FORMAT_NAME, MotionSequence
+from wearpose.motion.store import CorpusStore
 from wearpose.motion.template import default_rest_joints
 
 
@@ -55,8 +56,6 @@ def load_motion(spec: str | Path, cache: str | Path | None = None, rest_joints: 
     tried = [f"file {path}"]
     store_dir = cache_dir(cache)
     if (store_dir / "index.json").is_file():
-        from wearpose.motion.store import CorpusStore  # noqa: PLC0415 - only when a store exists
-
         store = CorpusStore(store_dir)
         if str(spec) in store.clips():
             return store.load(str(spec))

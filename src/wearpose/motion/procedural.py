@@ -46,10 +46,11 @@ from typing import Any
 
 import torch
 
+from wearpose.body.kinematics import forward_kinematics
 from wearpose.body.shapes import sample_betas
-from wearpose.body.skeleton import JOINT_INDEX, NUM_JOINTS
+from wearpose.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from wearpose.errors import ConfigError
-from wearpose.geometry import rotation_between, rotation_x, rotation_y, rotation_z
+from wearpose.geometry import matrix_to_axis_angle, rotation_between, rotation_x, rotation_y, rotation_z
 from wearpose.motion.sequence import NUM_BETAS, MotionSequence
 
 #: The families, in the order the docs list them.
@@ -287,8 +288,6 @@ class _Skin:
 
     def heights(self, pose: torch.Tensor, chunk: int = 512) -> torch.Tensor:
         """``(T, V)`` vertex heights, m, for local rotations ``pose`` ``(T, 24, 3, 3)`` (trans 0)."""
-        from wearpose.body.kinematics import forward_kinematics
-
         out = []
         with torch.no_grad():
             for a in range(0, pose.shape[0], chunk):
@@ -769,9 +768,6 @@ def joint_limit_violations(pose: torch.Tensor) -> list[str]:
     """Joints of local rotations ``pose`` ``(T, 24, 3, 3)`` beyond :data:`JOINT_LIMITS_DEG`, or
     hinges (:data:`HINGES`) bending the wrong way or off their axis by more than 2 deg; one
     message per joint (empty: all within)."""
-    from wearpose.body.skeleton import JOINT_NAMES
-    from wearpose.geometry import matrix_to_axis_angle
-
     aa = matrix_to_axis_angle(pose.double())  # (T, 24, 3)
     ang = aa.norm(dim=-1) * 180.0 / math.pi
     out = []

@@ -18,12 +18,14 @@ rate, body setting) is kept; the index is rewritten.
 from __future__ import annotations
 
 import hashlib
+import json
 import time
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import torch
 
+from wearpose.body import BodyModel
 from wearpose.errors import ConfigError
 from wearpose.motion import procedural
 from wearpose.motion.paths import cache_dir
@@ -76,8 +78,6 @@ def build_procedural_store(out: str | Path | None = None, *, per_family: int = U
     Raises:
         ConfigError: ``per_family`` < 1, or an unknown family.
     """
-    from wearpose.body import BodyModel
-
     if per_family < 1:
         raise ConfigError(f"procedural store: per_family = {per_family}; expected at least 1 clip per family")
     unknown = [f for f in families if f not in FAMILIES]
@@ -128,8 +128,6 @@ def _entry(cid: str, family: str, index: int, rel: Path, seq: Any, stamp: str, r
 
 def _old_entries(root: Path) -> dict[str, Any]:
     """The clip rows of an existing index at ``root`` (empty when there is none or it is unreadable)."""
-    import json
-
     path = root / INDEX_NAME
     try:
         return json.loads(path.read_text(encoding="utf-8")).get("clips", {})

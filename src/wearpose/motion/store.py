@@ -28,7 +28,9 @@ import torch
 from wearpose.fileio import atomic_write_text
 from wearpose.errors import ConfigError, InputFileError, WearposeError
 from wearpose.motion.amass import read_amass
+from wearpose.motion.asf import find_asf_for
 from wearpose.motion.bvh import read_bvh
+from wearpose.motion.importer import UP_AXES, import_motion
 from wearpose.motion.paths import cache_dir as default_cache_dir
 from wearpose.motion.paths import data_dir as default_data_dir
 from wearpose.motion.resample import resample
@@ -155,7 +157,6 @@ def _check_user_options(split: str | None, source: str | None, manifest: Path | 
                           "(leave out --split, --source, --asf and --up, or point at folders without a manifest.csv)")
     if asf is not None and not Path(asf).is_file():
         raise ConfigError(f"ASF file {asf} does not exist")
-    from wearpose.motion.importer import UP_AXES  # noqa: PLC0415 - the import's own list
 
     if up is not None and up.lower() not in UP_AXES:
         raise ConfigError(f"up axis {up!r}; expected one of {', '.join(UP_AXES)}")
@@ -186,8 +187,6 @@ def _stamp(path: Path, fps: float | None, rest_key: str) -> str:
 def _asf_stamp(amc: Path) -> str:
     """Size and mtime of the ASF an AMC clip reads (``"asf:?"`` when it cannot be found: the
     conversion then fails and says why)."""
-    from wearpose.motion.asf import find_asf_for  # noqa: PLC0415
-
     try:
         st = find_asf_for(amc).stat()
     except (WearposeError, OSError):
@@ -209,8 +208,6 @@ def _convert_one(job: dict[str, Any]) -> dict[str, Any]:
             seq.meta.update(meta)
         elif job.get("user_files"):
             # Folders without a manifest: any skeleton, units and up axis (wearpose.motion.importer).
-            from wearpose.motion.importer import import_motion  # noqa: PLC0415 - heavier, only for user folders
-
             seq = import_motion(src, rest, joint_map=job.get("joint_map"), meta=meta, asf=job.get("asf"),
                                 up=job.get("up")).sequence
         elif src.name.lower().endswith((".amc", ".amc.gz")):
@@ -240,8 +237,6 @@ def _import_corpus_amc(src: Path, rest: torch.Tensor, fps: float | None, meta: d
     ASF's ``:units``. Any other skeleton is refused: corpus rows must retarget the same way every
     time, not through an automatic match.
     """
-    from wearpose.motion.importer import import_motion  # noqa: PLC0415 - heavier, only for AMC rows
-
     imp = import_motion(src, rest, up="y", fps=fps, meta=meta)
     if not imp.report.map_source.startswith("built-in"):
         raise InputFileError(src, f"its ASF skeleton ({imp.report.map_source} match) is not a built-in one",
@@ -427,6 +422,7 @@ def prepare_corpus(data_dir: str | Path | Sequence[str | Path] | None = None, ca
             clips.pop(cid, None)
 
     n_workers = workers if workers is not None else min(2, os.cpu_count() or 1)
+    # start-up: rich.progress adds ~40 ms to import wearpose.motion
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     columns = (TextColumn("[bold]preparing motion corpus"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),

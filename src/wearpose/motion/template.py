@@ -9,6 +9,8 @@ from typing import Any
 
 import torch
 
+from wearpose.body.model import BodyModel
+
 #: SMPL-neutral-like rest joints (metres), zero pose: T-pose facing +Z, left at +X, Y up.
 #: Typed in to resemble SMPL's neutral J at betas = 0 (pelvis at about (0, -0.22, 0.03)).
 SMPL_LIKE_REST_JOINTS: tuple[tuple[float, float, float], ...] = (
@@ -38,8 +40,6 @@ def template_rest_joints(dtype: torch.dtype = torch.float64) -> torch.Tensor:
 @functools.lru_cache(maxsize=1)
 def _body_model() -> Any:
     """The default body model, loaded once per process (loading the asset is not free)."""
-    from wearpose.body.model import BodyModel  # noqa: PLC0415 - imported lazily: heavier module
-
     return BodyModel(dtype=torch.float64)
 
 

@@ -13,6 +13,7 @@ What each layout is based on is cited in the converter's docstring.
 from __future__ import annotations
 
 import io
+import json
 import pickle
 import re
 from pathlib import Path
@@ -24,6 +25,7 @@ import torch
 from wearpose.errors import InputFileError, ShapeError
 from wearpose.fileio import npz_problem
 from wearpose.geometry import axis_angle_to_matrix
+from wearpose.recording.devicelog import sample_grid
 from wearpose.recording.types import Recording, SensorInfo, SensorStream, _Problem, quaternions_to_matrices
 
 # --------------------------------------------------------------------------------------- DIP-IMU
@@ -97,6 +99,7 @@ def _array(path: Path, d: dict[str, Any], key: str, shape_ok: Any, expected: str
 def _smpl_motion(path: Path, pose_aa: np.ndarray, betas: np.ndarray, trans: np.ndarray, fps: float,
                  meta: dict[str, Any], field: str) -> Any:
     """SMPL axis-angle ``(T, 3J)`` with J = 22 (SMPL-H body) or 24 -> MotionSequence (Y-up)."""
+    # start-up: wearpose.motion adds ~80 ms to import wearpose.recording
     from wearpose.motion.sequence import MotionSequence
 
     T, n = pose_aa.shape[0], pose_aa.shape[1] // 3
@@ -457,7 +460,7 @@ def amass_ground_truth(path: str | Path, rest_joints: torch.Tensor | None = None
     converted); attach it with ``dataclasses.replace(recording, ground_truth=seq,
     ground_truth_start=t0)``.
     """
-    from wearpose.motion.amass import read_amass  # lazily: motion is the lower layer's reader
+    from wearpose.motion.amass import read_amass  # start-up: wearpose.motion adds ~80 ms to import wearpose.recording
 
     return read_amass(path, rest_joints=rest_joints)
 
@@ -496,8 +499,6 @@ def _ximu3_grid(stamps_us: np.ndarray, path: Path, t0_us: float) -> tuple[np.nda
     """Slots on the device's nominal sample grid (:func:`wearpose.recording.devicelog.sample_grid`,
     the device's clock in microseconds): ``(slot of each sample, timestamps (K,) s from ``t0_us``,
     rate Hz)``."""
-    from wearpose.recording.devicelog import sample_grid
-
     return sample_grid(stamps_us, path, "Timestamp (us)", t0_us, 1e-6, row_offset=2)
 
 
@@ -512,8 +513,6 @@ def _ximu3_first_stamp(folder: Path) -> float:
 def _ximu3_device(folder: Path, t0_us: float | None) -> tuple[SensorStream, dict[str, Any]]:
     """One device folder -> its stream (kind ``imu``) and what the import found about it.
     ``t0_us``: the shared clock's zero, or None to start this device's time at its first sample."""
-    import json
-
     try:
         cmd = json.loads((folder / "Command.json").read_text(encoding="utf-8"))
         ping = next(c["ping"] for c in cmd if isinstance(c, dict) and "ping" in c)

@@ -38,11 +38,24 @@ import multiprocessing
 import os
 import re
 import time
+import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path, PurePosixPath
 from typing import Any, Iterable, Sequence
 
+import torch
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from wearpose.body import BodyModel
+from wearpose.body.asset import DEFAULT_ASSET, load_default_asset
 from wearpose.errors import ConfigError, InputFileError
+from wearpose.fileio import atomic_write_text
+from wearpose.motion import CorpusStore
+from wearpose.motion.sequence import MotionSequence
+from wearpose.recording.fileformat import save_recording
+from wearpose.recording.simulated import simulate_recording
+from wearpose.sensors import get_kit
 
 INDEX_NAME = "index.json"
 SET_FORMAT = "wearpose.recording-set"
@@ -135,16 +148,11 @@ _BODY: Any = None
 
 def _init_worker(body: str | None, quiet: bool = True) -> None:
     """Process-pool initialiser: one torch thread, the body model loaded once per worker."""
-    import warnings
-
-    import torch
-
     global _BODY
     torch.set_num_threads(1)
     if quiet:
         # Site substitutions of custom kits are recorded in each recording's meta instead.
         warnings.simplefilter("ignore")
-    from wearpose.body import BodyModel
 
     _BODY = BodyModel(body)
 
@@ -153,10 +161,6 @@ def _simulate_one(job: dict[str, Any]) -> dict[str, Any]:
     """Simulate, convert and write one clip. Never raises: errors come back as ``ok=False``."""
     t0 = time.perf_counter()
     try:
-        from wearpose.motion.sequence import MotionSequence
-        from wearpose.recording.fileformat import save_recording
-        from wearpose.recording.simulated import simulate_recording
-
         rec, res = simulate_recording(
             MotionSequence.load(job["motion_file"]), job["kit"], _BODY, seed=job["seed"], noise=job["noise"],
             rate=job["rate"], offsets="random" if job["offsets"] == "random" else None,
@@ -244,9 +248,6 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
             made with other settings (and not ``overwrite``).
         InputFileError: no prepared corpus (run ``wearpose data prepare``).
     """
-    from wearpose.motion import CorpusStore
-    from wearpose.sensors import get_kit
-
     t_start = time.perf_counter()
     kit_obj = get_kit(kit)  # fails early, naming the available kits
     if noise not in NOISE_CHOICES:
@@ -365,9 +366,6 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
             write_index()
             last_flush[0] = time.perf_counter()
 
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
     columns = (TextColumn(f"[bold]simulating {kit_obj.name}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TimeRemainingColumn(), TextColumn("{task.fields[failed]}"))
     # Biggest clips first, so that the workers finish together.
@@ -403,7 +401,7 @@ def simulate_corpus(out_dir: str | Path, kit: str = "em12", split: str | Sequenc
 
 def _import_ray() -> Any:
     try:
-        import ray
+        import ray  # optional dependency: ray (extra 'ray')
     except ImportError:
         raise ConfigError("executor 'ray' needs Ray, an optional extra: pip install \"wearpose[ray]\" "
                           "(or use the default local executor)") from None
@@ -426,8 +424,8 @@ def _run_jobs(todo: list[dict[str, Any]], n_workers: int, body: str | None, exec
         return {k: v for k, v in job.items() if k != "_row"}
 
     if executor == "ray":
-        import ray
-        from ray.util import ActorPool
+        import ray  # optional dependency: ray (extra 'ray')
+        from ray.util import ActorPool  # optional dependency: ray (extra 'ray')
 
         @ray.remote(num_cpus=1)
         class _Worker:  # one body model per actor, loaded once (as the process pool's initialiser)
@@ -443,10 +441,6 @@ def _run_jobs(todo: list[dict[str, Any]], n_workers: int, body: str | None, exec
             yield by_id[res["id"]], res
         return
     if n_workers <= 1:
-        import warnings
-
-        import torch
-
         threads = torch.get_num_threads()
         try:
             with warnings.catch_warnings():
@@ -475,8 +469,6 @@ def _run_jobs(todo: list[dict[str, Any]], n_workers: int, body: str | None, exec
 def _body_asset_id(body: str | None) -> str:
     """The body asset, identified by content: a rebuilt asset (e.g. new sites) changes the key."""
     if body is None or body == "default":
-        from wearpose.body.asset import DEFAULT_ASSET, load_default_asset
-
         path, name = DEFAULT_ASSET, load_default_asset().asset_id
     else:
         path = Path(os.environ.get("WEARPOSE_SMPL_MODEL", "")) if body == "smpl" else Path(body)
@@ -503,8 +495,6 @@ def _read_index(path: Path) -> dict[str, Any] | None:
 
 def _write_index(path: Path, settings: dict[str, Any], key: str, clips: dict[str, Any], failures: dict[str, str],
                  include_nc: bool, store: Any) -> None:
-    from wearpose.fileio import atomic_write_text
-
     lic: dict[str, int] = {}
     for row in clips.values():
         lic[str(row.get("licence"))] = lic.get(str(row.get("licence")), 0) + 1

@@ -31,7 +31,7 @@ import torch
 
 from wearpose.fileio import atomic_savez, npz_declared_size_problem, npz_problem
 from wearpose.errors import InputFileError, ShapeError
-from wearpose.geometry import matrix_to_quat
+from wearpose.geometry import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quat
 from wearpose.recording.checks import check_recording
 from wearpose.recording.types import (
     CHANNEL_SHAPES,
@@ -80,8 +80,6 @@ def recording_arrays(rec: Recording) -> dict[str, np.ndarray]:
             # Quaternions in files (DESIGN.md): 4 numbers per frame instead of 9, exact enough.
             arrays[f"{base}/{c}"] = _quats(v, s.valid) if c == "orientation" else v
     if gt is not None:
-        from wearpose.geometry import matrix_to_axis_angle
-
         arrays["ground_truth/pose_aa"] = matrix_to_axis_angle(gt.pose.detach().to(torch.float64)).to(torch.float32).numpy()
         arrays["ground_truth/betas"] = gt.betas.detach().to(torch.float32).numpy()
         arrays["ground_truth/trans"] = gt.trans.detach().to(torch.float32).numpy()
@@ -291,6 +289,7 @@ def _short(a: np.ndarray) -> str:
 
 
 def _load_ground_truth(path: Path, d: dict[str, np.ndarray], gt_json: Any) -> tuple[Any, float]:
+    # start-up: wearpose.motion adds ~80 ms to import wearpose.recording
     from wearpose.motion.sequence import MotionSequence
 
     if not isinstance(gt_json, dict) or set(gt_json) - {"start", "fps", "meta"}:
@@ -321,7 +320,6 @@ def _load_ground_truth(path: Path, d: dict[str, np.ndarray], gt_json: Any) -> tu
         raise InputFileError(path, problem, "(T, 3) float metres, one row per pose frame", field="ground_truth/trans")
     if betas.shape != (10,):
         raise InputFileError(path, f"shape {betas.shape}", "(10,) float SMPL betas", field="ground_truth/betas")
-    from wearpose.geometry import axis_angle_to_matrix
 
     try:
         pose = axis_angle_to_matrix(torch.from_numpy(aa)).to(torch.float32)

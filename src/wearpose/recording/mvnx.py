@@ -185,9 +185,13 @@ def _sensor_streams(path: Path, data: dict[str, Any], slot: np.ndarray, rate: fl
 
 def _ground_truth(path: Path, data: dict[str, Any], rate: float) -> Any:
     """The segments' orientations and pelvis position as an SMPL :class:`MotionSequence`."""
+    # start-up: wearpose.body adds ~25 ms to import wearpose.recording
     from wearpose.body.kinematics import global_to_local
+    # start-up: wearpose.body adds ~20 ms to import wearpose.recording
     from wearpose.body.skeleton import JOINT_INDEX, PARENTS
+    # start-up: wearpose.motion adds ~80 ms to import wearpose.recording
     from wearpose.motion.sequence import MotionSequence
+    # start-up: wearpose.motion adds ~100 ms to import wearpose.recording
     from wearpose.motion.template import default_rest_joints
 
     segs = data["segments"]

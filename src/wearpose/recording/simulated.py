@@ -43,6 +43,8 @@ import numpy as np
 import torch
 
 from wearpose.errors import ShapeError
+from wearpose.geometry import matrix_to_quat
+from wearpose.recording.tpose import CALIBRATION_WINDOW_KEY, prepend_tpose
 from wearpose.recording.types import OPTIONAL_CHANNELS, REQUIRED_CHANNELS, Recording, SensorInfo, SensorStream
 
 #: Name given to the EM source (transmitter) in :attr:`SensorInfo.source` of simulated EM sensors.
@@ -73,8 +75,6 @@ def _noise_json(noise: Any) -> Any:
 
 
 def _quat_rows(R: torch.Tensor) -> list[list[float]]:
-    from wearpose.geometry import matrix_to_quat
-
     q = matrix_to_quat(R.detach().to(torch.float64)).cpu().numpy()
     return np.round(q, 7).tolist()
 
@@ -108,6 +108,7 @@ def recording_from_simulation(result: Any, motion: Any = None, subject: dict[str
     kit = result.kit
     sim_meta = dict(getattr(result, "meta", {}) or {})
     if motion is not None:
+        # start-up: wearpose.motion adds ~80 ms to import wearpose.recording
         from wearpose.motion.sequence import MotionSequence
 
         if not isinstance(motion, MotionSequence):
@@ -206,8 +207,7 @@ def simulate_recording(motion: Any, kit: Any, body: Any, *, seed: int = 0, noise
         ``(recording, result)``: the recording (ground truth = the motion as worn: re-fitted to
         the wearer's body when ``shape`` draws one) and the :class:`~wearpose.sensors.SimulationResult`.
     """
-    from wearpose.recording.tpose import CALIBRATION_WINDOW_KEY, prepend_tpose
-    from wearpose.sensors import simulate
+    from wearpose.sensors import simulate  # start-up: wearpose.sensors adds ~120 ms to import wearpose.recording
 
     extra = dict(meta or {})
     if tpose_s:

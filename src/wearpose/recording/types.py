@@ -206,6 +206,7 @@ def known_sites() -> frozenset[str]:
     custom body asset brings its own sites.
     """
     # Imported here: wearpose.sensors sits above nothing recording needs at import time.
+    # start-up: wearpose.sensors adds ~130 ms to import wearpose.recording
     from wearpose.sensors.kits import SITE_SEGMENT, get_kit, list_kits
 
     sites = set(SITE_SEGMENT)
@@ -229,6 +230,7 @@ def _unknown_site(site: str) -> tuple[str, str] | None:
     known = known_sites()
     if site in known:
         return None
+    # start-up: wearpose.sensors adds ~130 ms to import wearpose.recording
     from wearpose.sensors.kits import get_kit, list_kits
 
     worn_on: dict[str, list[str]] = {}  # site -> kits having a sensor named `site` worn there
@@ -481,6 +483,7 @@ class Recording:
                 raise ShapeError(f"Recording: sensor name {s.name!r} appears twice; names must be unique")
             seen.add(s.name)
         if self.ground_truth is not None:
+            # start-up: wearpose.motion adds ~80 ms to import wearpose.recording
             from wearpose.motion.sequence import MotionSequence
 
             if not isinstance(self.ground_truth, MotionSequence):
@@ -529,6 +532,7 @@ class Recording:
                         **kwargs: Any) -> Recording:
         """A recording of a :func:`wearpose.sensors.simulate` result (``motion`` becomes the
         ground truth); see :func:`wearpose.recording.simulated.recording_from_simulation`."""
+        # cycle: wearpose.recording.simulated imports wearpose.recording.types
         from wearpose.recording.simulated import recording_from_simulation
 
         return recording_from_simulation(result, motion, subject, **kwargs)
@@ -703,6 +707,7 @@ class Recording:
     # ------------------------------------------------------------------ files
     def save(self, path: Any) -> Any:
         """Write the versioned ``.npz`` format atomically; see :func:`save_recording`."""
+        # cycle: wearpose.recording.fileformat imports wearpose.recording.types
         from wearpose.recording.fileformat import save_recording
 
         return save_recording(self, path)

@@ -230,10 +230,9 @@ def gauss_markov(T: int, shape: tuple[int, ...], fps: float, tau: float, generat
         return z
     rho = math.exp(-1.0 / (fps * tau))
     s = math.sqrt(1 - rho * rho)
-    # y_k = rho y_{k-1} + s z_k with y_0 = z_0 (stationary start), as one IIR filter call.
-    # scipy.signal is imported here, not at module level: it takes ~1.7 s to import, and every
-    # recording with body sites imports wearpose.sensors (the known sites) without simulating.
-    from scipy.signal import lfilter
+    # y_k = rho y_{k-1} + s z_k with y_0 = z_0 (stationary start), as one IIR filter call. Every
+    # recording with body sites imports wearpose.sensors (the known sites) without simulating:
+    from scipy.signal import lfilter  # start-up: scipy.signal adds ~0.9 s to import wearpose.sensors
 
     zn = z.numpy()
     y, _ = lfilter([s], [1.0, -rho], zn, axis=0, zi=((1.0 - s) * zn[:1]))

@@ -269,6 +269,7 @@ def fit_static_noise(sensors: list[tuple[np.ndarray, np.ndarray, np.ndarray]], f
         along gravity is observable still), ``orientation_white`` (RMS angle from the mean
         orientation / sqrt(3): per axis, rad), ``samples`` (the fewest of any sensor).
     """
+    # start-up: scipy.spatial.transform adds ~290 ms to import wearpose.sensors
     from scipy.spatial.transform import Rotation
 
     if not sensors or min(len(g) for g, _, _ in sensors) < 3:

@@ -43,7 +43,9 @@ import numpy as np
 import torch
 
 from wearpose.errors import ConfigError, ShapeError
-from wearpose.geometry import Y_UP_TO_Z_UP, axis_angle_to_matrix, best_yaw, matrix_to_rot6d, rotation_y, vector_heading
+from wearpose.geometry import (
+    Y_UP_TO_Z_UP, axis_angle_to_matrix, best_yaw, matrix_to_quat, matrix_to_rot6d, rotation_y, vector_heading,
+)
 from wearpose.sensors.imu import ImuNoise, simulate_imu
 
 #: Earth field in the world frame, tesla: 50 uT, inclination 60 deg (northern hemisphere:
@@ -238,13 +240,13 @@ def ahrs_fusion(gyr: torch.Tensor, acc: torch.Tensor, mag: torch.Tensor | None, 
         ``(T, 3, 3)`` fused ``R_WS`` in the wearpose world, float64.
     """
     try:
+        # start-up: ahrs.common.orientation adds ~45 ms to import wearpose.sensors
         from ahrs.common.orientation import q2R
-        from ahrs.filters import Madgwick
+        from ahrs.filters import Madgwick  # start-up: ahrs.filters adds ~40 ms to import wearpose.sensors
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ConfigError("AHRS fusion needs the optional package ahrs==0.4.0 (pip install ahrs==0.4.0)") from exc
     if method != "madgwick":
         raise ConfigError(f"ahrs_fusion: method must be 'madgwick', got {method!r}")
-    from wearpose.geometry import matrix_to_quat
 
     q0 = matrix_to_quat(_C_EW @ R0.to(torch.float64)).numpy()
     kw: dict = {"frequency": float(fps)}

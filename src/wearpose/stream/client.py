@@ -18,6 +18,9 @@ import time
 from collections import defaultdict, deque
 from typing import Any, Callable
 
+from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+
 from wearpose.errors import WearposeError
 from wearpose.stream.packets import (
     FramePacket,
@@ -72,9 +75,6 @@ class StreamClient:
 
     async def connect(self) -> StreamClient:
         """Open the connection (StreamError naming the fix when the server refuses it)."""
-        from websockets.asyncio.client import connect
-        from websockets.exceptions import InvalidStatus
-
         headers = {"Authorization": f"Bearer {self.token}"} if self.token else None
         try:
             self._ws = await connect(self.url, compression=None, max_size=1 << 22, ping_interval=None,
@@ -103,8 +103,6 @@ class StreamClient:
         await self.close()
 
     async def _read(self) -> None:
-        from websockets.exceptions import ConnectionClosed
-
         try:
             async for msg in self._ws:
                 t = time.perf_counter()
@@ -144,8 +142,6 @@ class StreamClient:
 
     async def _send(self, msg: str | bytes) -> None:
         """Send, or StreamError when the connection is gone (the server stopped or closed it)."""
-        from websockets.exceptions import ConnectionClosed
-
         if self.disconnected:
             raise StreamError(f"connection to {self.url} closed{_close_text(self._ws)}")
         try:

@@ -16,6 +16,7 @@ import logging
 from typing import Any
 
 from wearpose.stream.inputs.base import DeviceFrame, LiveInput, canonical_channels, canonical_frame
+from wearpose.stream.inputs.mvn import SEGMENTS, MvnPoseEstimator, pose_frame, segment_info
 from wearpose.stream.packets import FramePacket, Hello, PacketError
 
 log = logging.getLogger("wearpose.stream")
@@ -81,8 +82,6 @@ class InputBridge:
     async def add_mvn_pose_subject(self, subject: int) -> dict[str, Any]:
         """MVN only: publish MVN's own pose (type-02 datagrams) as subject ``subject`` beside the
         estimate (viewer, outputs), e.g. as ground truth for a sparse estimate."""
-        from wearpose.stream.inputs.mvn import SEGMENTS, MvnPoseEstimator, pose_frame, segment_info
-
         sensors = tuple(segment_info(s, self.source.rate) for s in SEGMENTS)
         channels = canonical_channels(sensors)
         peer = _LocalPeer("mvn-pose")

@@ -33,6 +33,8 @@ import urllib.parse
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
+from websockets.exceptions import InvalidHandshake
+
 from wearpose.errors import ConfigError
 from wearpose.stream.packets import MAX_MESSAGE_BYTES
 
@@ -155,8 +157,6 @@ class AccessPolicy:
         """The module doc's rules for one handshake; ``protocol``: the connection's
         ``websockets.ServerProtocol`` (its ``origins`` is :attr:`origin_list`), ``request``: a
         ``websockets.http11.Request``. Returns None when the request may proceed."""
-        from websockets.exceptions import InvalidHandshake
-
         try:
             origin = protocol.process_origin(request.headers)
         except InvalidHandshake:  # a foreign origin, or several Origin headers

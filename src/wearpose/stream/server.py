@@ -62,6 +62,7 @@ import http
 import json
 import logging
 import queue
+import secrets
 import signal
 import struct
 import sys
@@ -73,9 +74,15 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
 import numpy as np
+import torch
+from websockets.asyncio.server import serve
+from websockets.exceptions import ConnectionClosed
 
-from wearpose.estimators.base import Estimator, SensorFrame
+from wearpose.estimators.base import Estimator, PoseFrame, SensorFrame
+from wearpose.estimators.run import open_model, use_subject_calibration
 from wearpose.recording import RecordingError, decimation_factor
+from wearpose.stream.client import StreamError
+from wearpose.stream.live import InputBridge
 from wearpose.stream.packets import (
     FramePacket,
     Hello,
@@ -336,8 +343,6 @@ class _Subscriber:
 
     async def run(self) -> None:
         """The sender task: until the connection closes (or the task is cancelled)."""
-        from websockets.exceptions import ConnectionClosed
-
         try:
             while True:
                 await self.wake.wait()
@@ -438,8 +443,6 @@ class StreamServer:
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> StreamServer:
-        from websockets.asyncio.server import serve
-
         self._loop = asyncio.get_running_loop()
         # No per-message compression: it costs latency and float payloads hardly compress.
         # origins=: the library refuses any other Origin (403) when a handshake gets past
@@ -559,8 +562,6 @@ class StreamServer:
 
     # ------------------------------------------------------------------ connections
     async def _handle(self, ws: Any) -> None:
-        from websockets.exceptions import ConnectionClosed
-
         self.connections.add(ws)
         peer = self._peer(ws)
         try:
@@ -652,8 +653,6 @@ class StreamServer:
     async def _udp_token_ok(self, peer: Any, d: dict[str, Any], kind: str) -> bool:
         """UDP has no handshake: its control messages carry the token in a ``token`` field, by
         the rule a WebSocket client without an Origin follows (required when the server requires it)."""
-        import secrets
-
         given = d.get("token")
         if given is None and not self.token_required:
             return True
@@ -773,8 +772,6 @@ class StreamServer:
         subject's poses). ``factory``: this subject's estimator instead of the server's (e.g. a
         pass-through of a device's own pose). Returns the ``ready`` reply; StreamError with the
         server's ``error``."""
-        from wearpose.stream.client import StreamError
-
         if factory is not None:
             self._factories[hello.subject] = factory
         await self._on_hello(peer, hello)
@@ -878,7 +875,6 @@ class StreamServer:
             raise PacketError(f"hello.sensors lacks {missing} needed by estimator {est.name!r} "
                               f"(it needs {list(est.sensor_names)})")
         stride = self._stride_for(hello, est)  # before the warm-up: a refusal costs no steps
-        from wearpose.estimators.run import use_subject_calibration  # as estimator_factory imports the runner
 
         use_subject_calibration(est, _SubjectOnly(hello.subject_info))  # EM-POSE offsets, as from a Recording
         if self.warmup > 0:
@@ -964,8 +960,6 @@ class StreamServer:
         """The subject's estimator thread: frames from ``s.inbox`` in order -> ``step`` -> pose
         packet (encoded here, off the event loop) -> ``s.outbox`` via the loop."""
         if self.threads is not None:
-            import torch
-
             torch.set_num_threads(self.threads)
         est, hello = s.estimator, s.hello
         assert est is not None
@@ -1061,8 +1055,6 @@ class StreamServer:
 
     @staticmethod
     async def _safe_send(ws: Any, msg: str | bytes) -> bool:
-        from websockets.exceptions import ConnectionClosed
-
         try:
             await ws.send(msg)
             return True
@@ -1141,15 +1133,12 @@ def estimator_factory(model: str, method: str | None = None, threads: int | None
     the card/checkpoint; ``settings`` are cost settings applied to every estimator made
     (:func:`wearpose.evaluate.latency.apply_settings`, e.g. ``{"online": "stream"}`` for BiRAE's
     streaming mode: the same ``--set`` as ``wearpose bench latency``)."""
-    from wearpose.estimators.run import open_model
     from wearpose.evaluate.latency import apply_settings
 
     if model == "null":
         return NullEstimator
     factory = open_model(model, method).factory
     if threads is not None:
-        import torch
-
         torch.set_num_threads(threads)
     if not settings:
         return factory
@@ -1172,8 +1161,6 @@ def run_server(estimator_factory: Callable[[], Estimator], host: str = "127.0.0.
     every published pose. Inputs are opened after the server started and closed (their buffered
     frames handed on) before it stops; outputs are closed last."""
     async def main() -> dict[str, Any]:
-        from wearpose.stream.live import InputBridge
-
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -1225,9 +1212,5 @@ class NullEstimator(Estimator):
         pass
 
     def step(self, frame: SensorFrame) -> Any:
-        import torch
-
-        from wearpose.estimators.base import PoseFrame
-
         return PoseFrame(torch.eye(3).repeat(24, 1, 1), torch.zeros(10), None, bool(np.all(frame.valid)), frame.timestamp,
                          extras={"frame": "none"})

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import signal
 import threading
 import time
 import warnings
@@ -41,8 +42,10 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 import torch
+from websockets.datastructures import MultipleValuesError
 
 from wearpose.body import PARENTS, BodyModel, forward_kinematics
+from wearpose.errors import ShapeError
 from wearpose.geometry import matrix_to_quat
 
 if TYPE_CHECKING:
@@ -197,6 +200,7 @@ class OriginGuard:
     """
 
     def __init__(self, server: Any, allow_origins: Sequence[str] = ()) -> None:
+        # start-up: wearpose.stream.security adds ~100 ms to import wearpose.viewer
         from wearpose.stream.security import normalise_origin, same_host_origins
 
         self.allowed = {None, *same_host_origins([server.get_port()]), *(normalise_origin(o) for o in allow_origins)}
@@ -231,8 +235,6 @@ class OriginGuard:
 
 
 def _origin(request: Any) -> str | None:
-    from websockets.datastructures import MultipleValuesError
-
     try:
         return None if request is None else request.headers.get("Origin")
     except MultipleValuesError:
@@ -240,6 +242,7 @@ def _origin(request: Any) -> str | None:
 
 
 def _warn_if_exposed(host: str, port: int) -> None:
+    # start-up: wearpose.stream.security adds ~100 ms to import wearpose.viewer
     from wearpose.stream.security import is_loopback_host
 
     if not is_loopback_host(host):
@@ -249,7 +252,7 @@ def _warn_if_exposed(host: str, port: int) -> None:
 
 
 def _new_server(host: str, port: int, allow_origins: Sequence[str] = ()) -> Any:
-    import viser
+    import viser  # start-up: viser adds ~250 ms to import wearpose.viewer
 
     server = viser.ViserServer(host=host, port=port, verbose=False)
     server.origin_guard = OriginGuard(server, allow_origins)  # before any page can connect to a scene
@@ -324,8 +327,7 @@ class CameraFollow:
 def _kit_sites(kit: str | None, sensor_names: Sequence[str], body: BodyModel) -> tuple[tuple[str, ...], str | None]:
     """Body sites of ``sensor_names`` of ``kit`` on ``body`` and the kit's EM source site
     (``((), None)`` if the kit is unknown)."""
-    import warnings
-
+    # start-up: wearpose.sensors adds ~90 ms to import wearpose.viewer
     from wearpose.sensors import get_kit, resolve_sites
 
     try:
@@ -372,11 +374,12 @@ def _sensor_grid(recording: Any, names: Sequence[str] | None) -> Any:
     recording's own when the sensors share one, else the nearest-sample grid the segment
     estimator puts devices with their own clocks on (x-IMU3; nothing interpolated, a lost
     sample stays masked)."""
-    from wearpose.recording import RecordingError
+    from wearpose.recording import RecordingError  # start-up: wearpose.recording adds ~50 ms to import wearpose.viewer
 
     try:
         return recording.on_common_grid(names)
     except RecordingError:
+        # start-up: wearpose.estimators.inputs adds ~150 ms to import wearpose.viewer
         from wearpose.estimators.inputs import nearest_sample_grid
 
         return nearest_sample_grid(recording, tuple(names or recording.names)).on_common_grid()
@@ -400,8 +403,6 @@ class RecordingViewer:
     def __init__(self, recording: Any = None, track: Any = None, *, sensor_names: Sequence[str] | None = None,
                  body: BodyModel | None = None, host: str = "127.0.0.1", port: int = 8080, title: str = "wearpose",
                  autoplay: bool = True, camera_distance: float = 6.0, allow_origins: Sequence[str] = ()) -> None:
-        from wearpose.errors import ShapeError
-
         gt = getattr(recording, "ground_truth", None)
         if track is None and gt is None:
             raise ShapeError("RecordingViewer: nothing to show (no estimate and the recording has no ground truth)")
@@ -609,8 +610,7 @@ class LiveViewer:
         Returns:
             why it stopped: ``"stopped"`` (``stop`` set or a signal) or ``"upstream closed"``.
         """
-        import signal
-
+        # start-up: wearpose.stream.client adds ~120 ms to import wearpose.viewer
         from wearpose.stream.client import StreamClient
 
         stop = stop or asyncio.Event()
@@ -658,8 +658,6 @@ def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subj
                     body: str | None = None, token: str | None = None, allow_origins: Sequence[str] = ()) -> str:
     """Blocking: the live viewer (``wearpose view-live``) until Ctrl-C / SIGTERM, or until the
     server closes the connection (it says so and returns). Returns why it stopped."""
-    import signal
-
     def _terminate(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt  # SIGTERM outside the event loop: the same clean stop as Ctrl-C
 
@@ -686,12 +684,13 @@ def open_recording_viewer(path: str | Path, *, model: ModelSource | None = None,
     """The offline viewer of a recording file (and ``model``'s estimate, made as ``wearpose
     estimate`` makes it: :func:`wearpose.estimators.run.estimate_recording`), serving until
     :meth:`RecordingViewer.close`."""
-    from wearpose.recording import load_recording
+    from wearpose.recording import load_recording  # start-up: wearpose.recording adds ~50 ms to import wearpose.viewer
 
     rec = load_recording(path)
     track, names = None, None
     bm = BodyModel(body)
     if model is not None:
+        # start-up: wearpose.estimators.run adds ~70 ms to import wearpose.viewer
         from wearpose.estimators.run import estimate_recording
 
         run = estimate_recording(model, rec, path, resample=resample)

@@ -38,8 +38,9 @@ def kit_sites(kit: str, body: BodyModel, sensor_names: Sequence[str] | None = No
     Raises:
         KitError: unknown kit, or a sensor name the kit does not have.
     """
+    # start-up: wearpose.sensors adds ~90 ms to import wearpose.viewer
     from wearpose.sensors import get_kit, resolve_sites
-    from wearpose.sensors.kits import KitError
+    from wearpose.sensors.kits import KitError  # start-up: wearpose.sensors.kits adds ~90 ms to import wearpose.viewer
 
     k = get_kit(kit)
     with warnings.catch_warnings():

@@ -42,6 +42,8 @@ from wearpose.estimators.birae.config import BiraeConfig
 from wearpose.estimators.birae.representations import SENSORS, angular_rate, features, pose_to_target, relative_orientations
 from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, split_source
 from wearpose.estimators.seeding import clip_seed
+from wearpose.motion import resample
+from wearpose.motion.template import default_rest_joints
 from wearpose.sensors import SITE_SEGMENT, MimuNoise, get_kit, simulate_mimu
 
 DATA_VERSION = 1
@@ -102,8 +104,6 @@ def sensor_positions(pose: torch.Tensor, trans: torch.Tensor) -> torch.Tensor:
     """Positions ``(T, 6, 3)`` m of the sensors' segment joints (FK on the default body's rest
     skeleton plus the root translation). Only the accelerometer channel depends on them, which
     BiRAE does not use; the skin site would sit a few centimetres away on the real body."""
-    from wearpose.motion.template import default_rest_joints
-
     rest, _ = default_rest_joints(dtype=pose.dtype)
     _, p = forward_kinematics(pose, rest)
     return p[:, segment_joints()] + trans[:, None, :].to(pose)
@@ -137,8 +137,6 @@ def synthesize(motion: Any, rate: float, noise: MimuNoise | None = None, seed: i
         ground-truth local rotations, ``yaw_error`` ``(T, 6)`` rad, ``motion`` (resampled), and
         with ``channels`` the ``sim`` dict of :func:`disturb`.
     """
-    from wearpose.motion import resample
-
     m = motion if abs(motion.fps - rate) < 1e-9 else resample(motion, rate)
     pose = m.pose.float()
     pos = sensor_positions(pose, m.trans.float()) if channels else None
@@ -161,6 +159,7 @@ def make_recording(R_world: torch.Tensor, fps: float, sim: dict[str, torch.Tenso
         sim: the inertial channels of :func:`disturb` (``acceleration``, ``angular_velocity``,
             ``magnetic_field``: a MIMU stream requires them; BiRAE itself reads orientations only).
     """
+    # start-up: wearpose.recording adds ~40 ms to importing this module
     from wearpose.recording import Recording, SensorInfo
 
     kit = get_kit("mimu6")

@@ -59,6 +59,8 @@ from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, loa
 from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.body.skeleton import MAJOR_JOINTS, NUM_JOINTS
+from wearpose.estimators.birae.data import augmentation_noise
+from wearpose.estimators.birae.train import finetune, train_birae
 from wearpose.estimators.seeding import init_seed, seeded
 
 
@@ -152,16 +154,12 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
 
     def fit(self, *args: Any, **kwargs: Any) -> Any:
         """Train (see :func:`wearpose.estimators.birae.train.train_birae`)."""
-        from wearpose.estimators.birae.train import train_birae
-
         return train_birae(self, *args, **kwargs)
 
     @classmethod
     def training_data_description(cls, config: Mapping[str, Any]) -> str | None:
         """The card sentence (:meth:`Estimator.training_data_description`) of
         :func:`wearpose.estimators.birae.data.build_split` and the two training phases."""
-        from wearpose.estimators.birae.data import augmentation_noise  # lazy: data pulls in the simulators
-
         cfg = BiraeConfig.from_dict(dict(config))
         walk = math.degrees(augmentation_noise(cfg).yaw_bias_walk)  # not a config field: read it where it is set
         text = (f"ideal {cfg.kit} segment orientations by forward kinematics ({cfg.rate:g} Hz), root-relative, "
@@ -176,8 +174,6 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
 
     def finetune(self, motions: Any, out_dir: str | Path, **kwargs: Any) -> Any:
         """Fine-tune on target-domain motions (see :func:`wearpose.estimators.birae.train.finetune`)."""
-        from wearpose.estimators.birae.train import finetune
-
         return finetune(self, motions, out_dir, **kwargs)
 
     # ------------------------------------------------------------------ inputs

@@ -13,14 +13,24 @@ turns them into a :class:`~wearpose.recording.Recording` and the estimator runs 
 
 from __future__ import annotations
 
+import json
 import math
+import shlex
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import torch
 
+from wearpose.body.skeleton import MAJOR_JOINTS
 from wearpose.estimators.birae.data import SCENARIOS, clip_seed, make_recording, synthesize
-from wearpose.estimators.birae.uncertainty import calibration_report, fit_sigma_scale, reliability_curve
+from wearpose.estimators.birae.representations import pose_to_target
+from wearpose.estimators.birae.uncertainty import (
+    GAUSS_1SIGMA, calibration_report, coverage, fit_sigma_scale, reliability_curve,
+)
+from wearpose.estimators.checkpoint import load_checkpoint
+from wearpose.evaluate.metrics import joint_angle_errors, mpjae, mpjae_groups
+from wearpose.geometry import rotation_y
+from wearpose.motion import CorpusStore
 
 GROUP_ORDER = ("distal", "tracking", "other", "all")
 
@@ -35,9 +45,6 @@ def scenario_recordings(split: str = "test", scenario: str = "clean", rate: floa
             vertical by its own constant angle ``U(-a, a)`` (seeded per clip): a diagnostic of
             how much a model reads heading at all (no other change to the scenario).
     """
-    from wearpose.geometry import rotation_y
-    from wearpose.motion import CorpusStore
-
     if scenario not in SCENARIOS:
         raise KeyError(f"unknown scenario {scenario!r}; expected one of {list(SCENARIOS)}")
     store = store or CorpusStore()
@@ -57,9 +64,6 @@ def scenario_recordings(split: str = "test", scenario: str = "clean", rate: floa
 
 def group_errors(pred: torch.Tensor, gt: torch.Tensor) -> dict[str, torch.Tensor]:
     """Per-frame MPJAE (rad) per group and ``all`` for local rotations ``(T, 24, 3, 3)``."""
-    from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.evaluate.metrics import mpjae, mpjae_groups
-
     g = mpjae_groups(pred, gt)
     g["all"] = mpjae(pred, gt, MAJOR_JOINTS)
     return g
@@ -86,10 +90,6 @@ def evaluate(est: Any, recs: Sequence[tuple[str, Any, torch.Tensor]], *, mode: s
         ``per_clip``: ``[{"clip", "frames", "mpjae_<group>_deg"}]`` in order (the pooled arrays
         hold the clips' frames in the same order).
     """
-    from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.estimators.birae.representations import pose_to_target
-    from wearpose.evaluate.metrics import joint_angle_errors
-
     acc: dict[str, list[torch.Tensor]] = {g: [] for g in GROUP_ORDER}
     res_l, sig_l, je_l, js_l = [], [], [], []
     per_clip: list[dict[str, Any]] = []
@@ -189,8 +189,6 @@ def calibrate(est: Any, val_recs: Sequence[tuple[str, Any, torch.Tensor]], metho
     Returns ``{"method", "sigma_scale", "val_within_1sigma_before", "val_within_1sigma_after",
     "cv": {method: {"fold_coverage": [...], "mean_abs_dev": ...}} (auto), ...}``.
     """
-    from wearpose.estimators.birae.uncertainty import GAUSS_1SIGMA, coverage
-
     if method not in (*CAL_METHODS, "auto"):
         raise ValueError(f"calibrate: method must be one of {CAL_METHODS} or 'auto', got {method!r}")
     old = est.sigma_scale
@@ -230,8 +228,6 @@ def per_clip_uncertainty(res: dict[str, Any]) -> list[dict[str, float]]:
     """Per clip of an :func:`evaluate` result with ``keep_uncertainty`` (its ``per_clip`` order):
     ``within_1sigma_pct`` / ``within_2sigma_pct`` (coverage of the calibrated sigma, %) and
     ``mean_sigma_deg`` (the mean per-joint sigma of the 15 major joints, degrees)."""
-    from wearpose.estimators.birae.uncertainty import coverage
-
     out, start = [], 0
     for c in res["per_clip"]:
         sl = slice(start, start + c["frames"])
@@ -253,8 +249,6 @@ def uncertainty_summary(res: dict[str, Any]) -> dict[str, Any]:
 
 def _epoch_rows(log: Path) -> dict[int, dict[str, Any]]:
     """Last ``"epoch"`` record per epoch of a training ``log.jsonl`` (a resumed epoch logs again)."""
-    import json
-
     rows: dict[int, dict[str, Any]] = {}
     if log.is_file():
         for line in log.read_text().splitlines():
@@ -271,8 +265,6 @@ def _run_dir(path: Path, ckpt: Any) -> Path | None:
     """The training run directory of a checkpoint: its own folder when it holds ``clean/`` or
     ``aug/`` (``<run>/best.pt``, ``<run>/calibrated.pt``), the phase's run when the checkpoint sits
     in ``<run>/<phase>/``, else the ``--out`` of its training command (shipped weights)."""
-    import shlex
-
     for d in (path.parent, path.parent.parent):
         if (d / "clean").is_dir() or (d / "aug").is_dir():
             return d
@@ -299,8 +291,6 @@ def training_chain(path: str | Path, max_depth: int = 10) -> list[dict[str, Any]
     Returns ``[{"run", "checkpoint", "command", "init_from", "val_clips", "phases": {"clean"|"aug": {"epochs",
     "steps", "train_seconds", "val_mpjae_deg"}}, "steps"}]``; ``steps`` is ``None`` if unknown.
     """
-    from wearpose.estimators.checkpoint import load_checkpoint
-
     chain: list[dict[str, Any]] = []
     p: Path | None = Path(path)
     seen: set[str] = set()

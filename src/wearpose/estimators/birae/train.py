@@ -29,8 +29,9 @@ import torch
 from wearpose.estimators.birae.data import BiraeData, build_from_motions, build_split
 from wearpose.estimators.birae.model import masked_mse, nll_loss
 from wearpose.estimators.birae.representations import target_to_pose
-from wearpose.estimators.checkpoint import fingerprint, save_checkpoint
+from wearpose.estimators.checkpoint import CheckpointMismatchError, fingerprint, load_checkpoint, save_checkpoint
 from wearpose.estimators.train import loop_settings, train
+from wearpose.evaluate.metrics import mpjae
 
 
 def batch_loss(est: Any, b: dict[str, torch.Tensor], device: torch.device, model: Any = None
@@ -78,8 +79,6 @@ class BiraeTask:
 
     @torch.no_grad()
     def validate(self, device: torch.device) -> dict[str, float]:
-        from wearpose.evaluate.metrics import mpjae
-
         if self.val_data is None:
             return {}
         was = self.model.training
@@ -123,9 +122,7 @@ def train_birae(est: Any, out_dir: str | Path, *, resume: bool = False, threads:
     Returns:
         ``{"clean": <loop result>, "aug": <loop result>, "best": val MPJAE deg, "out_dir", ...}``.
     """
-    from rich.console import Console
-
-    from wearpose.estimators.checkpoint import CheckpointMismatchError, load_checkpoint
+    from rich.console import Console  # start-up: rich.console adds ~120 ms to importing this module
 
     console = console or Console(quiet=quiet)
     if threads:
@@ -198,8 +195,6 @@ def finetune(est: Any, motions: Sequence[Any], out_dir: str | Path, *, val_motio
     Returns:
         the loop's result; ``est.meta["finetuned_on"]`` records the fingerprint of the motions.
     """
-    from wearpose.estimators.checkpoint import load_checkpoint
-
     cfg = est.config
     ids = list(ids) if ids is not None else [f"ft{i}" for i in range(len(motions))]
     keys = ("R_rel", "R_rel_aug", "rate", "rate_aug", "target", "starts", "lengths")

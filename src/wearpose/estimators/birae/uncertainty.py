@@ -21,6 +21,9 @@ from typing import Any
 
 import torch
 
+from wearpose.body.skeleton import MAJOR_JOINTS
+from wearpose.evaluate.metrics import BIRAE_JOINT_GROUPS
+
 #: Fraction of a Gaussian within +-1 / +-2 sigma.
 GAUSS_1SIGMA = math.erf(1 / math.sqrt(2))
 GAUSS_2SIGMA = math.erf(2 / math.sqrt(2))
@@ -127,8 +130,5 @@ def reliability_curve(residual: torch.Tensor, sigma: torch.Tensor, levels: torch
 
 def major_groups() -> dict[str, list[int]]:
     """BiRAE's joint groups as positions in :data:`wearpose.body.MAJOR_JOINTS` order."""
-    from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.evaluate.metrics import BIRAE_JOINT_GROUPS
-
     pos = {j: i for i, j in enumerate(MAJOR_JOINTS)}
     return {g: [pos[j] for j in js] for g, js in BIRAE_JOINT_GROUPS.items()}

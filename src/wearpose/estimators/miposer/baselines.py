@@ -34,12 +34,13 @@ from wearpose.estimators.seeding import clip_seed, init_seed, seeded
 from wearpose.estimators.inputs import InputSpec, prepare
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.estimators.clipstore import split_source
-from wearpose.estimators.miposer.data import MiposerData, cached_split
+from wearpose.estimators.miposer.data import DATA_VERSION, MiposerData, cached_split
 from wearpose.estimators.miposer.model import decode_pose, heading_frame, ik_loss
-from wearpose.estimators.miposer.train import MiposerTask
+from wearpose.estimators.miposer.train import MiposerTask, train_miposer
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import matrix_to_rot6d
-from wearpose.sensors import SensorKit, SensorSpec, get_kit, list_kits, register_kit
+from wearpose.motion import resample
+from wearpose.sensors import SensorKit, SensorSpec, get_kit, list_kits, register_kit, simulate
 
 KIT = "imu3-head-wrists"
 if KIT not in list_kits():
@@ -81,9 +82,6 @@ def simulate_imu_clip(motion: Any, cfg: MiposerConfig, body: Any, seed: int, noi
     Returns:
         ``{"R": (T, 3, 3, 3), "a": (T, 3, 3), "valid": (T, 3), "pose": (T, 24, 3, 3), "motion", "sim"}``.
     """
-    from wearpose.motion import resample
-    from wearpose.sensors import simulate
-
     m = motion if abs(motion.fps - cfg.rate) < 1e-9 else resample(motion, cfg.rate)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -100,7 +98,6 @@ def build_imu_split(split: str, cfg: MiposerConfig, body: Any, *, store: Any = N
     """Simulate (or load from the cache) one split for the baseline. The returned
     :class:`~wearpose.estimators.miposer.data.MiposerData` holds orientations in ``R`` and free
     accelerations (m/s^2) in ``p``; there is no T-pose prefix (``in_clip`` all True)."""
-    from wearpose.estimators.miposer.data import DATA_VERSION
     settings = {"version": DATA_VERSION, "kit": KIT, "rate": cfg.rate, "noise": cfg.train_noise, "seed": cfg.seed,
                 "body_asset": body.asset_id, "imu_orientation": "segment"}
     store, ids, fp, root = split_source(split, settings, "miposer", store=store, limit=limit, cache_root=cache_root,
@@ -169,8 +166,6 @@ class ImuPoserEstimator(NetworkCheckpointing, Estimator):
         return est.restore(ckpt)
 
     def fit(self, *args: Any, **kwargs: Any) -> Any:
-        from wearpose.estimators.miposer.train import train_miposer
-
         return train_miposer(self, *args, **kwargs)
 
     @classmethod

@@ -39,8 +39,10 @@ from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.inputs import InputSpec, hold_last_valid, prepare
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
 from wearpose.geometry import matrix_to_rot6d
+from wearpose.motion import resample
+from wearpose.recording import Recording
 from wearpose.recording.tpose import tpose_then
-from wearpose.sensors import get_kit
+from wearpose.sensors import get_kit, simulate
 
 DATA_VERSION = 1
 
@@ -126,10 +128,6 @@ def simulate_clip(motion: Any, cfg: MiposerConfig, body: Any, seed: int, noise: 
         ``(T, 24, 3, 3)`` local rotations with the root in the calibrated world, ``betas``,
         ``prefix`` frames before the clip, ``motion`` (with prefix, at ``cfg.rate``), ``sim``.
     """
-    from wearpose.motion import resample
-    from wearpose.recording import Recording
-    from wearpose.sensors import simulate
-
     m = motion if abs(motion.fps - cfg.rate) < 1e-9 else resample(motion, cfg.rate)
     mm, prefix = tpose_then(m, cfg.tpose_s, cfg.blend_s)
     with warnings.catch_warnings():

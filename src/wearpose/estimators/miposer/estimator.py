@@ -37,13 +37,16 @@ from typing import Any, Iterator, Mapping
 import numpy as np
 import torch
 
+from wearpose.calibration import CalibrationResult, apply_miposer, calibrate, em_to_world
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.inputs import InputSpec, OnlineInput, canonical_input, on_first_grid
 from wearpose.estimators.miposer.config import MiposerConfig
 from wearpose.estimators.miposer.data import calibrated_inputs, input_spec, raw_inputs, uncalibrated
+from wearpose.estimators.miposer.mim import mitigate_recording, step_mim
 from wearpose.estimators.miposer.model import AvatarPoserNet, decode_pose, head_anchored_translation, window_features
+from wearpose.estimators.miposer.train import train_miposer
 from wearpose.estimators.registry import register_estimator
 from wearpose.sensors import get_kit
 from wearpose.estimators.seeding import init_seed, seeded
@@ -51,8 +54,6 @@ from wearpose.estimators.seeding import init_seed, seeded
 
 def resolve_calibration(recording: Any, calibration: Any, window: tuple[float, float] | None, body: Any) -> Any:
     """The :class:`~wearpose.calibration.CalibrationResult` to use (module doc, step 3), or None."""
-    from wearpose.calibration import CalibrationResult, calibrate
-
     if isinstance(calibration, CalibrationResult):
         return calibration
     stored = (recording.meta or {}).get("calibration") if recording is not None else None
@@ -169,8 +170,6 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
 
     def fit(self, *args: Any, **kwargs: Any) -> Any:
         """Train (:func:`wearpose.estimators.miposer.train.train_miposer`)."""
-        from wearpose.estimators.miposer.train import train_miposer
-
         return train_miposer(self, *args, **kwargs)
 
     @classmethod
@@ -234,7 +233,6 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
         extras: dict[str, Any] = {"frame": "calibrated", "method": self.name, "mim": self.mim}
 
         def mitigated(rec: Any) -> Any:  # MIM on the checked, canonical recording, before the grid
-            from wearpose.estimators.miposer.mim import mitigate_recording
 
             rec, extras["interference"] = mitigate_recording(rec, self.kit_name, self.mim_config, imu)
             return rec
@@ -279,14 +277,10 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
     @torch.no_grad()
     def step(self, frame: SensorFrame) -> PoseFrame:
         """One 60 Hz frame (:func:`frames`): headset + wrist EM (+ wrist gyro/accelerometer for MIM)."""
-        from wearpose.calibration import apply_miposer, em_to_world
-
         names = self._input.sensor_names
         (p, R), v = self._input(frame)
         extras: dict[str, Any] = {"frame": "calibrated"}
         if self.mim:
-            from wearpose.estimators.miposer.mim import step_mim
-
             dt = 1.0 / self.fps if self._prev_t is None else max(1e-4, frame.timestamp - self._prev_t)
             if self._mims is None:
                 self._mims = [None] * (len(names) - 1)

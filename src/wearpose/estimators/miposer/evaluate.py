@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import warnings
 
 import numpy as np
 from typing import Any, Callable, Sequence
@@ -34,10 +35,16 @@ from typing import Any, Callable, Sequence
 import torch
 
 from wearpose.body.skeleton import JOINT_NAMES
+from wearpose.calibration import calibrate
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.miposer.config import UPPER_BODY
+from wearpose.estimators.miposer.mim import make_mim, mitigate_recording
+from wearpose.evaluate.metrics import joint_position_errors
+from wearpose.interference import simulate_condition
 from wearpose.interference.study import SOURCE_DOWN, SOURCE_FORWARD
+from wearpose.motion import CorpusStore, resample
 from wearpose.motion.store import motion_class
+from wearpose.sensors import get_kit, simulate
 
 #: Metres -> report centimetres (MI-Poser reports cm).
 CM = 100.0
@@ -48,8 +55,6 @@ def joint_errors(body: Any, pred_rot: torch.Tensor, gt_rot: torch.Tensor, betas:
     """Root-aligned joint position errors ``(N, 24)`` m of two local-rotation tracks ``(N, 24, 3, 3)``
     posed on ``body`` with the wearer's shape ``betas`` ``(10,)`` (None: the mean shape; the
     corpus clips' own body is the mean shape, so this is the same)."""
-    from wearpose.evaluate.metrics import joint_position_errors
-
     with torch.no_grad():
         a = body(pred_rot, betas, None, return_vertices=False).joints
         b = body(gt_rot.to(pred_rot.dtype), betas, None, return_vertices=False).joints
@@ -116,8 +121,8 @@ def evaluate_miposer(estimators: dict[str, Any], split: str = "test", limit: int
         "per_clip": {name: [{"clip", "frames", "<condition>_mpjpe_upper_cm"}]}}`` (summaries from
         :meth:`ErrorTable.summary`, cm) and timing.
     """
+    # start-up: wearpose.estimators.miposer.data adds ~50 ms to importing this module
     from wearpose.estimators.miposer.data import calibrated_inputs, raw_inputs, simulate_clip, uncalibrated
-    from wearpose.motion import CorpusStore
 
     store = store or CorpusStore()
     ids = store.clips(split=split)[: limit or None]
@@ -160,8 +165,8 @@ def evaluate_imuposer(est: Any, split: str = "test", limit: int | None = None, *
                       ) -> dict[str, Any]:
     """The IMU-only baseline's upper-body errors on the same clips (module doc); the BiLSTM runs
     over the whole clip (offline), frames are then subsampled as in :func:`evaluate_miposer`."""
+    # start-up: wearpose.estimators.miposer.baselines adds ~70 ms to importing this module
     from wearpose.estimators.miposer.baselines import simulate_imu_clip
-    from wearpose.motion import CorpusStore
 
     store = store or CorpusStore()
     ids = store.clips(split=split)[: limit or None]
@@ -185,6 +190,7 @@ def _to_head(rec: Any, kit: str, em_name: str, R_src: np.ndarray, p_src: np.ndar
     convention), through the recording's headset VIO pose (held to the EM instants): composing
     them back with the headset (as :func:`~.data.raw_inputs` does) gives the room-fixed
     measurement in the headset's world (MI-Poser App. A)."""
+    # start-up: wearpose.estimators.miposer.data adds ~50 ms to importing this module
     from wearpose.estimators.miposer.data import input_spec
 
     vio = input_spec(kit).sensor_names[0]
@@ -203,8 +209,6 @@ def world_source_pose(motion: Any, body: Any, forward: float = SOURCE_FORWARD,
                       down: float = SOURCE_DOWN) -> tuple[np.ndarray, np.ndarray]:
     """The room-fixed source of :mod:`wearpose.interference.study` (MI-Poser User Study 2): ``forward``
     m in front of the first-frame head (its horizontal facing), ``down`` m lower, world-aligned."""
-    import warnings
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         so = body.sites(motion.pose[:1], motion.betas, motion.trans[:1], ["head"])
@@ -223,10 +227,8 @@ def interference_recording(motion: Any, est: Any, cs: Any, which: str, seed: int
     the wrist sites, head-worn source): ``which="measured"`` (interfered) or ``"true"``. The
     headset stream is simulated with the default VIO noise; EM sensors sit on the sites
     (identity offsets, as the interference simulator models them)."""
-    import warnings
-
+    # start-up: wearpose.recording adds ~40 ms to importing this module
     from wearpose.recording import Recording
-    from wearpose.sensors import get_kit, simulate
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -273,12 +275,10 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
     reach the estimator through the headset's VIO pose (:func:`_to_head`); clips whose wrists
     leave ``max_range`` m of the source are skipped.
     """
-    from wearpose.calibration import calibrate
+    # start-up: wearpose.estimators.miposer.data adds ~50 ms to importing this module
     from wearpose.estimators.miposer.data import calibrated_inputs, raw_inputs
+    # start-up: wearpose.recording.tpose adds ~45 ms to importing this module
     from wearpose.recording.tpose import tpose_then
-    from wearpose.interference import simulate_condition
-    from wearpose.motion import CorpusStore, resample
-    from wearpose.sensors import get_kit
 
     store = store or CorpusStore()
     ids = store.clips(split=split)[:: max(1, clip_stride)][: limit or None]
@@ -322,8 +322,6 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
                 if sp is not None:
                     over = None
                     if use_mim is not None:
-                        from wearpose.estimators.miposer.mim import make_mim
-
                         over, info = {}, {}
                         for n, site in zip(names, sites):
                             c = cs[site]
@@ -335,8 +333,6 @@ def evaluate_end_to_end(est: Any, split: str = "test", limit: int | None = None,
                 else:
                     rec = interference_recording(mm, est, cs, which, s)
                 if use_mim is not None and sp is None:
-                    from wearpose.estimators.miposer.mim import mitigate_recording
-
                     rec, info = mitigate_recording(rec, est.kit_name, variants[use_mim], imu)
                     fallback = info.get("fallback", fallback)
                 res = calibrate(rec, "miposer-tpose", window=window, body=est.body)

@@ -23,12 +23,14 @@ per-frame interference state; :func:`step_mim` is the online twin used by
 from __future__ import annotations
 
 import copy
+from dataclasses import replace
 from typing import Any, Sequence
 
 import numpy as np
 import torch
 
 from wearpose.errors import ConfigError
+from wearpose.geometry import matrix_to_axis_angle
 
 
 def default_mim_config() -> Any:
@@ -39,6 +41,7 @@ def default_mim_config() -> Any:
     fusion position correction -- a tie, so the position stays EM's: the recording-derived IMU
     (:func:`relative_imu`) lacks the head's own linear acceleration, which only the position
     correction would feel."""
+    # start-up: wearpose.interference adds ~490 ms to importing this module
     from wearpose.interference import MIMConfig
 
     return MIMConfig(position="none")
@@ -49,10 +52,10 @@ def make_mim(mim_config: Any = None) -> Any:
     configured N-BEATS forecaster is not shipped (``ConfigError``), falls back to IMU odometry for
     the position and says so in ``.fallback``."""
     try:
+        # start-up: wearpose.interference adds ~490 ms to importing this module
         from wearpose.interference import MIM
     except ImportError as exc:  # pragma: no cover - the module is part of the package
         raise ConfigError(f"MI-Poser MIM needs wearpose.interference ({exc})") from exc
-    from dataclasses import replace
 
     cfg = mim_config or default_mim_config()
     try:
@@ -65,6 +68,7 @@ def make_mim(mim_config: Any = None) -> Any:
 
 
 def _em_imu_pairs(recording: Any, kit: str) -> list[tuple[str, str | None]]:
+    # start-up: wearpose.sensors adds ~90 ms to importing this module
     from wearpose.sensors import get_kit
 
     k = get_kit(kit)
@@ -73,8 +77,6 @@ def _em_imu_pairs(recording: Any, kit: str) -> list[tuple[str, str | None]]:
 
 
 def _rot_log(R: np.ndarray) -> np.ndarray:
-    from wearpose.geometry import matrix_to_axis_angle
-
     return matrix_to_axis_angle(torch.from_numpy(np.ascontiguousarray(R))).numpy()
 
 
@@ -84,7 +86,9 @@ def relative_imu(recording: Any, kit: str, em_name: str, imu_name: str | None) -
     Returns:
         ``(gyro (T, 3) rad/s, acc (T, 3) m/s^2)``; zeros where the kit has no co-located IMU.
     """
+    # start-up: wearpose.estimators.inputs adds ~140 ms to importing this module
     from wearpose.estimators.inputs import nearest_samples
+    # start-up: wearpose.estimators.miposer.data adds ~610 ms to importing this module
     from wearpose.estimators.miposer.data import input_spec
 
     em = recording.sensor(em_name)

@@ -12,6 +12,7 @@ from wearpose.estimators.miposer.config import UPPER_BODY
 from wearpose.estimators.miposer.data import build_split
 from wearpose.estimators.miposer.model import ik_loss, window_features
 from wearpose.estimators.train import WindowTask, train_estimator
+from wearpose.evaluate.metrics import mpjpe
 
 
 class MiposerTask(WindowTask):
@@ -45,8 +46,6 @@ class MiposerTask(WindowTask):
 
     @torch.no_grad()
     def validate(self, device: torch.device) -> dict[str, float]:
-        from wearpose.evaluate.metrics import mpjpe
-
         if self.val_data is None:
             return {}
         self.model.eval()

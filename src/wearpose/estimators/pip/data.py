@@ -37,7 +37,8 @@ from wearpose.estimators.checkpoint import fingerprint
 from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, kit_sites, num_batches
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.pip.config import PipConfig
-from wearpose.estimators.pip.sitting import SITTING_PREFIX
+from wearpose.estimators.pip.sitting import SITTING_PREFIX, STAND_HOLD_S, sitting_clip_id, sitting_motion
+from wearpose.evaluate.metrics import root_relative_global_rotations
 from wearpose.geometry import matrix_to_rot6d
 
 DATA_VERSION = 2
@@ -86,8 +87,6 @@ def root_frame_targets(pose: torch.Tensor, joints: torch.Tensor, fps: float, cfg
         (Eq. 14, m/s divided by ``vel_scale``; frame 0 copies frame 1), ``contact`` ``(T, 2)``
         in {0, 1}.
     """
-    from wearpose.evaluate.metrics import root_relative_global_rotations
-
     T = pose.shape[0]
     RrT = pose[:, 0].transpose(-1, -2)
     rel = (RrT[:, None] @ (joints - joints[:, :1]).unsqueeze(-1)).squeeze(-1)
@@ -131,7 +130,8 @@ def simulate_clip(motion: Any, cfg: PipConfig, body: Any, seed: int, noise: str 
         ``(T, 3)``, ``betas`` ``(10,)``, ``world_joints`` ``(T, 24, 3)``, ``motion`` (resampled),
         ``sim`` the :class:`~wearpose.sensors.SimulationResult`.
     """
-    from wearpose.motion import resample
+    from wearpose.motion import resample  # start-up: wearpose.motion adds ~60 ms to importing this module
+    # start-up: wearpose.sensors adds ~90 ms to importing this module
     from wearpose.sensors import simulate
 
     m = motion if abs(motion.fps - cfg.rate) < 1e-9 else resample(motion, cfg.rate)
@@ -258,6 +258,7 @@ def build_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, lim
     sitting clips (:func:`sitting_count`) follow those (each cached separately, so the corpus
     cache is shared with runs without them).
     """
+    # start-up: wearpose.motion adds ~60 ms to importing this module
     from wearpose.motion import CorpusStore
 
     store = store or CorpusStore()
@@ -274,6 +275,7 @@ def build_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, lim
 
 def augment_settings(cfg: PipConfig) -> Any:
     """PIP's augmentation as :class:`wearpose.motion.augment.AugmentSettings` (mirror, speed)."""
+    # start-up: wearpose.motion.augment adds ~60 ms to importing this module
     from wearpose.motion.augment import AugmentSettings
 
     return AugmentSettings(mirror=cfg.aug_mirror, speed_copies=cfg.aug_speed_copies,
@@ -283,6 +285,7 @@ def augment_settings(cfg: PipConfig) -> Any:
 def augmented_ids(ids: list[str], cfg: PipConfig) -> list[str]:
     """Ids of the augmented copies of corpus clips ``ids`` (``<id>#mirror``, ``<id>#speed<k>``;
     :func:`wearpose.motion.augment.augmented_ids`)."""
+    # start-up: wearpose.motion.augment adds ~60 ms to importing this module
     from wearpose.motion.augment import augmented_ids as ids_of
 
     return ids_of(ids, augment_settings(cfg))
@@ -293,6 +296,7 @@ def augmented_motion(aid: str, store: Any, cfg: PipConfig, body: Any) -> Any:
     or played at a speed drawn log-uniformly from ``cfg.aug_speed_range`` (seeded by ``aid`` in
     PIP's ``pip-speed`` namespace) and, when ``cfg.aug_mirror``, mirrored with probability 1/2
     (:func:`wearpose.motion.augment.augment_clip`)."""
+    # start-up: wearpose.motion.augment adds ~60 ms to importing this module
     from wearpose.motion.augment import augment_clip
 
     cid = aid.rsplit("#", 1)[0]
@@ -335,8 +339,6 @@ def concat_data(a: PipData, b: PipData) -> PipData:
 def _sitting_settings(cfg: PipConfig, body: Any) -> dict[str, Any]:
     """What the synthetic sitting clips' fingerprint (cache) depends on; a setting at its default
     is left out, so the clips of older configs keep their cache."""
-    from wearpose.estimators.pip.sitting import STAND_HOLD_S
-
     settings = {**data_settings(cfg, body), "sitting_version": 2}
     if tuple(cfg.sitting_stand_s) != STAND_HOLD_S:
         settings["sitting_stand_s"] = list(cfg.sitting_stand_s)
@@ -350,8 +352,6 @@ def _sitting_settings(cfg: PipConfig, body: Any) -> dict[str, Any]:
 def _build_sitting(split: str, n: int, cfg: PipConfig, body: Any, root: Path) -> PipData:
     """``n`` synthetic sitting clips (:func:`~wearpose.estimators.pip.sitting.sitting_motion`),
     seeds in a per-split namespace, simulated like corpus clips; cached under ``root``."""
-    from wearpose.estimators.pip.sitting import sitting_clip_id, sitting_motion
-
     ids = [sitting_clip_id(split, i) for i in range(n)]
     settings = _sitting_settings(cfg, body)
     fp = fingerprint(ids, {**settings, "split": split})

@@ -8,7 +8,12 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from wearpose.errors import ConfigError
+from wearpose.estimators.checkpoint import load_checkpoint
 from wearpose.estimators.method import TrainRun, finite_metrics
+from wearpose.estimators.pip.config import PipConfig
+from wearpose.estimators.pip.evaluate import evaluate_variants
+from wearpose.estimators.pip.sitting import SIT_HOLD_S
+from wearpose.estimators.pip.train import train_pip
 
 #: Options that override the :class:`~wearpose.estimators.pip.config.PipConfig` field of the same name.
 _SAME_NAME = ("hidden", "batch_size", "learned_init", "sitting_clips", "lr", "seq_len", "window_stride", "min_window",
@@ -22,10 +27,8 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     Returns:
         :func:`~wearpose.estimators.pip.train.train_pip`'s result with ``method`` and ``config``.
     """
-    from wearpose.estimators.pip.config import PipConfig
+    # start-up: wearpose.estimators.pip.estimator adds ~130 ms to importing this module
     from wearpose.estimators.pip.estimator import PipEstimator
-    from wearpose.estimators.pip.sitting import SIT_HOLD_S
-    from wearpose.estimators.pip.train import train_pip
 
     cfg = PipConfig.preset(run.config).override(
         **{k: opts[k] for k in _SAME_NAME}, aug_mirror=opts["mirror"] or None,
@@ -37,8 +40,6 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     est = PipEstimator(cfg, physics=False)
     init_from = opts["init_from"]
     if init_from is not None and not run.resume:
-        from wearpose.estimators.checkpoint import load_checkpoint
-
         ck = load_checkpoint(init_from)
         ck.check(method="pip", path=init_from)
         est.model.load_state_dict(ck.weights)  # same architecture required (strict)
@@ -53,8 +54,6 @@ def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noi
     free acceleration, IMU noise per ``noise``), known initial state; SIP / angular / positional
     / mesh error, jitter, translation error
     (:func:`wearpose.estimators.pip.evaluate.evaluate_variants`)."""
-    from wearpose.estimators.pip.evaluate import evaluate_variants
-
     if frame_stride != 1:
         raise ConfigError("PIP's protocol scores every frame (the physics runs through the whole clip); drop --frame-stride")
     res = evaluate_variants({"model": est}, split, clips, noise=noise, seed=seed, store=store, progress=progress)

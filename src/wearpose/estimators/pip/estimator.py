@@ -41,6 +41,8 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
+from wearpose.body import PARENTS
+from wearpose.body.kinematics import global_to_local
 from wearpose.errors import ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, NetworkCheckpointing, load_checkpoint
@@ -49,6 +51,7 @@ from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.data import EDGE_FRAMES, LEAF_JOINTS, imu_features
 from wearpose.estimators.pip.model import NumpyStepper, PipNet
 from wearpose.estimators.pip.sitting import SIT_HOLD_S
+from wearpose.estimators.pip.train import train_pip
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import rot6d_to_matrix
 from wearpose.estimators.seeding import init_seed, seeded
@@ -57,6 +60,7 @@ from wearpose.estimators.seeding import init_seed, seeded
 def physics_available() -> bool:
     """True when :mod:`wearpose.physics` provides the optimizer PIP drives."""
     try:
+        # start-up: wearpose.physics adds ~240 ms to importing this module
         import wearpose.physics as ph
     except ImportError:
         return False
@@ -107,7 +111,6 @@ class PipEstimator(NetworkCheckpointing, Estimator):
         #: per-frame overhead than torch at batch 1); False = torch
         self.fast_step = True
         self._stepper: tuple[Any, NumpyStepper] | None = None
-        from wearpose.body import PARENTS
 
         self._parents_np = np.array([max(p, 0) for p in PARENTS])
         self.reset()
@@ -132,8 +135,6 @@ class PipEstimator(NetworkCheckpointing, Estimator):
 
     def fit(self, *args: Any, **kwargs: Any) -> Any:
         """Train (see :func:`wearpose.estimators.pip.train.train_pip`)."""
-        from wearpose.estimators.pip.train import train_pip
-
         return train_pip(self, *args, **kwargs)
 
     @classmethod
@@ -224,6 +225,7 @@ class PipEstimator(NetworkCheckpointing, Estimator):
         meta = rec.meta or {}
         if meta.get("orientation_frame") == "segment":
             return rec
+        # start-up: wearpose.calibration adds ~470 ms to importing this module
         from wearpose.calibration import CalibrationResult, apply_calibration, calibrate
 
         cal = meta.get("calibration")
@@ -247,8 +249,6 @@ class PipEstimator(NetworkCheckpointing, Estimator):
     def _decode(self, out: dict[str, torch.Tensor], root: torch.Tensor) -> dict[str, torch.Tensor]:
         """Network output ``(T, ...)`` + pelvis orientation ``(T, 3, 3)`` -> local pose
         ``(T, 24, 3, 3)``, world joint velocities ``(T, 24, 3)`` m/s, contact probabilities ``(T, 2)``."""
-        from wearpose.body.kinematics import global_to_local
-
         T = root.shape[0]
         glob = torch.cat([torch.eye(3).expand(T, 1, 3, 3), rot6d_to_matrix(out["rot6"].reshape(T, 23, 6))], 1)
         glob = root[:, None] @ glob
@@ -276,6 +276,7 @@ class PipEstimator(NetworkCheckpointing, Estimator):
     def _physics_optimizer(self) -> Any:
         """The optimizer for the current shape and PD option (the character, costly to build, is
         kept while the shape stays the same)."""
+        # start-up: wearpose.physics adds ~240 ms to importing this module
         from wearpose.physics import PhysicsCharacter, PhysicsConfig, PhysicsOptimizer
 
         shape = tuple(self.betas.tolist())

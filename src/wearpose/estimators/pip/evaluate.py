@@ -25,8 +25,11 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
-from wearpose.estimators.pip.data import EDGE_FRAMES, edge_cut, simulate_clip
+from wearpose.errors import ConfigError
+from wearpose.estimators.pip.data import EDGE_FRAMES, edge_cut, imu_features, simulate_clip
+from wearpose.estimators.pip.sitting import sitting_pose, sitting_sequence
 from wearpose.estimators.seeding import clip_seed
+from wearpose.evaluate.metrics import compute_all, cumulative_translation_error, joint_angle_errors
 
 #: Travelled-distance thresholds of the translation error curve, m.
 DISTANCES = tuple(float(d) for d in range(0, 21, 2))
@@ -45,6 +48,7 @@ def clip_travel_m(motion: Any, rate: float, trim: int = EDGE_FRAMES) -> float:
     """:func:`horizontal_path_m` of a corpus clip as the evaluation sees it: resampled to
     ``rate`` Hz and cut by ``trim`` frames at both ends (as :func:`simulate_clip`), without
     simulating sensors."""
+    # start-up: wearpose.motion adds ~60 ms to importing this module
     from wearpose.motion import resample
 
     m = motion if abs(motion.fps - rate) < 1e-9 else resample(motion, rate)
@@ -61,6 +65,7 @@ _CHARACTERS: dict[tuple[int, tuple[float, ...]], Any] = {}
 def zmp_of(body: Any, betas: torch.Tensor, pose: torch.Tensor, trans: torch.Tensor, fps: float) -> Any:
     """:func:`wearpose.physics.zmp_distance` of a motion (``(T, 24, 3, 3)`` local rotations,
     ``(T, 3)`` m) on the character of ``betas`` (kept between calls: building one costs ~0.1 s)."""
+    # start-up: wearpose.physics adds ~240 ms to importing this module
     from wearpose.physics import PhysicsCharacter, zmp_distance
 
     key = (id(body), tuple(float(b) for b in torch.as_tensor(betas).reshape(-1)))
@@ -85,8 +90,6 @@ def clip_metrics(est: Any, r: dict[str, Any], body: Any, gt: Any = None) -> tupl
     Returns ``(metrics, info)``: :func:`compute_all` figures, and the translation curve / physics
     diagnostics of the clip.
     """
-    from wearpose.evaluate.metrics import compute_all, cumulative_translation_error
-
     _init(est, r)
     t0 = time.perf_counter()
     track = est.estimate_tensors(r["acc"], r["ori"])
@@ -129,6 +132,7 @@ def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int 
     the clip re-fitted to it (its shape is part of the known initial state). Returns
     ``{"rows": {name: {...}}, "clips", "frames", ...}``."""
     from wearpose.estimators.bodies import wearer_store
+    # start-up: wearpose.motion adds ~60 ms to importing this module
     from wearpose.motion import CorpusStore
 
     first = next(iter(variants.values()))
@@ -226,10 +230,6 @@ def sitting_drift(est: Any, hours: float = 1.0, start: str = "standing", chunk: 
     at the end, a series every ``every_s`` seconds, and the drift: the mean joint angle between
     the estimates at the start and at the end of the still period (Fig. 9's "total drift").
     """
-    from wearpose.estimators.pip.data import imu_features
-    from wearpose.estimators.pip.sitting import sitting_pose, sitting_sequence
-    from wearpose.evaluate.metrics import joint_angle_errors
-
     body, cfg = est.body, est.config
     target = sitting_pose() if seq is None else seq.pose[-1].float()
     seq = sitting_sequence(body) if seq is None else seq

@@ -38,7 +38,9 @@ from typing import Any
 
 import torch
 
+from wearpose.body import calibration_pose
 from wearpose.body.skeleton import JOINT_INDEX
+from wearpose.estimators.seeding import clip_seed
 from wearpose.geometry import axis_angle_to_matrix, rotation_x, rotation_y, rotation_z, slerp_matrix
 
 _SWAY_JOINTS = ("spine1", "spine2", "spine3", "neck", "head", "left_shoulder", "right_shoulder", "left_elbow",
@@ -52,8 +54,6 @@ def _u(g: torch.Generator, lo: float, hi: float) -> float:
 def sitting_pose(hip_deg: float = 90.0, knee_deg: float = 90.0, base: torch.Tensor | None = None) -> torch.Tensor:
     """A seated pose ``(24, 3, 3)``: ``base`` (default: the calibration I-pose, arms down) with
     both thighs flexed forward by ``hip_deg`` (rotation about -X) and both knees by ``knee_deg``."""
-    from wearpose.body import calibration_pose
-
     P = (calibration_pose("ipose") if base is None else base).float().clone()
     for side in ("left", "right"):
         P[JOINT_INDEX[f"{side}_hip"]] = rotation_x(torch.tensor(-math.radians(hip_deg))) @ P[JOINT_INDEX[f"{side}_hip"]]
@@ -64,8 +64,6 @@ def sitting_pose(hip_deg: float = 90.0, knee_deg: float = 90.0, base: torch.Tens
 def _upper_body(g: torch.Generator) -> torch.Tensor:
     """A random standing posture ``(24, 3, 3)``: arms hanging or resting forward, elbows bent
     0-90 deg, small spine/head tilts; legs straight."""
-    from wearpose.body import calibration_pose
-
     P = calibration_pose("ipose").float().clone()
     for name, lim in (("spine1", 6.0), ("spine3", 6.0), ("neck", 10.0), ("head", 10.0)):
         aa = torch.tensor([_u(g, -lim, lim), _u(g, -lim, lim), _u(g, -lim / 2, lim / 2)]).mul(math.pi / 180)
@@ -90,8 +88,6 @@ def _pose_arm(P: torch.Tensor, side: str, fwd_deg: float, out_deg: float, elbow_
 def arms_forward(fwd_deg: float, elbow_deg: float) -> torch.Tensor:
     """The calibration I-pose ``(24, 3, 3)`` with both arms swung forward by ``fwd_deg`` and both
     elbows bent by ``elbow_deg`` (a base posture for :func:`sitting_sequence`)."""
-    from wearpose.body import calibration_pose
-
     P = calibration_pose("ipose").float().clone()
     for side in ("left", "right"):
         _pose_arm(P, side, fwd_deg, 0.0, elbow_deg)
@@ -184,6 +180,7 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
     in both holds alike (the random posture rarely comes near the calibration I-pose, and the
     corpus stands with straight arms all the time, so a network learns "straight arms =
     standing"); drawn after the transitions, so 0 leaves every clip as it was."""
+    # start-up: wearpose.motion adds ~60 ms to importing this module
     from wearpose.motion import MotionSequence
 
     _check_transitions(transitions)
@@ -223,8 +220,6 @@ def sitting_motion(g: torch.Generator, body: Any, fps: float = 60.0, hold_s: tup
                                 spine_deg=_u(g, 5.0, 20.0), shank_deg=_u(g, 8.0, 20.0),
                                 neck_factor=_u(g, 0.2, 0.6), peak=_u(g, 0.35, 0.65))
     if hanging_arms > 0.0 and _u(g, 0.0, 1.0) < hanging_arms:
-        from wearpose.body import calibration_pose
-
         arms = calibration_pose("ipose").float()  # arms hanging straight, swung from there
         for side in ("left", "right"):
             _pose_arm(arms, side, _u(g, 0.0, 8.0), _u(g, -3.0, 8.0), _u(g, 0.0, 15.0))
@@ -241,7 +236,7 @@ def sitting_sequence(body: Any, seconds_stand: float = 1.0, seconds_down: float 
     deg) -> one second seated: the start of the long-sitting test (Fig. 6 / Fig. 9).
     ``transitions="lean"``: the sit-down leans like the middle of :func:`sitting_motion`'s ranges
     (pelvis 22.5, spine 12.5, shanks 14 deg, neck 0.4, peak mid-way)."""
-    from wearpose.body import calibration_pose
+    # start-up: wearpose.motion adds ~60 ms to importing this module
     from wearpose.motion import MotionSequence
 
     _check_transitions(transitions)
@@ -264,8 +259,6 @@ def heldout_sitting_clip(i: int, body: Any, fps: float = 60.0, seed: int = 0, tr
     draws test ids), cut after its seated hold: it ends seated (input for
     :func:`~wearpose.estimators.pip.evaluate.sitting_drift`'s ``seq``); ``transitions`` as in
     :func:`sitting_motion`."""
-    from wearpose.estimators.seeding import clip_seed
-
     m = sitting_motion(torch.Generator().manual_seed(clip_seed(sitting_clip_id("test", i), seed, "pip-sitting")),
                        body, fps, transitions=transitions)
     _, first, n = next(sg for sg in m.meta["segments"] if sg[0] == "sit")

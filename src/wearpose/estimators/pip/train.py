@@ -12,6 +12,7 @@ import torch
 from wearpose.estimators.pip.data import build_split
 from wearpose.estimators.pip.model import pip_loss, run_windows
 from wearpose.estimators.train import WindowTask, train_estimator
+from wearpose.geometry import geodesic_angle, rot6d_to_matrix
 
 
 class PipTask(WindowTask):
@@ -37,8 +38,6 @@ class PipTask(WindowTask):
         window when ``min_window`` says so; from learned initial states): loss, mean joint
         position error of P_A (mm, root frame, 23 joints), root-relative rotation error of R_A
         (deg, 23 joints), contact accuracy (%), root speed error (cm/s); over valid frames."""
-        from wearpose.geometry import geodesic_angle, rot6d_to_matrix
-
         if self.val_data is None:
             return {}
         self.model.eval()

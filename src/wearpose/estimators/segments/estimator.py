@@ -81,7 +81,9 @@ class SegmentsEstimator(Estimator):
         """Local rotations ``(T, 24, 3, 3)`` on the sensors' shared grid (module doc);
         ``valid`` where every used sensor had a sample; ``extras``: ``frame="world"``,
         ``segments`` (sensor -> joint), ``grid``, ``calibration``."""
+        # start-up: wearpose.calibration adds ~370 ms to importing this module
         from wearpose.calibration import calibrate
+        # start-up: wearpose.calibration.segment adds ~470 ms to importing this module
         from wearpose.calibration.segment import bone_orientations
 
         names, joints = self._segments(recording)

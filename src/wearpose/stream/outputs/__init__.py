@@ -9,6 +9,10 @@ An output is an object with ``pose(PosePacket, rate_hz)`` (called on the server'
 it must not block), ``stats()`` and ``close()``. Details: ``docs/devices.md``.
 """
 
+from wearpose.errors import ConfigError
+from wearpose.stream.outputs.lsl import LslPoseOutput
+from wearpose.stream.outputs.vmc import VmcOutput
+
 OUTPUTS = ("vmc", "lsl")
 
 __all__ = ["OUTPUTS"]
@@ -17,15 +21,9 @@ __all__ = ["OUTPUTS"]
 def make_output(name: str, *, vmc_host: str = "127.0.0.1", vmc_port: int = 39539, vmc_subject: int = 0,
                 lsl_name: str = "wearpose-poses") -> object:
     """The pose output ``name`` (``vmc``, ``lsl``) with its options (``wearpose serve``'s)."""
-    from wearpose.errors import ConfigError
-
     if name == "vmc":
-        from wearpose.stream.outputs.vmc import VmcOutput
-
         return VmcOutput(vmc_host, vmc_port, vmc_subject)
     if name == "lsl":
-        from wearpose.stream.outputs.lsl import LslPoseOutput
-
         return LslPoseOutput(lsl_name)
     raise ConfigError(f"--output {name!r}: expected one of {', '.join(OUTPUTS)}")
 

@@ -49,7 +49,7 @@ class LslPoseOutput:
         self.sent: dict[int, int] = {}
 
     def _outlet(self, subject: int, rate: float) -> Any:
-        import pylsl
+        import pylsl  # start-up: pylsl loads liblsl, which reads LSLAPICFG (--lsl-loopback) once
 
         info = pylsl.StreamInfo(f"{self.stream_name}-{subject}", "MoCap", len(LABELS), float(rate), "float32",
                                 f"{self.source_id}-{subject}")
@@ -74,7 +74,7 @@ class LslPoseOutput:
         return pylsl.StreamOutlet(info)
 
     def pose(self, p: Any, rate: float) -> None:
-        import pylsl
+        import pylsl  # start-up: pylsl loads liblsl, which reads LSLAPICFG (--lsl-loopback) once
 
         out = self.outlets.get(p.subject)
         if out is None:

@@ -22,7 +22,10 @@ from typing import Any
 
 import numpy as np
 import torch
+from pythonosc.osc_message_builder import OscMessageBuilder
 
+from wearpose.body import BodyModel
+from wearpose.body.skeleton import PARENTS
 from wearpose.geometry import to_unity_points, to_unity_quat
 
 DEFAULT_PORT = 39539  # the VMC protocol's default receiver (marionette) port
@@ -35,8 +38,6 @@ UNITY_BONES: tuple[str | None, ...] = (
 
 
 def _message(address: str, args: list[Any]) -> bytes:
-    from pythonosc.osc_message_builder import OscMessageBuilder
-
     b = OscMessageBuilder(address)
     for a in args:
         b.add_arg(a, "s" if isinstance(a, str) else "i" if isinstance(a, int) else "f")
@@ -70,9 +71,6 @@ def vmc_bundle(local_rot: Any, trans: Any, t: float, offsets: np.ndarray) -> byt
 
 def rest_offsets(betas: Any = None) -> np.ndarray:
     """``(24, 3)`` m: each joint's rest position minus its parent's (the pelvis: its own)."""
-    from wearpose.body import BodyModel
-    from wearpose.body.skeleton import PARENTS
-
     J = BodyModel().rest_joints(None if betas is None else torch.as_tensor(betas, dtype=torch.float32)).double().numpy()
     off = J.copy()
     for j, p in enumerate(PARENTS):

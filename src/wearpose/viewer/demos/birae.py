@@ -20,24 +20,25 @@ from typing import Any
 
 import torch
 
+from wearpose.body import BodyModel, JOINT_INDEX, MAJOR_JOINTS
+from wearpose.estimators.birae.data import SCENARIOS, make_recording, synthesize
+from wearpose.estimators.birae.evaluate import group_errors
+from wearpose.estimators.birae.representations import pose_to_target
+from wearpose.estimators.birae.uncertainty import coverage
+from wearpose.estimators.run import open_model
+from wearpose.estimators.seeding import clip_seed
+from wearpose.motion import load_motion
+from wearpose.viewer import write_html
+from wearpose.viewer.demos.birae_plots import uncertainty_bands
+from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
+from wearpose.weights import card
+
 WEIGHTS = {"6param": "birae6_cpu", "3param": "birae3_cpu"}
 BAND_JOINTS = (("left shoulder", "left_shoulder"), ("left elbow", "left_elbow"), ("right knee", "right_knee"))
 
 
 def run_demo(clip: str, out: str | Path, max_seconds: float = 10.0, seed: int = 0) -> dict[str, Any]:
     """Run the demo (module doc); returns ``{"clip", "frames", "fps", "html", "title", "metrics", "plot", ...}``."""
-    from wearpose.body import BodyModel, JOINT_INDEX, MAJOR_JOINTS
-    from wearpose.estimators.birae.data import SCENARIOS, make_recording, synthesize
-    from wearpose.estimators.seeding import clip_seed
-    from wearpose.estimators.birae.evaluate import group_errors
-    from wearpose.viewer.demos.birae_plots import uncertainty_bands
-    from wearpose.estimators.birae.uncertainty import coverage
-    from wearpose.motion import load_motion
-    from wearpose.viewer import write_html
-    from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
-    from wearpose.estimators.run import open_model
-    from wearpose.weights import card
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     body = BodyModel()
@@ -52,7 +53,6 @@ def run_demo(clip: str, out: str | Path, max_seconds: float = 10.0, seed: int = 
     track = est.estimate(rec)
     gt = noisy["pose"]
     errs = group_errors(track.local_rot, gt)
-    from wearpose.estimators.birae.representations import pose_to_target
 
     resid = pose_to_target(gt) - track.extras["expmap"]
     metrics = {f"mpjae_{g}_deg": float(e.mean() * k) for g, e in errs.items()}

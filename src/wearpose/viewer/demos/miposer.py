@@ -23,7 +23,17 @@ from typing import Any
 import numpy as np
 import torch
 
+from wearpose.calibration import calibrate
+from wearpose.estimators.miposer.config import UPPER_BODY
+from wearpose.estimators.miposer.evaluate import interference_recording, joint_errors
+from wearpose.estimators.run import open_model
+from wearpose.interference import simulate_condition
+from wearpose.motion import load_motion, resample
+from wearpose.recording.tpose import tpose_then
+from wearpose.sensors import get_kit
+from wearpose.viewer import write_html
 from wearpose.viewer.figures import pyplot, save_figure
+from wearpose.viewer.scene import ESTIMATE_COLOUR, SECOND_ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
 
 
 def _to_calibrated(body: Any, pose: torch.Tensor, trans: torch.Tensor, res: Any) -> tuple[torch.Tensor, torch.Tensor]:
@@ -69,18 +79,6 @@ def run_demo(clip: str, out: str | Path, weights: str = "miposer_cpu", condition
         ``interfered_true_pct`` (120 Hz frames with a wrist's true EM error > 2 cm or 5 deg),
         ``flagged_pct`` (frames MIM flagged), ``max_em_error_cm``.
     """
-    from wearpose.body.skeleton import JOINT_NAMES  # noqa: F401 - documents the joint order used below
-    from wearpose.calibration import calibrate
-    from wearpose.estimators.miposer.config import UPPER_BODY
-    from wearpose.recording.tpose import tpose_then
-    from wearpose.estimators.run import open_model
-    from wearpose.estimators.miposer.evaluate import interference_recording, joint_errors
-    from wearpose.interference import simulate_condition
-    from wearpose.motion import load_motion, resample
-    from wearpose.sensors import get_kit
-    from wearpose.viewer import write_html
-    from wearpose.viewer.scene import ESTIMATE_COLOUR, SECOND_ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     source = open_model(weights)  # shipped weights or a checkpoint file, read here once

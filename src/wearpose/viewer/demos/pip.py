@@ -20,7 +20,17 @@ from typing import Any
 
 import torch
 
+from wearpose.estimators.pip.data import EDGE_FRAMES
+from wearpose.estimators.run import estimate_recording, open_model
+from wearpose.estimators.seeding import clip_seed
+from wearpose.evaluate import compute_all
+from wearpose.geometry import heading, rotation_y
+from wearpose.motion import load_motion, resample
+from wearpose.recording import CALIBRATION_WINDOW_KEY, Recording, prepend_tpose
+from wearpose.sensors import simulate
+from wearpose.viewer import write_html
 from wearpose.viewer.figures import pyplot, save_figure
+from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
 
 #: Gravity magnitude used for "body weight", m/s^2.
 G = 9.81
@@ -88,17 +98,6 @@ def run_demo(clip: str, out: str | Path, weights: str = "pip_cpu", max_seconds: 
     Returns:
         ``{"clip", "frames", "fps", "weights", "html", "title", "metrics": {...}}``.
     """
-    from wearpose.estimators.seeding import clip_seed
-    from wearpose.estimators.pip.data import EDGE_FRAMES
-    from wearpose.evaluate import compute_all
-    from wearpose.geometry import heading, rotation_y
-    from wearpose.motion import load_motion, resample
-    from wearpose.estimators.run import estimate_recording, open_model
-    from wearpose.recording import CALIBRATION_WINDOW_KEY, Recording, prepend_tpose
-    from wearpose.sensors import simulate
-    from wearpose.viewer import write_html
-    from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     source = open_model(weights)  # shipped weights or a checkpoint file, read here once
