@@ -80,6 +80,7 @@ from websockets.exceptions import ConnectionClosed
 
 from wearpose.estimators.base import Estimator, PoseFrame, SensorFrame
 from wearpose.estimators.run import open_model, use_subject_calibration
+from wearpose.evaluate.latency import apply_settings
 from wearpose.recording import RecordingError, decimation_factor
 from wearpose.stream.client import StreamError
 from wearpose.stream.live import InputBridge
@@ -1133,8 +1134,6 @@ def estimator_factory(model: str, method: str | None = None, threads: int | None
     the card/checkpoint; ``settings`` are cost settings applied to every estimator made
     (:func:`wearpose.evaluate.latency.apply_settings`, e.g. ``{"online": "stream"}`` for BiRAE's
     streaming mode: the same ``--set`` as ``wearpose bench latency``)."""
-    from wearpose.evaluate.latency import apply_settings
-
     if model == "null":
         return NullEstimator
     factory = open_model(model, method).factory

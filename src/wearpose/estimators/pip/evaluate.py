@@ -26,6 +26,7 @@ import numpy as np
 import torch
 
 from wearpose.errors import ConfigError
+from wearpose.estimators.bodies import wearer_store
 from wearpose.estimators.pip.data import EDGE_FRAMES, edge_cut, imu_features, simulate_clip
 from wearpose.estimators.pip.sitting import sitting_pose, sitting_sequence
 from wearpose.estimators.seeding import clip_seed
@@ -131,7 +132,6 @@ def evaluate_variants(variants: dict[str, Any], split: str = "test", limit: int 
     (:mod:`wearpose.estimators.bodies`: the same body for every method; never a training draw),
     the clip re-fitted to it (its shape is part of the known initial state). Returns
     ``{"rows": {name: {...}}, "clips", "frames", ...}``."""
-    from wearpose.estimators.bodies import wearer_store
     # start-up: wearpose.motion adds ~60 ms to importing this module
     from wearpose.motion import CorpusStore
 
