@@ -8,11 +8,8 @@ import dataclasses
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-import torch
-
 from wearpose.estimators.method import OptionError, TrainRun, finite_metrics
 from wearpose.estimators.miposer.config import MiposerConfig
-from wearpose.estimators.miposer.mim import default_mim_config
 
 
 def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]:
@@ -23,7 +20,7 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
         :func:`~wearpose.estimators.miposer.train.train_miposer`'s result with ``method`` (the
         estimator's registry name), ``model``, ``wrists`` and ``config``.
     """
-    # start-up: wearpose.estimators.miposer.train adds ~540 ms to importing this module
+    # start-up: wearpose.estimators.miposer.train (with torch) adds ~1.6 s to importing this module
     from wearpose.estimators.miposer.train import train_miposer
 
     model, wrists = opts["model"], opts["wrists"]
@@ -33,13 +30,13 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
         raise OptionError("--wrists", f"expected 1 or 2, got {wrists}")
     cfg = MiposerConfig.preset(run.config, wrists=wrists, model=model).override(batch_size=opts["batch_size"])
     if model == "imuposer":
-        # start-up: wearpose.estimators.miposer.baselines adds ~520 ms to importing this module
+        # start-up: wearpose.estimators.miposer.baselines (with torch) adds ~2.0 s to importing this module
         from wearpose.estimators.miposer.baselines import ImuPoserEstimator
 
         est: Any = ImuPoserEstimator(cfg)
         out = run.out or Path("runs") / f"imuposer_{run.config}"
     else:
-        # start-up: wearpose.estimators.miposer.estimator adds ~780 ms to importing this module
+        # start-up: wearpose.estimators.miposer.estimator (with torch) adds ~2.1 s to importing this module
         from wearpose.estimators.miposer.estimator import MiposerEstimator
 
         est = MiposerEstimator(cfg)
@@ -60,7 +57,9 @@ def train_nbeats_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[st
         ``--ship`` ``{"method": "nbeats", "shipped", "test", "summary"}`` (``summary``: the
         line printed when done).
     """
-    # start-up: wearpose.interference adds ~450 ms to importing this module
+    import torch  # start-up: torch adds ~1.3 s to importing this module
+
+    # start-up: wearpose.interference (with torch) adds ~2.2 s to importing this module
     from wearpose.interference import nbeats
 
     torch.set_num_threads(run.threads or 1)
@@ -83,7 +82,7 @@ def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noi
              progress: Callable[[int, int], None] | None, frame_stride: int = 1) -> dict[str, Any]:
     """MI-Poser's protocol: simulated headset VIO + wrist EM after a 1 s T-pose, calibrated and
     uncalibrated upper-body MPJPE, pelvis-aligned (:func:`wearpose.estimators.miposer.evaluate.evaluate_miposer`)."""
-    # start-up: wearpose.estimators.miposer.evaluate adds ~670 ms to importing this module
+    # start-up: wearpose.estimators.miposer.evaluate (with torch) adds ~2.6 s to importing this module
     from wearpose.estimators.miposer.evaluate import evaluate_miposer
 
     res = evaluate_miposer({"model": est}, split, clips, seed=seed, noise=noise, frame_stride=frame_stride,
@@ -124,7 +123,9 @@ def detection_protocol(est: Any, store: Any, split: str, ids: list[str], seed: i
         ``{"metrics": {f"{e_P:g}": metrics}, "threshold_deg", "condition", "e_p_cm", "wrists",
         "out_of_range"}``.
     """
-    # start-up: wearpose.interference adds ~450 ms to importing this module
+    # start-up: wearpose.estimators.miposer.mim (with torch) adds ~1.5 s to importing this module
+    from wearpose.estimators.miposer.mim import default_mim_config
+    # start-up: wearpose.interference (with torch) adds ~2.2 s to importing this module
     from wearpose.interference import study
 
     th = (est.mim_config or default_mim_config()).threshold_deg
@@ -139,7 +140,7 @@ def imuposer_protocol(est: Any, store: Any, split: str, clips: int | None, seed:
                       progress: Callable[[int, int], None] | None, frame_stride: int = 1) -> dict[str, Any]:
     """The IMU-only baseline's upper-body MPJPE on MI-Poser's clips
     (:func:`~wearpose.estimators.miposer.evaluate.evaluate_imuposer`)."""
-    # start-up: wearpose.estimators.miposer.evaluate adds ~670 ms to importing this module
+    # start-up: wearpose.estimators.miposer.evaluate (with torch) adds ~2.6 s to importing this module
     from wearpose.estimators.miposer.evaluate import evaluate_imuposer
 
     res = evaluate_imuposer(est, split, clips, seed=seed, noise=noise, frame_stride=frame_stride, store=store,

@@ -8,12 +8,7 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from wearpose.errors import ConfigError
-from wearpose.estimators.checkpoint import load_checkpoint
 from wearpose.estimators.method import TrainRun, finite_metrics
-from wearpose.estimators.pip.config import PipConfig
-from wearpose.estimators.pip.evaluate import evaluate_variants
-from wearpose.estimators.pip.sitting import SIT_HOLD_S
-from wearpose.estimators.pip.train import train_pip
 
 #: Options that override the :class:`~wearpose.estimators.pip.config.PipConfig` field of the same name.
 _SAME_NAME = ("hidden", "batch_size", "learned_init", "sitting_clips", "lr", "seq_len", "window_stride", "min_window",
@@ -27,8 +22,14 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     Returns:
         :func:`~wearpose.estimators.pip.train.train_pip`'s result with ``method`` and ``config``.
     """
-    # start-up: wearpose.estimators.pip.estimator adds ~130 ms to importing this module
+    # start-up: wearpose.estimators.pip.config (with torch) adds ~1.9 s to importing this module
+    from wearpose.estimators.pip.config import PipConfig
+    # start-up: wearpose.estimators.pip.estimator (with torch) adds ~1.5 s to importing this module
     from wearpose.estimators.pip.estimator import PipEstimator
+    # start-up: wearpose.estimators.pip.sitting (with torch) adds ~2.1 s to importing this module
+    from wearpose.estimators.pip.sitting import SIT_HOLD_S
+    # start-up: wearpose.estimators.pip.train (with torch) adds ~1.5 s to importing this module
+    from wearpose.estimators.pip.train import train_pip
 
     cfg = PipConfig.preset(run.config).override(
         **{k: opts[k] for k in _SAME_NAME}, aug_mirror=opts["mirror"] or None,
@@ -40,6 +41,9 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     est = PipEstimator(cfg, physics=False)
     init_from = opts["init_from"]
     if init_from is not None and not run.resume:
+        # start-up: wearpose.estimators.checkpoint (with torch) adds ~1.5 s to importing this module
+        from wearpose.estimators.checkpoint import load_checkpoint
+
         ck = load_checkpoint(init_from)
         ck.check(method="pip", path=init_from)
         est.model.load_state_dict(ck.weights)  # same architecture required (strict)
@@ -54,6 +58,9 @@ def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noi
     free acceleration, IMU noise per ``noise``), known initial state; SIP / angular / positional
     / mesh error, jitter, translation error
     (:func:`wearpose.estimators.pip.evaluate.evaluate_variants`)."""
+    # start-up: wearpose.estimators.pip.evaluate (with torch) adds ~1.6 s to importing this module
+    from wearpose.estimators.pip.evaluate import evaluate_variants
+
     if frame_stride != 1:
         raise ConfigError("PIP's protocol scores every frame (the physics runs through the whole clip); drop --frame-stride")
     res = evaluate_variants({"model": est}, split, clips, noise=noise, seed=seed, store=store, progress=progress)
