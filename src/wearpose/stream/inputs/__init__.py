@@ -12,6 +12,10 @@ Contract and per-input details: ``docs/devices.md``.
 """
 
 from wearpose.stream.inputs.base import DeviceFrame, LiveInput, canonical_channels, canonical_frame
+from wearpose.errors import ConfigError
+from wearpose.stream.inputs.lsl import LslInput, emulate_lsl
+from wearpose.stream.inputs.mvn import MvnInput, emulate_mvn
+from wearpose.stream.inputs.ximu3 import Ximu3Input, emulate_ximu3
 
 #: Input name -> module holding its ``*Input`` class and ``emulate_*`` coroutine.
 INPUTS = ("lsl", "osc", "mvn", "ximu3")
@@ -25,13 +29,10 @@ def make_input(name: str, *, host: str = "127.0.0.1", rate: float | None = None,
                mvn_position_unit: str = "m", mvn_pose_subject: int | None = None,
                ximu3_sensors: dict[str, int] | None = None, ximu3_transport: str = "tcp") -> LiveInput:
     """The live input ``name`` (``lsl``, ``osc``, ``mvn``, ``ximu3``) with its options (``wearpose serve``'s)."""
-    from wearpose.errors import ConfigError
-
     if name == "lsl":
-        from wearpose.stream.inputs.lsl import LslInput
-
         return LslInput(lsl_stream, rate)
     if name == "osc":
+        # start-up: the osc input (yaml, its profiles) adds ~114 ms to import wearpose.stream.inputs
         from wearpose.stream.inputs.osc import OscInput
 
         if not osc_sensors:
@@ -44,16 +45,12 @@ def make_input(name: str, *, host: str = "127.0.0.1", rate: float | None = None,
         except ValueError as exc:
             raise ConfigError(f"--input osc: {exc}") from None
     if name == "mvn":
-        from wearpose.stream.inputs.mvn import MvnInput
-
         try:
             return MvnInput(host, mvn_port, mvn_segments, rate or 60.0, mvn_character, mvn_position_unit,
                             pose_subject=mvn_pose_subject)
         except ValueError as exc:
             raise ConfigError(f"--input mvn: {exc}") from None
     if name == "ximu3":
-        from wearpose.stream.inputs.ximu3 import Ximu3Input
-
         if not ximu3_sensors or not isinstance(ximu3_sensors, dict):
             raise ConfigError("--input ximu3: name the devices, --ximu3-sensor NAME=PORT (tcp: the device's TCP port "
                               "on --device-host; udp: the local port the device sends to)")
@@ -72,23 +69,16 @@ async def emulate_input(name: str, recording: object, *, host: str = "127.0.0.1"
                   ximu3_transport: str = "tcp", ximu3_format: str = "binary", **kw: object) -> dict:
     """Play ``recording`` as input ``name``'s device on ``host`` (loopback emulators; ``kw``:
     ``faults``, ``speed``, ``duration``, ``realtime``)."""
-    from wearpose.errors import ConfigError
-
     if name == "lsl":
-        from wearpose.stream.inputs.lsl import emulate_lsl
-
         return await emulate_lsl(recording, lsl_stream, **kw)
     if name == "osc":
+        # start-up: the osc input (yaml, its profiles) adds ~114 ms to import wearpose.stream.inputs
         from wearpose.stream.inputs.osc import emulate_osc
 
         return await emulate_osc(recording, osc_profile, host, port or 9000, osc_ports, **kw)
     if name == "mvn":
-        from wearpose.stream.inputs.mvn import emulate_mvn
-
         return await emulate_mvn(recording, host, port or 9763, **kw)
     if name == "ximu3":
-        from wearpose.stream.inputs.ximu3 import emulate_ximu3
-
         return await emulate_ximu3(recording, host, port or 7000, ximu3_ports, transport=ximu3_transport,
                                    fmt=ximu3_format, **kw)
     raise ConfigError(f"emulate {name!r}: expected one of {', '.join(INPUTS)}")

@@ -20,6 +20,7 @@ through ``on_malformed`` (the server counts it in ``malformed_total`` and the su
 from __future__ import annotations
 
 import abc
+import socket
 from dataclasses import dataclass, replace
 from typing import Any, Callable, ClassVar, Sequence
 
@@ -28,7 +29,7 @@ import torch
 
 from wearpose.geometry import quat_to_matrix
 from wearpose.recording import SensorInfo
-from wearpose.recording.types import REQUIRED_CHANNELS, canonical_arrays
+from wearpose.recording.types import OPTIONAL_CHANNELS, REQUIRED_CHANNELS, canonical_arrays
 from wearpose.stream.packets import CHANNEL_FLOATS, PacketError
 
 #: A quaternion a device sends must be unit-norm within this (the recording format's tolerance).
@@ -140,8 +141,6 @@ def quaternion_matrix(q: Sequence[float], order: str, where: str) -> np.ndarray:
 def canonical_channels(sensors: Sequence[SensorInfo]) -> tuple[str, ...]:
     """The channels the server's hello declares for these sensors (every channel any of them
     carries, in the packet order)."""
-    from wearpose.recording.types import OPTIONAL_CHANNELS, REQUIRED_CHANNELS
-
     have = {c for s in sensors for c in REQUIRED_CHANNELS[s.kind] + OPTIONAL_CHANNELS[s.kind]}
     return tuple(c for c in CHANNEL_FLOATS if c in have)
 
@@ -202,8 +201,6 @@ UDP_RCVBUF = 4 << 20
 
 def udp_socket(host: str, port: int) -> Any:
     """A bound, non-blocking UDP socket with a large receive buffer (:data:`UDP_RCVBUF`)."""
-    import socket
-
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)
     s.bind((host, port))

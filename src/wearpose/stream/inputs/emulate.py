@@ -14,6 +14,7 @@ An emulator plays a recording in a device's wire format at the recording's real 
 from __future__ import annotations
 
 import asyncio
+import socket
 import time
 from dataclasses import dataclass, field
 from typing import Any, Awaitable, Callable
@@ -113,8 +114,6 @@ class UdpSender:
     """A connected UDP socket to ``host:port`` (loopback by default) for the emulators."""
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0) -> None:
-        import socket
-
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.connect((host, port))
         self.refused = 0

@@ -38,10 +38,15 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+import pylsl
+import torch
+from pylsl.util import LostError
 
+from wearpose.geometry import matrix_to_quat
 from wearpose.recording import SensorInfo
 from wearpose.recording.types import known_sites
 from wearpose.stream.inputs.base import DeviceFrame, LiveInput, quaternion_matrices, quaternion_norm_check
+from wearpose.stream.inputs.emulate import device_data, play
 from wearpose.stream.packets import PacketError
 
 COMPONENTS: dict[str, tuple[str, str]] = {  # component -> (channel, LSL channel type)
@@ -80,8 +85,6 @@ def write_loopback_config(path: str | Path, set_env: bool = True) -> Path:
 
 
 def _pylsl() -> Any:
-    import pylsl
-
     return pylsl
 
 
@@ -227,8 +230,6 @@ class LslInput(LiveInput):
         if self._thread is not None:
             await asyncio.get_running_loop().run_in_executor(None, self._thread.join, 5.0)
         if self._inlet is not None:  # what the outlet pushed before it stopped
-            from pylsl.util import LostError
-
             while True:
                 try:
                     chunk, ts = self._inlet.pull_chunk(timeout=0.0)
@@ -240,8 +241,6 @@ class LslInput(LiveInput):
             await asyncio.sleep(0)  # samples the pull thread handed to the loop just before it stopped
 
     def _pull(self) -> None:
-        from pylsl.util import LostError
-
         while not self._stop.is_set():
             try:
                 chunk, ts = self._inlet.pull_chunk(timeout=0.05)
@@ -308,11 +307,6 @@ async def emulate_lsl(recording: Any, stream: str = "wearpose-sensors", *, fault
     given (``Recording.declared_as`` arguments, e.g. ``position_unit="cm"``) and declared in the
     metadata. Waits up to ``wait_consumer`` s for an inlet, then pushes every frame with time
     stamp ``t_start + k / rate`` (LSL clock); dropped sensors are sent as NaN."""
-    import torch
-
-    from wearpose.geometry import matrix_to_quat
-    from wearpose.stream.inputs.emulate import device_data, play
-
     pylsl = _pylsl()
     d = device_data(recording, **conventions)
     rec = recording if recording.is_canonical else recording.to_canonical()

@@ -37,9 +37,12 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-from wearpose.geometry import matrix_to_quat
+from wearpose.body import BodyModel, forward_kinematics, global_to_local
+from wearpose.estimators.base import PoseFrame
+from wearpose.geometry import MVN_TO_WEARPOSE, matrix_to_quat, wearpose_to_mvn_segment
 from wearpose.recording import SensorInfo
 from wearpose.stream.inputs.base import DeviceFrame, LiveInput, drain_udp, quaternion_matrices, udp_socket
+from wearpose.stream.inputs.emulate import UdpSender, device_data, play
 from wearpose.stream.packets import PacketError
 
 DEFAULT_PORT = 9763  # §2.3: "9 = X, M = 6, E = 3"
@@ -277,9 +280,6 @@ def mvn_pose_arrays(recording: Any) -> tuple[np.ndarray, np.ndarray] | None:
     gt = getattr(recording, "ground_truth", None)
     if gt is None:
         return None
-    from wearpose.body import BodyModel, forward_kinematics
-    from wearpose.geometry import MVN_TO_WEARPOSE, wearpose_to_mvn_segment
-
     body = BodyModel()
     G, J = forward_kinematics(gt.pose.double(), body.rest_joints(gt.betas).double().expand(len(gt.pose), -1, -1),
                               body.parents)
@@ -297,8 +297,6 @@ async def emulate_mvn(recording: Any, host: str = "127.0.0.1", port: int = DEFAU
     """Play ``recording`` as the MVN network streamer: per frame one type-23 datagram of its
     sensors (each named by its MVN segment, e.g. ``left_forearm``; sensors with other names are
     refused) and, with ``pose`` and ground truth, one type-02 datagram of the 23 segments."""
-    from wearpose.stream.inputs.emulate import UdpSender, device_data, play
-
     d = device_data(recording, world_up="z_up")  # acceleration stays free, world frame, m/s^2
     ids = [segment_id(n) for n in d.names]
     T = len(d.timestamps)
@@ -380,8 +378,6 @@ class MvnPoseEstimator:
     lookahead = 0
 
     def __init__(self) -> None:
-        from wearpose.body import BodyModel
-
         self.sensor_names = tuple(f"mvn_{s}" for s in SEGMENTS)
         self._pelvis_rest = BodyModel().rest_joints()[0].double()
 
@@ -389,10 +385,6 @@ class MvnPoseEstimator:
         pass
 
     def step(self, frame: Any) -> Any:
-        from wearpose.body import global_to_local
-        from wearpose.estimators.base import PoseFrame
-        from wearpose.geometry import MVN_TO_WEARPOSE
-
         idx = [frame.names.index(n) for n in self.sensor_names]
         R = torch.as_tensor(np.asarray(frame.channels["orientation"][idx], np.float64))  # segment -> Y-up world
         G = R[list(SMPL_FROM_MVN)] @ MVN_TO_WEARPOSE.T  # SMPL joint axes -> segment axes -> world

@@ -27,12 +27,18 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+import torch
 import yaml
+from pythonosc.osc_bundle import OscBundle
+from pythonosc.osc_message import OscMessage
+from pythonosc.osc_message_builder import OscMessageBuilder
 
 from wearpose.errors import InputFileError
+from wearpose.geometry import matrix_to_quat
 from wearpose.recording import SensorInfo
 from wearpose.recording.types import known_sites
 from wearpose.stream.inputs.base import DeviceFrame, LiveInput, drain_udp, quaternion_matrices, quaternion_norm_check, udp_socket
+from wearpose.stream.inputs.emulate import UdpSender, device_data, play
 from wearpose.stream.packets import PacketError
 
 PROFILE_DIR = Path(__file__).parent / "profiles"
@@ -148,8 +154,6 @@ def load_profile(name_or_path: str | Path) -> OscProfile:
 def encode_bundle(time_s: float, messages: Sequence[tuple[str, Sequence[float]]]) -> bytes:
     """An OSC bundle with time tag ``time_s`` (seconds since the Unix epoch, as NTP) holding
     float32 messages ``(address, args)``."""
-    from pythonosc.osc_message_builder import OscMessageBuilder
-
     ntp = time_s + NTP_UNIX
     sec = int(ntp)
     frac = min(int(round((ntp - sec) * 2 ** 32)), 2 ** 32 - 1)
@@ -165,9 +169,6 @@ def encode_bundle(time_s: float, messages: Sequence[tuple[str, Sequence[float]]]
 
 def decode_bundle(data: bytes) -> tuple[float, list[tuple[str, list[Any]]]]:
     """A bundle's time tag (s, Unix epoch) and its messages; PacketError for anything else."""
-    from pythonosc.osc_bundle import OscBundle
-    from pythonosc.osc_message import OscMessage
-
     if not data.startswith(b"#bundle\x00") or len(data) < 16:
         raise PacketError("OSC datagram: not a time-tagged bundle (the profile identifies frames by bundle time tags)")
     sec, frac = struct.unpack_from(">II", data, 8)
@@ -357,8 +358,6 @@ async def emulate_osc(recording: Any, profile: str | Path = "generic", host: str
     sensor ``i`` to ``ports[name]`` (default ``port + i``). Arguments the profile does not map
     (e.g. the NGIMU's accelerometer and barometer in ``/sensors``) carry the sensor's
     accelerometer reading (g, gravity included) and 1013.25 hPa."""
-    from wearpose.stream.inputs.emulate import UdpSender, device_data, play
-
     prof = load_profile(profile)
     d = device_data(recording, **prof.conventions())
     raw = device_data(recording, acc_unit="g", acc_frame="sensor", acc_gravity="included", world_up=prof.world_up)
@@ -370,9 +369,6 @@ async def emulate_osc(recording: Any, profile: str | Path = "generic", host: str
     else:
         one = UdpSender(host, port)
         socks = {n: one for n in names}
-    from wearpose.geometry import matrix_to_quat
-    import torch
-
     quat = matrix_to_quat(torch.from_numpy(np.ascontiguousarray(d.channels["orientation"]))).numpy()
 
     def args_of(pattern: str, i: int, j: int) -> list[float]:
@@ -407,8 +403,6 @@ async def emulate_osc(recording: Any, profile: str | Path = "generic", host: str
         if kind == 0:
             msg = b"#bundle\x00" + bytes(rng.integers(0, 256, 12, dtype=np.uint8))  # garbage after the tag
         elif kind == 1:  # a message outside a bundle
-            from pythonosc.osc_message_builder import OscMessageBuilder
-
             b = OscMessageBuilder(prof.address(pattern, n))
             b.add_arg(1.0, "f")
             msg = b.build().dgram

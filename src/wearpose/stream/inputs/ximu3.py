@@ -38,10 +38,14 @@ import struct
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+import torch
 
+from wearpose.errors import ConfigError
+from wearpose.geometry import matrix_to_quat
 from wearpose.recording import SensorInfo
 from wearpose.recording.types import known_sites
 from wearpose.stream.inputs.base import DeviceFrame, LiveInput, quaternion_matrices, quaternion_norm_check
+from wearpose.stream.inputs.emulate import UdpSender, device_data, play
 from wearpose.stream.packets import PacketError
 
 TRANSPORTS = ("tcp", "udp")
@@ -56,10 +60,8 @@ END, ESC, ESC_END, ESC_ESC = 0x0A, 0xDB, 0xDC, 0xDD
 
 def _ximu3() -> Any:
     try:
-        import ximu3
+        import ximu3  # optional dependency: the ximu3 extra (live x-IMU3 devices)
     except ImportError:  # pragma: no cover - the extra is installed in the project's venv
-        from wearpose.errors import ConfigError
-
         raise ConfigError("--input ximu3 needs x-io's ximu3 package: pip install 'wearpose[ximu3]'") from None
     return ximu3
 
@@ -134,8 +136,6 @@ class Ximu3Input(LiveInput):
                 return
             except RuntimeError as exc:
                 if loop.time() >= deadline:
-                    from wearpose.errors import ConfigError
-
                     raise ConfigError(f"--input ximu3: device {name!r} at {self.transport}://{self.host}:{port} did not "
                                       f"answer in {self.timeout:g} s ({exc}); check the device's IP and port") from None
                 await asyncio.sleep(0.2)
@@ -286,11 +286,6 @@ async def emulate_ximu3(recording: Any, host: str = "127.0.0.1", port: int = 700
     each device listens on ``host:ports[name]`` (default ``port + i``) and plays once every
     device has a connection (waiting up to ``connect_timeout``); ``udp``: each device sends one
     datagram per message to ``host:ports[name]``."""
-    from wearpose.geometry import matrix_to_quat
-    import torch
-
-    from wearpose.stream.inputs.emulate import device_data, play
-
     if transport not in TRANSPORTS:
         raise ValueError(f"x-IMU3 transport {transport!r}: expected one of {', '.join(TRANSPORTS)}")
     if fmt not in FORMATS:
@@ -338,8 +333,6 @@ async def emulate_ximu3(recording: Any, host: str = "127.0.0.1", port: int = 700
 
 class _UdpLink:
     def __init__(self, host: str, port: int) -> None:
-        from wearpose.stream.inputs.emulate import UdpSender
-
         self.sender = UdpSender(host, port)
 
     def write(self, data: bytes) -> None:
