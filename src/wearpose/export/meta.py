@@ -66,6 +66,7 @@ def read_export_metadata(path: str | Path) -> dict[str, Any]:
     """
     path = Path(path)
     if path.suffix == ".glb":
+        # cycle: export.gltf imports this module (export_metadata) at its top
         from wearpose.export.gltf import read_glb
 
         src, meta = path, read_glb(path)[0].get("asset", {}).get("extras")
