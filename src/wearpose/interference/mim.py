@@ -56,6 +56,8 @@ import numpy as np
 
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.interference._so3 import angle_between, exp_so3
+from wearpose.interference.nbeats import NumpyNBeats, load_forecaster
+from wearpose.weights import weight_path
 
 POSITION_METHODS = ("none", "hold", "odometry", "nbeats", "fusion", "fusion-eq3")
 
@@ -130,11 +132,8 @@ class MIMConfig:
 
 def load_numpy_forecaster(name_or_path: str | Path):
     """A :class:`~wearpose.interference.nbeats.NumpyNBeats` from shipped weights or a checkpoint path."""
-    from wearpose.interference.nbeats import NumpyNBeats, load_forecaster
-
     p = Path(name_or_path)
     if not p.suffix:
-        from wearpose.weights import weight_path
         p = weight_path(str(name_or_path))
     model, _ = load_forecaster(p)
     return NumpyNBeats(model)

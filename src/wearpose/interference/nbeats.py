@@ -37,7 +37,11 @@ import numpy as np
 import torch
 from torch import nn
 
+from wearpose.body import BodyModel
 from wearpose.errors import ConfigError, ShapeError
+from wearpose.interference.trajectories import body_trajectories
+from wearpose.motion import CorpusStore
+from wearpose.weights import WEIGHTS_DIR
 
 
 @dataclass(frozen=True)
@@ -179,8 +183,6 @@ def load_forecaster(path: str | Path) -> tuple[NBeats, dict[str, Any]]:
 
 def clip_trajectories(motion: Any, body: Any, cfg: NBeatsConfig) -> list[np.ndarray]:
     """Wrist positions relative to the head-worn source at ``cfg.fps``: a list of ``(T, 3)`` float32."""
-    from wearpose.interference.trajectories import body_trajectories
-
     tr = body_trajectories(motion, body, cfg.sites, source="head", fps=cfg.fps)
     _, p = tr.relative()
     return [p[:, s].numpy().astype(np.float32) for s in range(p.shape[1])]
@@ -196,9 +198,6 @@ def forecast_windows(trajs: list[np.ndarray], cfg: NBeatsConfig) -> np.ndarray:
 
 def split_windows(split: str, cfg: NBeatsConfig, limit: int | None = None) -> tuple[np.ndarray, list[str]]:
     """Windows of every clip of a corpus split (``limit`` clips at most, spread over the split)."""
-    from wearpose.body import BodyModel
-    from wearpose.motion import CorpusStore
-
     store = CorpusStore()
     clips = sorted(store.clips(split=split))
     if limit is not None and len(clips) > limit:
@@ -315,9 +314,6 @@ def train(cfg: NBeatsConfig, out: Path, *, resume: bool = False, threads: int = 
 
 def ship(checkpoint: Path, name: str, test: dict[str, Any] | None = None) -> Path:
     """Copy a forecaster checkpoint into ``wearpose/weights/<name>.pt`` (no optimiser state) with its card."""
-    from wearpose.motion import CorpusStore
-    from wearpose.weights import WEIGHTS_DIR
-
     ck = torch.load(checkpoint, map_location="cpu", weights_only=False)
     ck["train_state"] = None
     out = WEIGHTS_DIR / f"{name}.pt"

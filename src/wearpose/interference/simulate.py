@@ -44,6 +44,7 @@ from typing import Any, Sequence
 import numpy as np
 import torch
 
+from wearpose.body import BodyModel
 from wearpose.errors import ConfigError
 from wearpose.geometry import geodesic_angle
 from wearpose.interference.field import MetalObject, Scene, measured_voltages
@@ -305,7 +306,6 @@ def simulate_condition(motion_or_trajectories: Any, condition: str | ConditionPr
             raise ConfigError(f"simulate_condition: trajectories must be at {EM_RATE} Hz, got {traj.fps}")
     else:
         if body is None:
-            from wearpose.body import BodyModel
             body = BodyModel()
         traj = body_trajectories(motion_or_trajectories, body, sensors, source=source, source_pose=source_pose)
     fps = traj.fps

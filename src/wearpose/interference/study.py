@@ -30,10 +30,12 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 import torch
 
+from wearpose.body import BodyModel
 from wearpose.interference.metrics import binary_metrics
 from wearpose.interference.mim import MIM, MIMConfig, detect
 from wearpose.interference.simulate import rotation_error, simulate_condition
 from wearpose.interference.trajectories import EM_RATE, SiteTrajectories, body_trajectories
+from wearpose.motion import CorpusStore
 
 #: Ground-truth thresholds e_P (cm) of the Fig. 8 sweep.
 E_P_SWEEP_CM = (0.5, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0)
@@ -61,8 +63,6 @@ Session = list[tuple[str, str, Any]]
 
 
 def _store(store: Any) -> Any:
-    from wearpose.motion import CorpusStore
-
     return store if store is not None else CorpusStore()
 
 
@@ -211,8 +211,6 @@ def simulate_sessions(split: str, seconds: float, limit: int | None, conds: list
     Returns:
         the cache files written, one per condition.
     """
-    from wearpose.body import BodyModel
-
     body = BodyModel()
     store = _store(store)
     if source == "world":
