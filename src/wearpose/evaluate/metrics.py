@@ -40,6 +40,7 @@ from typing import Any, NamedTuple
 import torch
 
 from wearpose.body.kinematics import forward_kinematics
+from wearpose.body.shapes import standing_height, zero_pose_vertices
 from wearpose.body.skeleton import IGNORED_JOINTS, MAJOR_JOINTS, NUM_JOINTS, PARENTS, SIP_JOINTS
 from wearpose.errors import ShapeError
 from wearpose.geometry import geodesic_angle, project_to_so3
@@ -817,8 +818,6 @@ def shape_errors(body: Any, betas_pred: torch.Tensor, betas_true: torch.Tensor) 
     Returns:
         :class:`ShapeErrors`, each ``(...)`` in metres.
     """
-    from wearpose.body.shapes import standing_height, zero_pose_vertices
-
     bp, bt = torch.broadcast_tensors(_check_tensor(betas_pred, "betas_pred"), _check_tensor(betas_true, "betas_true"))
     ht = standing_height(body, bt)
     dh = standing_height(body, bp) - ht

@@ -32,22 +32,27 @@ unseen-lab figure of a model trained on the other lab), or the held-out procedur
 
 from __future__ import annotations
 
+import json
+import platform
 from pathlib import Path
 from typing import Any, Callable
+
+import torch
 
 from wearpose.errors import ConfigError
 from wearpose.estimators.bodies import clip_bodies, wearer_store, wearers
 from wearpose.estimators.method import resolve
+from wearpose.estimators.registry import find_estimator, list_estimators
 from wearpose.estimators.run import ModelSource
 from wearpose.motion import CorpusStore
+from wearpose.motion.procedural_store import UNSEEN_MOTION_PER_FAMILY, build_procedural_store, unseen_motion_dir
+from wearpose.motion.store import motion_class
 
 Progress = Callable[[int, int], None]
 
 
 def protocols() -> dict[str, str]:
     """Estimator (registry name) -> its declared single-model protocol (``"module:function"``)."""
-    from wearpose.estimators.registry import find_estimator, list_estimators
-
     out = {}
     for name in list_estimators():
         try:
@@ -119,8 +124,6 @@ def breakdown(per_clip: list[dict[str, Any]], store: CorpusStore) -> dict[str, d
         <metric>: frame-weighted mean over the group's clips}`` (over every clip these are the
         pooled headline figures for the metrics that are frame means), groups sorted by name.
     """
-    from wearpose.motion.store import motion_class
-
     keys: dict[str, Callable[[str], str]] = {"source": lambda cid: _entry(store, cid)["source"],
                                               "class": lambda cid: motion_class(_entry(store, cid))}
     out: dict[str, dict[str, dict[str, Any]]] = {}
@@ -190,8 +193,6 @@ def unseen_motion_store(per_family: int | None = None, seed: int = 0, *,
     """The unseen-motion protocol's store (:mod:`wearpose.motion.procedural_store`), built at
     :func:`~wearpose.motion.procedural_store.unseen_motion_dir` the first time (about 1.5 s a
     clip) and opened from there afterwards."""
-    from wearpose.motion.procedural_store import UNSEEN_MOTION_PER_FAMILY, build_procedural_store, unseen_motion_dir
-
     n = per_family or UNSEEN_MOTION_PER_FAMILY
     root = unseen_motion_dir(n, seed)
     build_procedural_store(root, per_family=n, seed=seed, progress=progress)
@@ -212,11 +213,6 @@ def markdown_table(result: dict[str, Any]) -> str:
 def write_result(result: dict[str, Any], path_stem: str | Path, *, title: str, produced_by: str,
                  note: str | None = None) -> tuple[Path, Path]:
     """``<stem>.md`` (title, the command, the table, protocol, clips) and ``<stem>.json`` (all of it)."""
-    import json
-    import platform
-
-    import torch
-
     stem = Path(path_stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     first = next(iter(result["models"].values()))
