@@ -53,6 +53,10 @@ from wearpose.estimators.empose.model import (
 )
 from wearpose.estimators.registry import register_estimator
 from wearpose.estimators.seeding import init_seed, seeded
+from wearpose.estimators.checkpoint import load_checkpoint
+from wearpose.estimators.empose.train import EmposeTask
+from wearpose.estimators.empose.twostage import TwoStageEstimator
+from wearpose.estimators.empose.twostage import twostage_config
 
 #: Config model name -> registry name of the estimator.
 ESTIMATOR_NAMES: dict[str, str] = {"lgd": "empose", "resnet": "empose-resnet", "birnn": "empose-birnn",
@@ -71,7 +75,6 @@ def baseline_config(preset: str, sensors: int, model: str) -> EmposeConfig:
     if model == "lgd":
         return base
     if model == "twostage":
-        from wearpose.estimators.empose.twostage import twostage_config
 
         return twostage_config(preset, sensors)
     if model not in ("resnet", "birnn"):
@@ -187,7 +190,6 @@ def baseline_outputs(model: nn.Module, body: Any, x: torch.Tensor) -> dict[str, 
 
 
 def _make_task(est: BaselineEstimator, train_data: EmposeData, val_data: EmposeData | None) -> Any:
-    from wearpose.estimators.empose.train import EmposeTask
 
     class BaselineTask(EmposeTask):
         """:class:`EmposeTask` (same batches, loss and validation) with the baseline's forward."""
@@ -295,7 +297,6 @@ class BiRNNEstimator(BaselineEstimator):
 
 def estimator_class(model: str) -> type[EmposeEstimator]:
     """``lgd`` / ``resnet`` / ``birnn`` / ``twostage`` -> the estimator class (ConfigError otherwise)."""
-    from wearpose.estimators.empose.twostage import TwoStageEstimator
 
     classes: dict[str, type[EmposeEstimator]] = {"lgd": EmposeEstimator, "resnet": ResNetEstimator,
                                                  "birnn": BiRNNEstimator, "twostage": TwoStageEstimator}
@@ -306,7 +307,6 @@ def estimator_class(model: str) -> type[EmposeEstimator]:
 
 def load_any(path: Any, **kw: Any) -> EmposeEstimator:
     """Load an EM-POSE-family checkpoint (LGD-RNN or a baseline) by its ``method`` field."""
-    from wearpose.estimators.checkpoint import load_checkpoint
 
     ck = load_checkpoint(path)
     cls = {v: estimator_class(k) for k, v in ESTIMATOR_NAMES.items()}.get(ck.method)

@@ -34,6 +34,11 @@ from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.inputs import hold_last_valid
 from wearpose.estimators.seeding import clip_seed
 from wearpose.geometry import matrix_to_rot6d, rot6d_to_matrix
+from wearpose.motion import resample
+from wearpose.recording import Recording
+from wearpose.sensors import simulate
+from wearpose.sensors.em import EMOffsets, random_subject_offsets
+from wearpose.sensors.simulate import _generator
 
 DATA_VERSION = 1
 #: Per-frame tensors of the cache (``(F, ...)``; with ``clip`` ``(F,)``) and per-clip ones (``(C, ...)``).
@@ -45,8 +50,6 @@ def rotation_only_offsets(num_sensors: int, seed: int) -> Any:
     """The synthetic subject that ``simulate(..., offsets="random", seed=seed)`` draws, with its
     translations (and their per-sequence jitter) set to zero: EM-POSE's "no t" training scheme
     (Table 3). Returns a :class:`~wearpose.sensors.em.EMOffsets`."""
-    from wearpose.sensors.em import EMOffsets, random_subject_offsets
-    from wearpose.sensors.simulate import _generator  # the simulator's own subject stream: same R as "random"
 
     full = random_subject_offsets(num_sensors, _generator(seed, "subject"))
     return EMOffsets(full.R, torch.zeros_like(full.t))
@@ -67,8 +70,6 @@ def simulate_clip(motion: Any, cfg: EmposeConfig, body: Any, seed: int, noise: s
         translation), ``off_R`` ``(S, 3, 3)``, ``off_t`` ``(S, 3)``, ``motion`` (resampled),
         ``sim`` the :class:`~wearpose.sensors.SimulationResult`.
     """
-    from wearpose.motion import resample
-    from wearpose.sensors import simulate
 
     m = motion if abs(motion.fps - cfg.rate) < 1e-9 else resample(motion, cfg.rate)
     noise = noise or cfg.train_noise
@@ -184,6 +185,5 @@ def recording_from_clip(r: dict[str, Any], cfg: EmposeConfig) -> Any:
     (:meth:`Recording.from_simulation`): EM sensors in the source frame, the applied offsets in
     ``subject["offsets"]`` (what a calibration gives the estimator), the resampled motion as
     ground truth."""
-    from wearpose.recording import Recording
 
     return Recording.from_simulation(r["sim"], r["motion"])

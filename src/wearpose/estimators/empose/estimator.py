@@ -31,10 +31,10 @@ from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, module_vers
 from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.estimators.seeding import init_seed, seeded
+from wearpose.sensors import get_kit, resolve_sites
 
 
 def _sites(kit_name: str, body: Any) -> tuple[list[str], str]:
-    from wearpose.sensors import get_kit, resolve_sites
 
     kit = get_kit(kit_name)
     with warnings.catch_warnings():
@@ -109,7 +109,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
 
     def fit(self, *args: Any, **kwargs: Any) -> Any:
         """Train (see :func:`wearpose.estimators.empose.train.train_empose`)."""
-        from wearpose.estimators.empose.train import train_empose
+        from wearpose.estimators.empose.train import train_empose  # cycle: train and twostage import this module at their top
 
         return train_empose(self, *args, **kwargs)
 
@@ -133,7 +133,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         if cfg.inputs != "both":  # the Table 3 "pos only" / "ori only" ablations
             text += f"; network input: sensor {cfg.inputs}s only"
         if twostage:
-            from wearpose.estimators.empose.twostage import MAX_REMOVED, P_REMOVE
+            from wearpose.estimators.empose.twostage import MAX_REMOVED, P_REMOVE  # cycle: train and twostage import this module at their top
 
             text += (f"; the joint mapper trains with 1-{MAX_REMOVED} sensors removed (zeros, flag off) for half of "
                      f"the window in {P_REMOVE:.0%} of the windows")

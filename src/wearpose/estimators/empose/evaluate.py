@@ -41,6 +41,15 @@ from typing import Any, Mapping, Sequence
 import torch
 
 from wearpose.errors import ConfigError
+from wearpose.body.skeleton import MAJOR_JOINTS
+from wearpose.estimators.bodies import clip_bodies, wearer_store
+from wearpose.estimators.bodies import wearers
+from wearpose.estimators.seeding import clip_seed
+from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
+from wearpose.evaluate.metrics import shape_errors
+import dataclasses
+import inspect
+import numpy as np
 
 #: Paper's Table 2 (real test set, 12 sensors), for context in the report: mean, std.
 PAPER_TABLE2_12 = {
@@ -85,9 +94,8 @@ def unseen_subject_offsets(num_sensors: int, generator: torch.Generator, spread:
     off the skin and are twice as mis-rotated / displaced as any training subject is likely to be
     (e.g. straps over thick clothing). Returns an :class:`~wearpose.sensors.em.EMOffsets`.
     """
-    import inspect
 
-    from wearpose.sensors.em import random_subject_offsets
+    from wearpose.sensors.em import random_subject_offsets  # start-up: sensors.em adds ~164 ms to import this module
 
     sizes = {k: float(p.default) * spread for k, p in inspect.signature(random_subject_offsets).parameters.items()
              if isinstance(p.default, float)}
@@ -99,8 +107,7 @@ def simulate_eval_clip(motion: Any, est: Any, clip_id: str, seed: int, *, noise:
     """The evaluation simulation of one clip (:func:`~wearpose.estimators.empose.data.simulate_clip`
     with the sensor noise seeded in the ``"eval"`` namespace, so ``random`` and ``unseen`` share the
     noise draw and differ only in the subject)."""
-    from wearpose.estimators.empose.data import simulate_clip
-    from wearpose.estimators.seeding import clip_seed
+    from wearpose.estimators.empose.data import simulate_clip  # start-up: empose.data adds ~256 ms to import this module
 
     if offsets not in SUBJECT_MODES:
         raise ConfigError(f"evaluation offsets: expected one of {', '.join(SUBJECT_MODES)}, got {offsets!r}")
@@ -129,7 +136,6 @@ def _clip_row(cid: str, errs: Mapping[str, list[torch.Tensor]]) -> dict[str, Any
 
 def _shape_row(body: Any, betas_pred: torch.Tensor, betas_true: torch.Tensor) -> dict[str, float]:
     """One clip's shape figures (:func:`wearpose.evaluate.metrics.shape_errors`) in report units."""
-    from wearpose.evaluate.metrics import shape_errors
 
     e = shape_errors(body, betas_pred.reshape(-1), betas_true.reshape(-1))
     return {"height_error_cm": float(e.height_error) * 100.0, "height_difference_cm": float(e.height_difference) * 100.0,
@@ -186,12 +192,9 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         "frames", "mpjpe_mm", "pa_mpjpe_mm", "mpjae_deg", "height_error_cm",
         "height_difference_cm", "zero_pose_vertex_error_mm", "wearer_height_cm"}]}}}``.
     """
-    from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.estimators.bodies import clip_bodies, wearer_store
-    from wearpose.estimators.empose.baselines import load_any
-    from wearpose.estimators.empose.data import recording_from_clip
-    from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
-    from wearpose.motion import CorpusStore
+    from wearpose.estimators.empose.baselines import load_any  # start-up: empose.baselines adds ~368 ms to import this module
+    from wearpose.estimators.empose.data import recording_from_clip  # start-up: empose.data adds ~256 ms to import this module
+    from wearpose.motion import CorpusStore  # start-up: motion adds ~231 ms to import this module
 
     if not checkpoints:
         raise ConfigError("evaluate_models: no checkpoints given")
@@ -259,7 +262,6 @@ def table2_markdown(result: Mapping[str, Any], digits: int = 1) -> str:
     models = result["models"]
     cols = [("mpjpe_mm", "mpjpe_std_mm", "MPJPE [mm]"), ("pa_mpjpe_mm", "pa_mpjpe_std_mm", "PA-MPJPE [mm]"),
             ("mpjae_deg", "mpjae_std_deg", "MPJAE [°]")]
-    from wearpose.estimators.bodies import wearers
 
     n_s = {"em12": 12, "em6": 6}.get(result.get("kit", ""), "")
     best = {k: min((m[k] for m in models.values() if not math.isnan(m[k])), default=math.nan) for k, _, _ in cols}
@@ -360,9 +362,7 @@ def drop_sensors(recording: Any, sensor_names: list[str], g: torch.Generator,
     Returns:
         the new recording and ``removed`` ``(T, S)`` bool (True = removed by this function).
     """
-    import dataclasses
 
-    import numpy as np
 
     streams = {s.name: s for s in recording.sensors}
     T = len(streams[sensor_names[0]].valid)
@@ -392,9 +392,7 @@ def zero_dropped(recording: Any, sensor_names: list[str]) -> Any:
     measurement (position 0, i.e. at the source, and identity orientation; a Recording only holds
     proper rotations): what some EM SDKs deliver for a lost sensor, so an estimator cannot tell it
     is missing (EM-POSE supp. Fig. 12)."""
-    import dataclasses
 
-    import numpy as np
 
     new = []
     for s in recording.sensors:
@@ -426,12 +424,9 @@ def evaluate_dropped(checkpoints: Mapping[str, Any], split: str = "test", limit:
         ``{"split", "clips", "frame_counts": {set: n}, "models": {name: {set: {"mpjpe_mm", ...}}},
         ...}`` (mean and std per set, mm / degrees, 15 major joints).
     """
-    from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.estimators.empose.baselines import load_any
-    from wearpose.estimators.empose.data import recording_from_clip, simulate_clip
-    from wearpose.estimators.seeding import clip_seed
-    from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
-    from wearpose.motion import CorpusStore
+    from wearpose.estimators.empose.baselines import load_any  # start-up: empose.baselines adds ~368 ms to import this module
+    from wearpose.estimators.empose.data import recording_from_clip, simulate_clip  # start-up: empose.data adds ~256 ms to import this module
+    from wearpose.motion import CorpusStore  # start-up: motion adds ~231 ms to import this module
 
     if not checkpoints:
         raise ConfigError("evaluate_dropped: no checkpoints given")

@@ -33,6 +33,7 @@ from torch import nn
 from wearpose.body.skeleton import NUM_JOINTS
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.geometry import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
+from wearpose.estimators.empose.fastgrad import LeanSensorGrad
 
 #: Unobserved joints (feet, hands), identity in the output.
 UNOBSERVED_JOINTS: tuple[int, ...] = (10, 11, 22, 23)
@@ -107,7 +108,6 @@ class VirtualSensors:
     def lean(self) -> Any:
         """The closed-form L_r / gradient kernel for these sites on the body's current device and
         dtype (:class:`~wearpose.estimators.empose.fastgrad.LeanSensorGrad`, built once)."""
-        from wearpose.estimators.empose.fastgrad import LeanSensorGrad
 
         key = (str(self.body.device), self.body.dtype)
         if key not in self._lean:

@@ -32,6 +32,9 @@ from wearpose.estimators.method import TrainRun
 from wearpose.estimators.empose.model import PRED_JOINTS, decode_omega, reconstruction_loss
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import matrix_to_rot6d
+from pathlib import Path
+from wearpose.body import BodyModel
+from wearpose.estimators.empose.data import build_split
 
 BODY_JOINTS = tuple(j for j in PRED_JOINTS if j != 0)  # the 19 joints the prior models
 LATENT = 32
@@ -75,10 +78,7 @@ def train_pose_prior(out_dir: str, epochs: int = 4, batch: int = 256, lr: float 
     epoch with the lowest validation reconstruction error, save ``<out>/prior.pt`` (its
     ``train_command``: ``train_command``, else the equivalent ``wearpose train poseprior``);
     ``log`` receives one line per epoch."""
-    from pathlib import Path
 
-    from wearpose.body import BodyModel
-    from wearpose.estimators.empose.data import build_split
 
     torch.manual_seed(seed)
     cfg = EmposeConfig.preset("cpu", 12)

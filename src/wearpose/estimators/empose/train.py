@@ -13,6 +13,10 @@ from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.empose.estimator import EmposeEstimator
 from wearpose.estimators.empose.model import lgd_loss, sensor_features
 from wearpose.estimators.train import WindowTask, train_estimator
+from wearpose.body.skeleton import MAJOR_JOINTS
+from wearpose.evaluate.metrics import mpjae, mpjpe
+from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
+from wearpose.motion import CorpusStore
 
 
 class EmposeTask(WindowTask):
@@ -36,8 +40,6 @@ class EmposeTask(WindowTask):
 
     @torch.no_grad()
     def validate(self, device: torch.device) -> dict[str, float]:
-        from wearpose.body.skeleton import MAJOR_JOINTS
-        from wearpose.evaluate.metrics import mpjae, mpjpe
 
         if self.val_data is None:
             return {}
@@ -92,9 +94,6 @@ def evaluate_empose(checkpoint: str | Path | EmposeEstimator, split: str = "test
     count (EM-POSE Sec. 6.2). Ground truth: the clip's pose with the root in the EM source
     frame, like the estimate. Units: mm and degrees.
     """
-    from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
-    from wearpose.motion import CorpusStore
 
     est = checkpoint if isinstance(checkpoint, EmposeEstimator) else EmposeEstimator.load(checkpoint)
     store = store or CorpusStore()

@@ -65,6 +65,17 @@ from wearpose.estimators.empose.model import (
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import axis_angle_to_matrix, matrix_to_rot6d, rot6d_to_matrix
 from wearpose.estimators.seeding import init_seed, seeded
+from pathlib import Path
+from wearpose.body.skeleton import MAJOR_JOINTS
+from wearpose.estimators.base import OfflineOnlyError
+from wearpose.estimators.checkpoint import CheckpointMismatchError, load_checkpoint
+from wearpose.estimators.checkpoint import save_checkpoint
+from wearpose.estimators.empose.train import EmposeTask
+from wearpose.estimators.empose.train import train_empose
+from wearpose.evaluate.metrics import mpjpe
+from wearpose.geometry import matrix_to_rot6d
+import math
+import sys
 
 NUM_MAPPED = len(PRED_JOINTS)  # 20 joints: positions + orientations from the mapper
 JOINT_NOISE_M = 0.015  #: std of the position perturbation of stage-2 training inputs, m
@@ -149,7 +160,6 @@ def polish_pose(body: Any, local_rot: torch.Tensor, betas: torch.Tensor, joints:
     Returns:
         local rotations ``(T, 24, 3, 3)`` and the per-frame joint residual ``(T,)`` m^2.
     """
-    from wearpose.geometry import matrix_to_rot6d
 
     pj = list(PRED_JOINTS)
     rest = body.rest_joints(betas.to(body.J_template)).to(local_rot)
@@ -298,11 +308,7 @@ def _perturb(joints: torch.Tensor, rots: torch.Tensor, g: torch.Generator) -> tu
 
 
 def _make_task(est: TwoStageEstimator, train_data: EmposeData, val_data: EmposeData | None) -> Any:
-    import math
 
-    from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.estimators.empose.train import EmposeTask
-    from wearpose.evaluate.metrics import mpjpe
 
     class TwoStageTask(EmposeTask):
         """:class:`EmposeTask` batches with the two-stage losses and validation."""
@@ -445,7 +451,6 @@ class TwoStageEstimator(EmposeEstimator):
                          extras={**extras, "rec_loss": torch.cat(rec).cpu(), "betas_per_frame": b_all})
 
     def step(self, frame: SensorFrame) -> PoseFrame:
-        from wearpose.estimators.base import OfflineOnlyError
 
         raise OfflineOnlyError("empose-twostage has a bidirectional joint mapper (non-causal): use "
                                "estimate(recording) on a whole sequence; for streaming use empose (LGD-RNN)")
@@ -461,7 +466,6 @@ def warm_start(est: TwoStageEstimator, path: Any) -> dict[str, Any] | None:
     ``lr`` (m / sqrt(v) = +-1), which on val took the warm mapper from 12 to 45 mm in one step at
     lr 2e-4; the old moments keep the steps the size they were.
     """
-    from wearpose.estimators.checkpoint import CheckpointMismatchError, load_checkpoint
 
     ck = load_checkpoint(path)
     ck.check(method=est.name, kit=est.kit_name, body_asset=est.body_asset_id, path=path)
@@ -502,12 +506,7 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
         :func:`~wearpose.estimators.empose.train.train_empose`'s result with ``method``,
         ``sensors`` and ``config``.
     """
-    import math
-    import sys
-    from pathlib import Path
 
-    from wearpose.estimators.checkpoint import save_checkpoint
-    from wearpose.estimators.empose.train import train_empose
 
     if run.out is None:
         raise OptionError("--out", "the run directory is required (a warm start writes its last.pt there)")
