@@ -79,7 +79,7 @@ class PoseTrack:
 
     def to_motion(self) -> Any:
         """As a :class:`wearpose.motion.MotionSequence` (zero translation when not estimated)."""
-        from wearpose.motion import MotionSequence
+        from wearpose.motion import MotionSequence  # start-up: motion adds ~48 ms to import this module
 
         trans = self.trans if self.trans is not None else torch.zeros(self.num_frames, 3, dtype=self.local_rot.dtype)
         return MotionSequence(self.local_rot.detach().clone(), self.betas.detach().clone(), trans.detach().clone(),

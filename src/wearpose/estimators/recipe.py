@@ -32,6 +32,7 @@ from typing import Any, Mapping
 
 from wearpose.errors import ConfigError, InputFileError
 from wearpose.estimators.method import MethodSpec
+import yaml
 
 FORMAT = "wearpose.recipe"
 VERSION = 1
@@ -74,7 +75,7 @@ class Recipe:
 def recipe_dirs() -> dict[str, Path]:
     """Method name -> its shipped recipes folder (``estimators/<method>/recipes``), for the
     declared trainable methods."""
-    from wearpose.estimators.registry import get_method, list_methods
+    from wearpose.estimators.registry import get_method, list_methods  # start-up: registry adds ~35 ms (63 modules) to import this module
 
     out = {}
     for name in list_methods(trainable=True):
@@ -114,7 +115,6 @@ def load_recipe(name_or_path: str | Path) -> Recipe:
         InputFileError: not YAML, not a recipe, an unknown key, method or option, an option in
             two sections, a value of the wrong type, ``init_from`` for a method without it.
     """
-    import yaml
 
     path = find_recipe(name_or_path)
     raw = path.read_bytes()
@@ -140,7 +140,7 @@ def load_recipe(name_or_path: str | Path) -> Recipe:
 
 
 def _method(path: Path, name: Any) -> MethodSpec:
-    from wearpose.estimators.registry import get_method, list_methods
+    from wearpose.estimators.registry import get_method, list_methods  # start-up: registry adds ~35 ms (63 modules) to import this module
 
     trainable = list_methods(trainable=True)
     if name not in trainable:

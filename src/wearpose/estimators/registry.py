@@ -22,6 +22,7 @@ from typing import Callable, TypeVar
 
 from wearpose.errors import ConfigError
 from wearpose.estimators.method import EstimatorEntry, MethodSpec, Training, resolve, target_available
+import wearpose.estimators as pkg
 
 T = TypeVar("T")
 
@@ -73,7 +74,6 @@ def _discover() -> None:
     if _DISCOVERED:
         return
     _DISCOVERED.append(True)
-    import wearpose.estimators as pkg
 
     for m in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name):
         if m.ispkg:

@@ -32,6 +32,8 @@ from wearpose.estimators.checkpoint import Checkpoint, load_checkpoint
 from wearpose.estimators.registry import get_estimator
 from wearpose.geometry import quat_to_matrix
 from wearpose.recording import Recording, RecordingError, calibration_window, decimate
+from wearpose.estimators.registry import list_estimators
+from wearpose.weights import card, list_weights, weight_path
 
 
 @dataclass(frozen=True)
@@ -83,8 +85,6 @@ def open_model(model: str | Path, method: str | None = None) -> ModelSource:
         ConfigError: ``model`` is none of these (names the shipped weights and weight-free estimators).
         InputFileError: the checkpoint file cannot be read (from :func:`load_checkpoint`).
     """
-    from wearpose.estimators.registry import list_estimators
-    from wearpose.weights import card, list_weights, weight_path
 
     name = str(model)
     if name in list_weights():
