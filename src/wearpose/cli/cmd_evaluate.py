@@ -22,6 +22,10 @@ import typer
 from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from wearpose.cli.models import check_pose_weights
+from wearpose.errors import ConfigError
+from wearpose.weights import weight_path
 
 if TYPE_CHECKING:
     from wearpose.estimators.method import EstimatorEntry
@@ -31,8 +35,6 @@ def resolve_model(spec: str) -> tuple[str, Path]:
     """``NAME=TARGET`` or ``TARGET`` -> (display name, checkpoint path); TARGET is a file or the
     name of shipped weights (:func:`wearpose.weights.weight_path`). The default name is the
     weights' name, or the run directory of a ``.../<run>/best.pt`` path."""
-    from wearpose.errors import ConfigError
-    from wearpose.weights import weight_path
 
     name, sep, target = spec.partition("=")
     if not sep:
@@ -41,7 +43,6 @@ def resolve_model(spec: str) -> tuple[str, Path]:
         raise typer.BadParameter(f"{spec!r}: expected NAME=PATH, PATH or a shipped weight name", param_hint="MODELS")
     path = Path(target)
     if not path.is_file():
-        from wearpose.cli.models import check_pose_weights
 
         check_pose_weights(target, param_hint="MODELS")
         try:
@@ -56,7 +57,7 @@ def resolve_model(spec: str) -> tuple[str, Path]:
 def _open(name: str, path: Path) -> ModelSource:
     """The model at ``path`` (its checkpoint read once, :func:`wearpose.estimators.run.open_model`),
     refused when `wearpose evaluate` has no protocol for its method."""
-    from wearpose.estimators.run import open_model
+    from wearpose.estimators.run import open_model  # start-up: wearpose.estimators.run loads torch, +2.0 s to wearpose --help
 
     source = open_model(path)
     entry = _entry(source.method)
@@ -70,7 +71,7 @@ def _open(name: str, path: Path) -> ModelSource:
 
 def _entries() -> dict[str, EstimatorEntry]:
     """Every declared estimator's entry, by registry name."""
-    from wearpose.estimators.registry import get_method, list_methods
+    from wearpose.estimators.registry import get_method, list_methods  # start-up: wearpose.estimators.registry adds ~25 ms to wearpose --help
 
     return {e.name: e for m in list_methods() for e in get_method(m).estimators}
 
@@ -82,8 +83,7 @@ def _entry(method: str) -> EstimatorEntry | None:
 def _store(cache: Path | None, protocol: str, source: str | None, per_family: int | None, split: str) -> Any:
     """The store the command evaluates on: ``--cache`` (or the prepared corpus) for ``corpus``,
     the built-in procedural store for ``unseen-motion``; restricted to ``--source``."""
-    from wearpose.errors import ConfigError
-    from wearpose.motion import CorpusStore
+    from wearpose.motion import CorpusStore  # start-up: wearpose.motion loads torch, +1.7 s to wearpose --help
 
     if protocol not in ("corpus", "unseen-motion"):
         raise typer.BadParameter(f"expected corpus or unseen-motion, got {protocol!r}", param_hint="--protocol")
@@ -97,7 +97,7 @@ def _store(cache: Path | None, protocol: str, source: str | None, per_family: in
                                      param_hint="--cache")
         if split != "test":
             raise typer.BadParameter("the unseen-motion set is a test split only", param_hint="--split")
-        from wearpose.evaluate.protocols import unseen_motion_store
+        from wearpose.evaluate.protocols import unseen_motion_store  # start-up: wearpose.evaluate.protocols loads torch, +1.8 s to wearpose --help
 
         err_console.print("unseen-motion store: building or checking (about 1.5 s per new clip)")
         store = unseen_motion_store(per_family)
@@ -220,10 +220,9 @@ def evaluate(
     Unseen lab: wearpose evaluate empose12_cpu --source cmu_daz
     Held-out wearers: wearpose evaluate empose12_cpu --bodies heldout
     """
-    import torch
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    import torch  # start-up: torch loads torch, +1.3 s to wearpose --help
 
-    from wearpose.estimators.empose.evaluate import SUBJECT_MODES, write_table
+    from wearpose.estimators.empose.evaluate import SUBJECT_MODES, write_table  # start-up: wearpose.estimators.empose.evaluate loads torch, +1.6 s to wearpose --help
 
     if split not in ("test", "val", "train"):
         raise typer.BadParameter(f"expected test or val, got {split!r}", param_hint="--split")
@@ -233,7 +232,7 @@ def evaluate(
         raise typer.BadParameter(f"expected default or none, got {noise!r}", param_hint="--noise")
     if split == "train":
         err_console.print("[yellow]warning[/]: the train split measures fit, not held-out accuracy")
-    from wearpose.estimators.bodies import BODIES
+    from wearpose.estimators.bodies import BODIES  # start-up: wearpose.estimators.bodies loads torch, +1.7 s to wearpose --help
 
     if bodies not in BODIES:
         raise typer.BadParameter(f"expected {' or '.join(BODIES)}, got {bodies!r}", param_hint="--bodies")
@@ -264,12 +263,12 @@ def evaluate(
         if compared:
             if frame_stride != 1:
                 raise typer.BadParameter("the EM-POSE protocol scores every frame", param_hint="--frame-stride")
-            from wearpose.evaluate.protocols import compare_models
+            from wearpose.evaluate.protocols import compare_models  # start-up: wearpose.evaluate.protocols loads torch, +1.8 s to wearpose --help
 
             res = compare_models(next(iter(compare.values())), ckpts, split, clips, noise=noise, seed=seed,
                                  offsets=offsets, spread=spread, store=store, progress=tick, bodies=bodies)
         else:
-            from wearpose.evaluate.protocols import evaluate_model
+            from wearpose.evaluate.protocols import evaluate_model  # start-up: wearpose.evaluate.protocols loads torch, +1.8 s to wearpose --help
 
             res = {"split": split, "store": store.provenance(),
                    "models": {n: evaluate_model(src, split=split, clips=clips, seed=seed, noise=noise,
@@ -282,13 +281,13 @@ def evaluate(
     res.update(command=command, protocol_clips=protocol, source_filter=source, bodies=bodies)
     if out is not None and compared:
         extra = {"command": command, **({"note": note} if note else {})}
-        from wearpose.evaluate.protocols import breakdown_sections
+        from wearpose.evaluate.protocols import breakdown_sections  # start-up: wearpose.evaluate.protocols loads torch, +1.8 s to wearpose --help
 
         md, js = write_table(res, out, title=title or f"wearpose evaluate ({split} split, kit {res['kit']})",
                              produced_by=command, paper=None, extra=extra, appendix=breakdown_sections(res["models"]))
         res["written"] = [str(md), str(js)]
     elif out is not None:
-        from wearpose.evaluate.protocols import write_result
+        from wearpose.evaluate.protocols import write_result  # start-up: wearpose.evaluate.protocols loads torch, +1.8 s to wearpose --help
 
         md, js = write_result(res, out, title=title or f"wearpose evaluate ({split} split)", produced_by=command,
                               note=note)

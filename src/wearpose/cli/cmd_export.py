@@ -20,9 +20,9 @@ def export(
 
     Example: wearpose export cmu_daz/05/05_01 out/walk.bvh
     """
-    from wearpose.body import BodyModel
-    from wearpose.export import export_motion
-    from wearpose.motion import load_motion
+    from wearpose.body import BodyModel  # start-up: wearpose.body loads torch, +1.6 s to wearpose --help
+    from wearpose.export import export_motion  # start-up: wearpose.export loads torch, +1.6 s to wearpose --help
+    from wearpose.motion import load_motion  # start-up: wearpose.motion loads torch, +1.7 s to wearpose --help
 
     model = BodyModel(body)
     rest = model.rest_joints()

@@ -17,6 +17,8 @@ from rich.markup import escape
 from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from wearpose.errors import WearposeError
 
 motion_app = typer.Typer(help="Import your own motion files (BVH, ASF/AMC) onto the SMPL body, or make\n"
                               "procedural clips of motion the corpus lacks.\n\n"
@@ -76,9 +78,8 @@ def _report_table(res: dict[str, Any]) -> Table:
 def _check_options(units: str | None, up: str | None, joint_map: Path | None) -> None:
     """Options that apply to every file are checked once, before any file is read (a typo in
     --units would otherwise fail every file with the same message)."""
-    from wearpose.errors import WearposeError
-    from wearpose.motion.importer import UP_AXES, parse_units
-    from wearpose.motion.mapping import load_joint_map
+    from wearpose.motion.importer import UP_AXES, parse_units  # start-up: wearpose.motion.importer loads torch, +1.7 s to wearpose --help
+    from wearpose.motion.mapping import load_joint_map  # start-up: wearpose.motion.mapping loads torch, +1.7 s to wearpose --help
 
     if units is not None:
         try:
@@ -117,10 +118,9 @@ def motion_import(
 
     Example: wearpose motion import amc_takes/ --asf amc_takes/actor2.asf --out motion_npz/
     """
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from wearpose.body import BodyModel
-    from wearpose.motion import collect_motion_files, import_paths
+    from wearpose.body import BodyModel  # start-up: wearpose.body loads torch, +1.6 s to wearpose --help
+    from wearpose.motion import collect_motion_files, import_paths  # start-up: wearpose.motion loads torch, +1.7 s to wearpose --help
 
     _check_options(units, up, joint_map)
     if asf is not None and not asf.is_file():
@@ -191,8 +191,8 @@ def motion_procedural(
 
     Example: wearpose motion procedural lie --namespace eval --count 20 --out heldout/lie/
     """
-    from wearpose.body import BodyModel
-    from wearpose.motion.procedural import procedural_clip, procedural_seed
+    from wearpose.body import BodyModel  # start-up: wearpose.body loads torch, +1.6 s to wearpose --help
+    from wearpose.motion.procedural import procedural_clip, procedural_seed  # start-up: wearpose.motion.procedural loads torch, +1.7 s to wearpose --help
 
     procedural_seed(family, index, seed, namespace)  # ConfigError naming the family or namespace
     model = BodyModel(body)

@@ -18,6 +18,9 @@ from rich.markup import escape
 from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console, error_text
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from wearpose.errors import InputFileError
+from wearpose.errors import WearposeError
 
 recording_app = typer.Typer(help="Import real sensor recordings: public datasets (DIP-IMU, TotalCapture, EM-POSE) "
                                  "and device files (x-IMU3 logs, Xsens MVNX, Movella DOT CSV, any CSV with a column map).\n\n"
@@ -68,6 +71,7 @@ def _parse_sensors(fmt: str, sensors: str | None) -> Any:
 def _converter(fmt: str, sensors: Any, fps: float | None, ground_truth: bool,
                column_map: Path | None = None) -> Callable[[Path], Any]:
     """One-argument converter with the options bound (options left unset keep the converter's default)."""
+    # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
     from wearpose.recording import (
         from_csv, from_dip_imu, from_empose, from_movella_dot, from_mvnx, from_totalcapture, from_ximu3, load_column_map,
     )
@@ -149,7 +153,7 @@ def _collect_sessions(paths: list[Path]) -> list[tuple[Path, Path]]:
 
 def _summary(rec: Any) -> dict[str, Any]:
     """Frames, sensors, rate and valid share of one converted recording."""
-    import numpy as np
+    import numpy as np  # start-up: numpy adds ~81 ms to wearpose --help
 
     valid = np.concatenate([s.valid for s in rec.sensors]) if rec.sensors else np.zeros(0, bool)
     rates = sorted({float(s.info.rate) for s in rec.sensors if s.info.rate})
@@ -167,8 +171,7 @@ def _summary(rec: Any) -> dict[str, Any]:
 def import_recordings(fmt: str, files: list[tuple[Path, Path]], out: Path, convert: Callable[[Path], Any],
                       on_file: Callable[[Path], None] | None = None) -> dict[str, Any]:
     """Convert and save each file; a file that fails is recorded with its error line, the others go on."""
-    from wearpose.errors import WearposeError
-    from wearpose.recording import save_recording
+    from wearpose.recording import save_recording  # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
 
     rows: list[dict[str, Any]] = []
     for f, rel in files:
@@ -194,8 +197,7 @@ def import_recordings(fmt: str, files: list[tuple[Path, Path]], out: Path, conve
 def _check_conventions(f: Path, rec: Any) -> None:
     """Refuse what :func:`wearpose.recording.load_recording` would refuse, before writing: the
     data does not look like its declared units or frames (every suspicion about the first field)."""
-    from wearpose.errors import InputFileError
-    from wearpose.recording import check_recording
+    from wearpose.recording import check_recording  # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
 
     issues = check_recording(rec.sensors)
     if issues:
@@ -277,7 +279,6 @@ def recording_import(
 
     Example: wearpose recording import csv trial.csv --map columns.yaml --out recordings/
     """
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     fmt = fmt.lower()
     if fmt not in FORMATS:

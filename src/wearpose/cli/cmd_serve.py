@@ -16,6 +16,12 @@ from rich.markup import escape
 from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
+from rich.progress import Progress
+from wearpose.cli.models import check_pose_weights, parse_settings
+from wearpose.cli.models import check_pose_weights, parse_settings, recording_mismatch
+from wearpose.errors import ConfigError
+from wearpose.errors import ShapeError
+import tempfile
 
 stream_app = typer.Typer(help="Clients of the streaming server (see wearpose serve).\n\n"
                               "Example: wearpose stream replay out/rec.npz --url ws://127.0.0.1:8765",
@@ -127,9 +133,8 @@ def serve(
 
     Example: wearpose serve --model pip_cpu --input mvn --mvn-segments pelvis,head,left_forearm,right_forearm,left_lower_leg,right_lower_leg --output vmc
     """
-    from wearpose.cli.models import check_pose_weights, parse_settings
-    from wearpose.stream import estimator_factory, run_server
-    from wearpose.stream.security import Limits, check_token, new_token, normalise_origin
+    from wearpose.stream import estimator_factory, run_server  # start-up: wearpose.stream loads torch, +2.0 s to wearpose --help
+    from wearpose.stream.security import Limits, check_token, new_token, normalise_origin  # start-up: wearpose.stream.security loads torch, +1.6 s to wearpose --help
 
     logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     token = new_token() if token is None else check_token(token)
@@ -168,10 +173,9 @@ def _devices(inputs: Optional[List[str]], host: str, rate: Optional[float], lsl_
              lsl_out_name: str, mvn_pose_subject: Optional[int] = None, ximu3_sensor: Optional[List[str]] = None,
              ximu3_transport: str = "tcp") -> tuple[list[Any], list[Any]]:
     """The --input / --output objects (library: wearpose.stream.inputs / outputs)."""
-    from wearpose.errors import ConfigError
-    from wearpose.stream.inputs import make_input
-    from wearpose.stream.inputs.osc import parse_sensor_ports
-    from wearpose.stream.outputs import make_output
+    from wearpose.stream.inputs import make_input  # start-up: wearpose.stream.inputs loads torch, +2.0 s to wearpose --help
+    from wearpose.stream.inputs.osc import parse_sensor_ports  # start-up: wearpose.stream.inputs.osc loads torch, +1.9 s to wearpose --help
+    from wearpose.stream.outputs import make_output  # start-up: wearpose.stream.outputs loads torch, +1.7 s to wearpose --help
 
     if lsl_loopback:
         _lsl_loopback()
@@ -192,7 +196,7 @@ def _devices(inputs: Optional[List[str]], host: str, rate: Optional[float], lsl_
 
 def _ximu3_ports(items: Optional[List[str]]) -> Optional[dict[str, int]]:
     """``--ximu3-sensor NAME=PORT`` values (the OSC parser's rule); ValueError otherwise."""
-    from wearpose.stream.inputs.osc import parse_sensor_ports
+    from wearpose.stream.inputs.osc import parse_sensor_ports  # start-up: wearpose.stream.inputs.osc loads torch, +1.9 s to wearpose --help
 
     if not items:
         return None
@@ -203,9 +207,8 @@ def _ximu3_ports(items: Optional[List[str]]) -> Optional[dict[str, int]]:
 
 
 def _lsl_loopback() -> None:
-    import tempfile
 
-    from wearpose.stream.inputs.lsl import write_loopback_config
+    from wearpose.stream.inputs.lsl import write_loopback_config  # start-up: wearpose.stream.inputs.lsl loads torch, +1.9 s to wearpose --help
 
     path = write_loopback_config(Path(tempfile.mkdtemp(prefix="wearpose-lsl-")) / "lsl_api.cfg")
     err_console.print(f"LSL kept on this machine: LSLAPICFG={path}", highlight=False)
@@ -234,11 +237,9 @@ def stream_replay(
 
     Example: wearpose stream replay out/demo-em12/recording.npz --speed 1 --dropout 0.001 --malformed 0.01
     """
-    from rich.progress import Progress
 
-    from wearpose.errors import ConfigError
-    from wearpose.recording import load_recording
-    from wearpose.stream import Faults, replay
+    from wearpose.recording import load_recording  # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
+    from wearpose.stream import Faults, replay  # start-up: wearpose.stream loads torch, +2.0 s to wearpose --help
 
     if fmt not in ("binary", "json"):
         raise typer.BadParameter(f"expected binary or json, got {fmt!r}", param_hint="--format")
@@ -302,7 +303,7 @@ def view_live(
 
     Example: wearpose serve & wearpose view-live --port 8080 & wearpose stream replay rec.npz
     """
-    from wearpose.viewer.live import run_live_viewer
+    from wearpose.viewer.live import run_live_viewer  # start-up: wearpose.viewer.live loads torch, +1.5 s to wearpose --help
 
     run_live_viewer(url, host=host, port=port, subjects=None if subject is None else [subject], body=body,
                     token=token, allow_origins=allow_origin or ())
@@ -331,10 +332,8 @@ def view_recording(
 
     Example: wearpose view-recording out/demo-em12/recording.npz --model empose12_cpu
     """
-    from wearpose.cli.models import check_pose_weights, parse_settings, recording_mismatch
-    from wearpose.errors import ShapeError
-    from wearpose.estimators.run import open_model
-    from wearpose.viewer.live import run_recording_viewer
+    from wearpose.estimators.run import open_model  # start-up: wearpose.estimators.run loads torch, +2.0 s to wearpose --help
+    from wearpose.viewer.live import run_recording_viewer  # start-up: wearpose.viewer.live loads torch, +1.5 s to wearpose --help
 
     source = None
     if model is not None:

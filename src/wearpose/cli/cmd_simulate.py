@@ -58,7 +58,7 @@ def simulate(
     On a Ray cluster: wearpose simulate --kit imu6 --split all --out /shared/sim/imu6 --executor ray --ray-address auto
     Unseen wearers of every size: wearpose simulate --kit imu6 --split test --shapes heldout --out sims/imu6-bodies
     """
-    from wearpose.recording.dataset import simulate_corpus
+    from wearpose.recording.dataset import simulate_corpus  # start-up: wearpose.recording.dataset loads torch, +1.9 s to wearpose --help
 
     res = simulate_corpus(out, kit, None if split == "all" else split, cache_dir=cache, source=source or None,
                           licence=licence or None, include_nc=include_nc, seed=seed, noise=noise, offsets=offsets,

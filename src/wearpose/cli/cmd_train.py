@@ -25,6 +25,8 @@ from typer.core import TyperGroup
 
 from wearpose.cli.app import _emit, app, console
 from wearpose.cli.helptext import reflow
+from wearpose.errors import WearposeError
+from wearpose.estimators.method import OptionError, resolve
 
 if TYPE_CHECKING:
     from wearpose.estimators.method import TrainOption, Training
@@ -35,12 +37,12 @@ class MethodCommands(TyperGroup):
     further ones, :meth:`~wearpose.estimators.method.MethodSpec.training_commands`)."""
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        from wearpose.estimators.registry import list_trainings
+        from wearpose.estimators.registry import list_trainings  # start-up: wearpose.estimators.registry adds ~25 ms to wearpose --help
 
         return sorted(set(super().list_commands(ctx)) | set(list_trainings()))
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        from wearpose.estimators.registry import list_trainings
+        from wearpose.estimators.registry import list_trainings  # start-up: wearpose.estimators.registry adds ~25 ms to wearpose --help
 
         cmd = super().get_command(ctx, cmd_name)
         trainings = list_trainings() if cmd is None else {}
@@ -74,7 +76,6 @@ def run_training(training: Training, values: dict[str, Any], train_command: str,
     keyword name, ``as_json`` too) and print the result; ``recipe`` (a
     :class:`~wearpose.estimators.recipe.Recipe`) is recorded in the run's checkpoints and its
     seed checked against the run's config. A refused value is that option's usage error."""
-    from wearpose.estimators.method import OptionError, resolve
 
     own, run = training.run_options(values)
     as_json = bool(values.get("as_json"))
@@ -86,7 +87,7 @@ def run_training(training: Training, values: dict[str, Any], train_command: str,
     except OptionError as exc:
         raise typer.BadParameter(str(exc), param_hint=exc.option) from None
     if recipe is not None:
-        from wearpose.estimators.recipe import check_seed
+        from wearpose.estimators.recipe import check_seed  # start-up: wearpose.estimators.recipe adds ~30 ms to wearpose --help
 
         check_seed(recipe, res.get("config"))
         res["recipe"] = recipe.record()
@@ -113,16 +114,15 @@ def train_recipe(
     if recipe is None:
         console.print(ctx.get_help())
         raise typer.Exit(0)
-    from wearpose.errors import WearposeError
-    from wearpose.estimators.recipe import check_corpus, load_recipe
-    from wearpose.estimators.registry import get_method
+    from wearpose.estimators.recipe import check_corpus, load_recipe  # start-up: wearpose.estimators.recipe adds ~30 ms to wearpose --help
+    from wearpose.estimators.registry import get_method  # start-up: wearpose.estimators.registry adds ~25 ms to wearpose --help
 
     try:
         r = load_recipe(recipe)
     except WearposeError as exc:
         raise typer.BadParameter(str(exc), param_hint="--recipe") from None
     if r.corpus is not None:
-        from wearpose.motion import CorpusStore
+        from wearpose.motion import CorpusStore  # start-up: wearpose.motion loads torch, +1.7 s to wearpose --help
 
         check_corpus(r, CorpusStore().provenance().get("corpus"))
     values = {**r.values, "as_json": as_json,

