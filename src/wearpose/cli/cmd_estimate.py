@@ -19,6 +19,7 @@ from wearpose.cli.app import _emit, _kv_table, app, console, err_console
 from wearpose.cli.models import check_pose_weights, recording_mismatch
 from wearpose.errors import InputFileError, ShapeError
 
+
 @app.command()
 def estimate(
     recording: Path = typer.Argument(..., help="A wearpose recording (.npz, docs/formats.md) with the sensors of the "

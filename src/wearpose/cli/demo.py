@@ -27,6 +27,7 @@ from wearpose.estimators.method import resolve, target_available
 from wearpose.estimators.seeding import clip_seed
 from wearpose.weights import card
 
+
 def kit_demos() -> dict[str, str]:
     """``wearpose demo --kit K`` -> ``"module:function"``, from every method's declaration
     (:attr:`wearpose.estimators.method.MethodSpec.demos`). Each function has the signature
