@@ -85,6 +85,7 @@ def check_dependencies() -> list[Check]:
 
 
 def check_torch() -> list[Check]:
+    # isolation: imported by the check that needs it, so a broken part fails only its own check
     import torch
 
     cuda = torch.cuda.is_available()
@@ -95,8 +96,9 @@ def check_torch() -> list[Check]:
 
 
 def check_body() -> list[Check]:
+    # isolation: imported by the check that needs it, so a broken part fails only its own check
     from wearpose.body import BodyModel
-    from wearpose.body.asset import SMPL_ENV
+    from wearpose.body.asset import SMPL_ENV  # isolation: as above
 
     body = BodyModel()
     out = [Check("body", "embedded asset", "ok", f"{body.asset_id}: {body.num_vertices} vertices, "
@@ -116,6 +118,7 @@ def check_body() -> list[Check]:
 
 
 def check_data() -> list[Check]:
+    # isolation: imported by the check that needs it, so a broken part fails only its own check
     from wearpose.motion import CorpusStore, cache_dir, data_dir
 
     out: list[Check] = []
@@ -138,8 +141,9 @@ def check_data() -> list[Check]:
 
 
 def check_weights() -> list[Check]:
+    # isolation: imported by the check that needs it, so a broken part fails only its own check
     from wearpose.estimators.checkpoint import load_checkpoint
-    from wearpose.weights import card, list_weights, weight_path
+    from wearpose.weights import card, list_weights, weight_path  # isolation: as above
 
     out: list[Check] = []
     names = list_weights()
@@ -151,7 +155,7 @@ def check_weights() -> list[Check]:
             size = weight_path(name).stat().st_size / 1e6
             if str(c.get("method", "")).startswith("nbeats"):
                 # Not an estimator checkpoint: the N-BEATS forecaster of MI-Poser's interference correction.
-                from wearpose.interference.nbeats import load_forecaster
+                from wearpose.interference.nbeats import load_forecaster  # isolation: this check alone needs it
 
                 load_forecaster(weight_path(name))
                 what = f"{c['method']}, {size:.1f} MB"
@@ -165,6 +169,7 @@ def check_weights() -> list[Check]:
 
 
 def check_estimators() -> list[Check]:
+    # isolation: imported by the check that needs it, so a broken part fails only its own check
     from wearpose.estimators.registry import list_estimators
 
     return [Check("estimators", "available", "ok", ", ".join(list_estimators()))]

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import os
 import tempfile
+import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+from numpy.lib import format as npy
 
 
 def _umask() -> int:
@@ -48,7 +50,7 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
 def atomic_torch_save(path: str | Path, obj: Any) -> Path:
     """``torch.save(obj)`` to exactly ``path``, atomically, through a temporary file of its own
     (unique per call: torchrun ranks building the same cache never share one)."""
-    import torch  # here: the recording reader imports this module and needs no torch for it
+    import torch  # start-up: the recording reader imports this module and needs no torch for it
 
     return _atomic(path, ".tmp", lambda tmp: torch.save(obj, tmp))
 
@@ -62,8 +64,6 @@ def npz_problem(path: str | Path, exc: BaseException) -> str:
     """Why ``np.load(path)`` could not read ``path`` as an ``.npz``, in a user's words: another
     kind of file, a damaged/truncated archive (e.g. an interrupted copy), or numpy's own reason.
     For error messages (:class:`wearpose.errors.InputFileError` ``problem``)."""
-    import zipfile
-
     try:
         with open(path, "rb") as f:
             head = f.read(4)
@@ -85,10 +85,6 @@ def npz_declared_size_problem(path: str | Path) -> tuple[str, str] | None:
     from the headers and the zip directory alone, before any array is read. Members numpy cannot
     parse are left to ``np.load``, which reports them.
     """
-    import zipfile
-
-    from numpy.lib import format as npy
-
     with zipfile.ZipFile(path) as z:
         for info in z.infolist():
             if not info.filename.endswith(".npy"):
