@@ -33,7 +33,7 @@ from wearpose.estimators.registry import get_estimator
 from wearpose.geometry import quat_to_matrix
 from wearpose.recording import Recording, RecordingError, calibration_window, decimate
 from wearpose.estimators.registry import list_estimators
-from wearpose.weights import card, list_weights, weight_path
+from wearpose import weights as shipped  # the module, not its names: a test (or a plug-in) may replace them
 
 
 @dataclass(frozen=True)
@@ -87,15 +87,15 @@ def open_model(model: str | Path, method: str | None = None) -> ModelSource:
     """
 
     name = str(model)
-    if name in list_weights():
-        path, c = weight_path(name), card(name)
+    if name in shipped.list_weights():
+        path, c = shipped.weight_path(name), shipped.card(name)
     elif Path(name).suffix == ".pt" or Path(name).is_file():
         path, c = Path(name), {}
     else:
         free = [n for n in list_estimators() if not getattr(get_estimator(n), "has_weights", True)]
         if name in free:
             return ModelSource(name=name, method=method or name)
-        raise ConfigError(f"--model {name!r}: neither shipped weights ({', '.join(list_weights()) or 'none'}), a "
+        raise ConfigError(f"--model {name!r}: neither shipped weights ({', '.join(shipped.list_weights()) or 'none'}), a "
                           f"checkpoint file, nor a weight-free estimator ({', '.join(free)})")
     ck = load_checkpoint(path)
     fps = ck.config.get("rate") if isinstance(ck.config, dict) else None  # Hz the network was trained at
