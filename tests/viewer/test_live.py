@@ -186,8 +186,15 @@ def test_camera_follows_the_walking_body_in_headless_chromium() -> None:
         browser = Browser(viewer.url)
         t0 = time.time()
         first = None
-        while first is None and time.time() - t0 < 20:  # the page connects and draws while playing
+        # The page connects and draws while playing. Its first camera is viser's default, applied
+        # before the initial one (the cause of 562bec5's oblique view): the reference picture is
+        # taken once the browser has reported the initial camera's orbit (a picture taken before
+        # it moved the body 57 px on screen in one CI run).
+        while first is None and time.time() - t0 < 20:
             time.sleep(0.5)
+            if not (reports and np.allclose(reports[-1][0] - reports[-1][1], orbit0, atol=0.02)):
+                continue
+            time.sleep(0.3)  # that camera drawn
             shot = browser.screenshot()
             first = shot if len(_blue(shot)) > 50 else None
         assert first is not None, "the body was never drawn"
