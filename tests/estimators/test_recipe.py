@@ -52,9 +52,9 @@ def test_shipped_recipes_load_and_miposer_cpu_is_its_cards_command() -> None:
 @pytest.mark.parametrize("body, field, problem", [
     ("method: nope\noptions: {}\n", "method", "method 'nope'"),
     ("method: miposer\noptions: {epochs: 2}\nbudget: {epochs: 3}\n", "budget.epochs", "given in options and budget"),
-    ("method: miposer\noptions: {mirror: true}\n", "options.mirror", "not an option of wearpose train miposer"),
+    ("method: miposer\noptions: {sitting_clips: 3}\n", "options.sitting_clips", "not an option of wearpose train miposer"),
     ("method: miposer\noptions: {wrists: two}\n", "options.wrists", "'two' is str"),
-    ("method: miposer\ninit_from: x.pt\n", "init_from.init_from", "not an option"),
+    ("method: miposer\ninit_from: archive:nope_v1\n", "init_from", "no archived weights 'nope_v1'"),
     ("method: miposer\nepochs: 3\n", "epochs", "unknown keys"),
     ("method: miposer\nseed: zero\n", "seed", "seed 'zero'"),
 ])
@@ -120,3 +120,14 @@ def test_smoke_recipe_runs_end_to_end_and_is_recorded(tmp_path: Path, corpus_sto
     assert rec["options"]["config"] == "tiny" and rec["options"]["epochs"] == 1 and rec["options"]["limit"] == 2
     assert rec["sha1"] == load_recipe("empose12_smoke").sha1 and ck.meta["train_clips"] == 2
     assert ck.train_command == "wearpose train --recipe empose12_smoke"
+
+
+def test_archive_init_from_and_seed_set_the_run(tmp_path: Path) -> None:
+    """``init_from: archive:<name>`` is the archived shipped file on any checkout; ``seed`` sets the run's --seed."""
+    from wearpose.weights import WEIGHTS_DIR
+
+    f = tmp_path / "e.yaml"
+    f.write_text(HEADER + "method: empose\noptions: {config: tiny}\ninit_from: archive:empose12_cpu_v1\nseed: 4\n")
+    r = load_recipe(f)
+    assert Path(r.values["init_from"]) == WEIGHTS_DIR / "archive" / "empose12_cpu_v1.pt"
+    assert Path(r.values["init_from"]).is_file() and r.values["seed"] == 4 and r.seed == 4

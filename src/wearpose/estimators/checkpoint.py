@@ -202,6 +202,32 @@ class NetworkCheckpointing:
             ckpt.check(body_asset=body.asset_id, path=path)
         return body
 
+    def warm_start(self, path: str | Path) -> Any:
+        """Start training from the weights of checkpoint ``path`` (fine-tuning): the same method,
+        kit and body asset, every tensor of the same shape; the provenance stays this run's,
+        with ``meta["init_from"]`` = ``path``. Returns the estimator.
+
+        Raises:
+            CheckpointMismatchError: another method / kit / asset, or a weight whose shape or
+                name differs (both sides named).
+        """
+        ckpt = load_checkpoint(path)
+        ckpt.check(method=self.name, kit=self.kit_name, body_asset=self.body_asset_id, path=path)
+        own = self.model.state_dict()
+        missing, extra = sorted(set(own) - set(ckpt.weights)), sorted(set(ckpt.weights) - set(own))
+        if missing or extra:
+            raise CheckpointMismatchError(f"{path}: --init-from weights do not match this {self.name} network: "
+                                          f"missing {missing[:5]}, unexpected {extra[:5]}; train with the same sizes "
+                                          "as the checkpoint's config")
+        for k, v in own.items():
+            if tuple(ckpt.weights[k].shape) != tuple(v.shape):
+                raise CheckpointMismatchError(f"{path}: --init-from weight {k!r} is {tuple(ckpt.weights[k].shape)}, "
+                                              f"this network's is {tuple(v.shape)}; train with the same sizes as the "
+                                              "checkpoint's config")
+        self.model.load_state_dict(ckpt.weights)
+        self.meta["init_from"] = str(path)
+        return self
+
     def restore(self, ckpt: Checkpoint) -> Any:
         """Load ``ckpt``'s weights and provenance (data fingerprint, train command, meta); returns the estimator."""
         self.model.load_state_dict(ckpt.weights)

@@ -114,7 +114,8 @@ def concat_clips(clips: Iterable[Any], one: Callable[[Any], dict[str, torch.Tens
 
 def split_source(split: str, settings: dict[str, Any], method: str, *, store: Any = None, limit: int | None = None,
                  cache_root: str | Path | None = None,
-                 clip_ids: Sequence[str] | None = None) -> tuple[Any, list[str], str, Path]:
+                 clip_ids: Sequence[str] | None = None, cfg: Any = None,
+                 body: Any = None) -> tuple[Any, list[str], str, Path]:
     """Where a method's split comes from and is cached.
 
     Args:
@@ -125,6 +126,10 @@ def split_source(split: str, settings: dict[str, Any], method: str, *, store: An
         limit: the first ``limit`` clips (sorted ids) only.
         cache_root: the cache folder (default ``<store root>/estimators/<method>``).
         clip_ids: these clips instead of the split's.
+        cfg, body: the method's config and body model: the train split then holds the config's
+            training mix too (:func:`wearpose.estimators.trainmix.training_source`: augmented
+            copies, procedural clips, wearers; its settings join the fingerprint), loaded through
+            the returned store.
 
     Returns:
         ``(store, ids, fingerprint, cache folder)``.
@@ -135,6 +140,12 @@ def split_source(split: str, settings: dict[str, Any], method: str, *, store: An
     ids = list(clip_ids) if clip_ids is not None else list(store.clips(split=split))
     if limit:
         ids = ids[:limit]
+    if cfg is not None:
+        # start-up: trainmix loads the augmentation and procedural motion modules (~60 ms)
+        from wearpose.estimators.trainmix import training_source
+
+        store, ids, extra = training_source(split, store, ids, cfg, body, method)
+        settings = {**settings, **extra}
     fp = fingerprint(ids, {**settings, "split": split})
     root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / method
     return store, ids, fp, root

@@ -119,6 +119,29 @@ SHARED_OPTIONS: tuple[TrainOption, ...] = (
     TrainOption("as_json", False, "Print the result as JSON.", flags=("--json",)),
 )
 
+#: The options of a method whose config is a :class:`~wearpose.estimators.trainconfig.TrainConfig`
+#: and whose training data go through the training mix (:attr:`Training.mix`; declared once):
+#: the seed, the fine-tuning start, and the mix (TrainConfig's ``aug_*``, ``procedural_per_family``,
+#: ``train_shapes``; docs/augmentation.md). They come after the method's own options.
+MIX_OPTIONS: tuple[TrainOption, ...] = (
+    TrainOption("seed", None, "Base seed of the data draws, batch order and initial weights (default: the "
+                              "preset's).", int, min=0),
+    TrainOption("init_from", None, "Start from this checkpoint's weights (fine-tuning: same method, kit and "
+                                   "sizes; fresh optimiser).", Path),
+    TrainOption("mirror", False, "Add the left/right mirror image of every training clip.", flags=("--mirror",)),
+    TrainOption("speed_copies", None, "Add N copies of every training clip played faster or slower "
+                                      "(0.8-1.25x, log-uniform).", int, min=0),
+    TrainOption("heading_copies", None, "Add N copies of every training clip turned to a random heading.", int, min=0),
+    TrainOption("mix_copies", None, "Add N copies of every training clip with the upper body of another clip.",
+                int, min=0),
+    TrainOption("site_jitter", None, "Strap every simulated sensor up to M metres off its site, drawn per "
+                                     "training clip.", float, min=0.0, max=0.1),
+    TrainOption("procedural", None, "Add N procedural clips of each motion family the corpus lacks (squat, kneel, "
+                                    "pick up, sit, lie down, crawl, reach).", int, min=0),
+    TrainOption("shapes", None, "Wearers of the training clips: corpus (the clips' own body) or random (an adult "
+                                "body drawn per clip).", str),
+)
+
 
 @dataclass(frozen=True)
 class TrainRun:
@@ -135,10 +158,27 @@ class TrainRun:
     limit: int | None = None
     source: str | None = None
     checkpoint_every: int = 100
+    seed: int | None = None
+    init_from: Path | None = None
+    mirror: bool = False
+    speed_copies: int | None = None
+    heading_copies: int | None = None
+    mix_copies: int | None = None
+    site_jitter: float | None = None
+    procedural: int | None = None
+    shapes: str | None = None
     train_command: str = ""
     quiet: bool = False
     console: Any = None
     recipe: Mapping[str, Any] | None = None
+
+    def config_overrides(self) -> dict[str, Any]:
+        """The config fields the shared options set: ``seed`` and the training mix (None: the
+        preset's; ``config.override`` skips them)."""
+        return {"seed": self.seed, "aug_mirror": self.mirror or None, "aug_speed_copies": self.speed_copies,
+                "aug_heading_copies": self.heading_copies, "aug_mix_copies": self.mix_copies,
+                "aug_site_jitter_m": self.site_jitter, "procedural_per_family": self.procedural,
+                "train_shapes": self.shapes}
 
     @property
     def limit_train(self) -> int | None:
@@ -167,7 +207,7 @@ class TrainRun:
         return {"epochs": self.epochs, "resume": self.resume, "threads": self.threads, "device": self.device,
                 "limit_train": self.limit_train, "checkpoint_every": self.checkpoint_every,
                 "train_command": self.train_command, "quiet": self.quiet, "console": self.console,
-                "store": self.corpus_store(), "recipe": self.recipe}
+                "store": self.corpus_store(), "recipe": self.recipe, "init_from": self.init_from}
 
 
 @dataclass(frozen=True)
@@ -188,6 +228,8 @@ class Training:
         defaults / help: the shared options' defaults and help texts this method changes.
         omit: shared options this method does not take (BiRAE: ``epochs``, ``limit``; a
             training with no presets: ``config``).
+        mix: the method also takes :data:`MIX_OPTIONS` (seed, ``--init-from``, the training mix),
+            passed on in :class:`TrainRun` (:meth:`TrainRun.config_overrides`).
     """
 
     entry: str
@@ -197,10 +239,11 @@ class Training:
     defaults: Mapping[str, Any] = field(default_factory=dict)
     help: Mapping[str, str] = field(default_factory=dict)
     omit: frozenset[str] = frozenset()
+    mix: bool = False
 
     def all_options(self) -> tuple[TrainOption, ...]:
         """``--config``, the method's options, then the other shared ones (``--json`` last)."""
-        shared = {o.name: o for o in SHARED_OPTIONS}
+        shared = {o.name: o for o in (*SHARED_OPTIONS, *(MIX_OPTIONS if self.mix else ()))}
         unknown = (set(self.defaults) | set(self.help) | set(self.omit)) - set(shared)
         if unknown:
             raise ConfigError(f"train declaration: {sorted(unknown)} are not shared options "
@@ -214,13 +257,14 @@ class Training:
             return replace(o, default=self.defaults.get(name, o.default), help=self.help.get(name, o.help))
 
         rest = [shared_option(o.name) for o in SHARED_OPTIONS[1:] if o.name not in self.omit]
+        mix = [shared_option(o.name) for o in MIX_OPTIONS if o.name not in self.omit] if self.mix else []
         first = () if "config" in self.omit else (shared_option("config"),)
-        return (*first, *self.options, *rest)
+        return (*first, *self.options, *mix, *rest)
 
     def run_options(self, values: Mapping[str, Any]) -> tuple[dict[str, Any], TrainRun]:
         """Split parsed option ``values`` into the method's own options and the :class:`TrainRun`
         fields (``as_json`` becomes neither: it is the command line's)."""
-        shared = {o.name for o in SHARED_OPTIONS} - {"as_json"}
+        shared = {o.name for o in (*SHARED_OPTIONS, *MIX_OPTIONS)} - {"as_json"}
         own = {k: v for k, v in values.items() if k not in shared and k != "as_json"}
         return own, TrainRun(**{k: v for k, v in values.items() if k in shared})
 

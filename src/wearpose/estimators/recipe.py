@@ -8,8 +8,9 @@ A recipe (``format: wearpose.recipe``, ``version: 1``)::
     options: {config: cpu, model: avatarposer, wrists: 2, ...}   # the method's options
     budget: {epochs: 5}              # options that set the training length
     augmentation: {}                 # options that set the augmentation (PIP: mirror, speed_copies)
-    init_from: null                  # the init-from checkpoint (methods with --init-from only)
-    seed: 0                          # the config's seed (checked against the run's config)
+    init_from: null                  # the checkpoint the run starts from (fine-tuning): a path, or
+                                     # archive:<name> for archived weights (wearpose/weights/archive)
+    seed: 0                          # the config's seed (the run's --seed; checked against its config)
     corpus: {name: data-v2, manifest_sha1: 94395d87...}   # the prepared store must hold this corpus
 
 Every key of ``options``, ``budget`` and ``augmentation`` is an option of ``wearpose train
@@ -113,7 +114,7 @@ def load_recipe(name_or_path: str | Path) -> Recipe:
 
     Raises:
         InputFileError: not YAML, not a recipe, an unknown key, method or option, an option in
-            two sections, a value of the wrong type, ``init_from`` for a method without it.
+            two sections, a value of the wrong type.
     """
 
     path = find_recipe(name_or_path)
@@ -156,7 +157,9 @@ def _values(path: Path, d: Mapping[str, Any], spec: MethodSpec) -> dict[str, Any
     seen: dict[str, str] = {}
     sections = [(s, d.get(s) or {}) for s in OPTION_SECTIONS]
     if d.get("init_from") is not None:
-        sections.append(("init_from", {"init_from": d["init_from"]}))
+        sections.append(("init_from", {"init_from": _init_from(path, d["init_from"])}))
+    if isinstance(d.get("seed"), int) and "seed" in declared:  # a bad seed is named by load_recipe
+        sections.append(("seed", {"seed": d["seed"]}))
     for section, opts in sections:
         if not isinstance(opts, dict):
             raise InputFileError(path, f"{section} is {type(opts).__name__}", "a mapping of option names to values",
@@ -171,6 +174,19 @@ def _values(path: Path, d: Mapping[str, Any], spec: MethodSpec) -> dict[str, Any
             seen[k] = section
             values[k] = _typed(path, f"{section}.{k}", v, declared[k].value_type)
     return values
+
+
+def _init_from(path: Path, v: Any) -> Any:
+    """``init_from``: ``archive:<name>`` is archived shipped weights
+    (:func:`wearpose.weights.archived_path`, the same file on every checkout); anything else a path."""
+    if not (isinstance(v, str) and v.startswith("archive:")):
+        return v
+    from wearpose.weights import archived_path  # start-up: keeps the weights module out of reading declarations
+
+    try:
+        return str(archived_path(v.split(":", 1)[1]))
+    except ConfigError as exc:
+        raise InputFileError(path, str(exc), "archive:<name> of a file in wearpose/weights/archive", field="init_from") from None
 
 
 def _typed(path: Path, where: str, v: Any, kind: type) -> Any:

@@ -409,7 +409,7 @@ def train_estimator(est: Any, out_dir: str | Path, build: Callable[..., Any], ma
                     max_steps: int | None = None, checkpoint_every: int = 100, train_command: str = "",
                     quiet: bool = False, store: Any = None, cache_root: str | Path | None = None, console: Any = None,
                     progress_every: int = 200, val_frames: bool = True,
-                    recipe: dict[str, Any] | None = None) -> dict[str, Any]:
+                    recipe: dict[str, Any] | None = None, init_from: str | Path | None = None) -> dict[str, Any]:
     """Build the data of a method, set the run up and train ``est`` in place with :func:`train`.
 
     In order: torch CPU ``threads``; the train and val splits (``build``, progress printed every
@@ -432,6 +432,8 @@ def train_estimator(est: Any, out_dir: str | Path, build: Callable[..., Any], ma
         max_steps: stop after N optimiser steps (tests).
         val_frames: also print the validation frame count.
         recipe: the recipe the run was started from (``est.meta["recipe"]``, so in every checkpoint).
+        init_from: start from this checkpoint's weights (``est.warm_start``; ignored when resuming:
+            ``last.pt`` holds the run's own weights).
         The other options are :class:`TrainSettings`'.
 
     Returns:
@@ -457,6 +459,9 @@ def train_estimator(est: Any, out_dir: str | Path, build: Callable[..., Any], ma
         est.meta["train_sources"] = list(store.sources_only)
     if recipe is not None:
         est.meta["recipe"] = dict(recipe)
+    if init_from is not None and not resume:
+        est.warm_start(init_from)
+        console.print(f"initial weights from {init_from}")
     task = make_task(tr, va)
     est.to(resolve_device(device))  # network and body together: some losses run the body model
     s = loop_settings(cfg, out_dir, epochs or cfg.epochs, resume=resume, threads=threads, device=device,

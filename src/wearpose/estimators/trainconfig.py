@@ -28,10 +28,23 @@ class TrainConfig(ConfigIO):
     ``cosine`` decay to ``lr_min_factor * lr`` over the run, and where a method allows it
     ``exp``, see :class:`wearpose.estimators.train.TrainSettings`); ``lr_min_factor``;
     ``batch_size`` windows per optimiser step; ``grad_clip`` max global gradient norm (0 = off).
+
+    The training mix (:mod:`wearpose.estimators.trainmix`: what the *train* split holds beyond
+    its corpus clips; validation and test never change): ``aug_mirror`` the left/right mirror
+    image of every corpus clip; ``aug_speed_copies`` copies played at a speed drawn from
+    ``aug_speed_range`` (log-uniform); ``aug_heading_copies`` copies turned to a random heading;
+    ``aug_mix_copies`` copies whose upper body comes from another clip; ``aug_site_jitter_m``
+    sensors strapped up to that far (m) off their sites, drawn per clip; ``procedural_per_family``
+    procedural clips of each family of :mod:`wearpose.motion.procedural` (squat, kneel, ...);
+    ``train_shapes`` the wearers, ``"corpus"`` (the clips' own body, beta = 0) or ``"random"``
+    (one adult body drawn per clip, :func:`wearpose.body.shapes.sample_betas`).
     """
 
     #: The learning-rate schedules a method's training accepts.
     LR_SCHEDULES: ClassVar[tuple[str, ...]] = ("constant", "cosine")
+    #: ``train_shapes`` values.
+    TRAIN_SHAPES: ClassVar[tuple[str, ...]] = ("corpus", "random")
+    TUPLE_FIELDS = {"aug_speed_range": float}
 
     seed: int = 0
     val_clips: int = 0
@@ -40,11 +53,32 @@ class TrainConfig(ConfigIO):
     lr_min_factor: float = 0.1
     batch_size: int = 32
     grad_clip: float = 1.0
+    aug_mirror: bool = False
+    aug_speed_copies: int = 0
+    aug_speed_range: tuple[float, float] = (0.8, 1.25)
+    aug_heading_copies: int = 0
+    aug_mix_copies: int = 0
+    aug_site_jitter_m: float = 0.0
+    procedural_per_family: int = 0
+    train_shapes: str = "corpus"
 
     def __post_init__(self) -> None:
+        name = type(self).__name__
         if self.lr_schedule not in self.LR_SCHEDULES:
-            raise ConfigError(f"{type(self).__name__}.lr_schedule: expected one of "
+            raise ConfigError(f"{name}.lr_schedule: expected one of "
                               f"{', '.join(repr(s) for s in self.LR_SCHEDULES)}, got {self.lr_schedule!r}")
+        for field in ("aug_speed_copies", "aug_heading_copies", "aug_mix_copies", "procedural_per_family"):
+            if int(getattr(self, field)) < 0:
+                raise ConfigError(f"{name}.{field}: expected a count >= 0, got {getattr(self, field)!r}")
+        lo_hi = tuple(self.aug_speed_range)
+        if len(lo_hi) != 2 or not 0.0 < lo_hi[0] <= lo_hi[1]:
+            raise ConfigError(f"{name}.aug_speed_range: expected (low, high) with 0 < low <= high, "
+                              f"got {self.aug_speed_range!r}")
+        if not 0.0 <= self.aug_site_jitter_m <= 0.1:
+            raise ConfigError(f"{name}.aug_site_jitter_m: expected 0-0.1 m, got {self.aug_site_jitter_m!r}")
+        if self.train_shapes not in self.TRAIN_SHAPES:
+            raise ConfigError(f"{name}.train_shapes: expected one of "
+                              f"{', '.join(repr(s) for s in self.TRAIN_SHAPES)}, got {self.train_shapes!r}")
 
 
 @dataclass(frozen=True, kw_only=True)

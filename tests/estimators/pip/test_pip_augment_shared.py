@@ -1,5 +1,6 @@
-"""PIP's augmentation goes through wearpose.motion.augment: the augmented clips are bit-identical
-to what PIP's own code made before (the old code is kept here as the reference)."""
+"""PIP's augmentation goes through the shared training mix (wearpose.estimators.trainmix, on
+wearpose.motion.augment): the augmented clips are bit-identical to what PIP's own code made
+before (the old code is kept here as the reference)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ import torch
 from tests.estimators.pip.test_pip_kinematics import FakeStore, tiny
 from wearpose.body import BodyModel
 from wearpose.estimators.seeding import clip_seed
-from wearpose.estimators.pip.data import augment_settings, augmented_ids, augmented_motion
+from wearpose.estimators.pip.data import AUG_NAMESPACE
+from wearpose.estimators.trainmix import TrainingMix, TrainingStore
 from wearpose.motion import mirror, play_speed
 
 
@@ -38,12 +40,14 @@ def test_pip_augmented_clips_bit_identical_to_the_former_code(tmp_path) -> None:
     for cfg in (tiny(aug_mirror=True, aug_speed_copies=3, aug_speed_range=(0.7, 1.4)),
                 tiny(aug_mirror=False, aug_speed_copies=2), tiny(aug_mirror=True, aug_speed_copies=0, seed=5)):
         ids = store.clips("train")
-        assert augmented_ids(ids, cfg) == _former_ids(ids, cfg)
-        for aid in augmented_ids(ids, cfg):
-            new, old = augmented_motion(aid, store, cfg, body), _former_motion(aid, store, cfg, body)
+        mix = TrainingMix.from_config(cfg)
+        tstore = TrainingStore(store, mix, body, ids, cfg.seed, AUG_NAMESPACE)
+        assert mix.extra_ids(ids) == _former_ids(ids, cfg)
+        for aid in mix.extra_ids(ids):
+            new, old = tstore.load(aid), _former_motion(aid, store, cfg, body)
             assert torch.equal(new.pose, old.pose) and torch.equal(new.trans, old.trans), aid
             assert torch.equal(new.betas, old.betas) and new.fps == old.fps and new.meta == old.meta, aid
         # the settings a recipe records
-        d = augment_settings(cfg).to_dict()
+        d = mix.augment.to_dict()
         assert d["mirror"] == cfg.aug_mirror and d["speed_copies"] == cfg.aug_speed_copies
         assert d["speed_range"] == list(cfg.aug_speed_range) and d["heading_copies"] == 0

@@ -475,14 +475,14 @@ def test_heldout_sitting_clips_end_seated_and_are_not_training_clips(body) -> No
 
 def test_augmented_train_split_mirror_and_speed(body, tmp_path: Path) -> None:
     from wearpose.body.skeleton import MIRROR
-    from wearpose.estimators.pip.data import augmented_ids
+    from wearpose.estimators.trainmix import TrainingMix
 
     store = FakeStore(tmp_path / "store", {"train": 3, "val": 2})
     cfg = tiny(aug_mirror=True, aug_speed_copies=2, aug_speed_range=(0.7, 1.4))
     base = build_split("train", tiny(), body, store=store, cache_root=tmp_path / "cache")
     aug = build_split("train", cfg, body, store=store, cache_root=tmp_path / "cache")
     assert aug.clip_ids[:3] == base.clip_ids and len(aug.clip_ids) == 3 * 4
-    assert aug.clip_ids[3:] == augmented_ids(base.clip_ids, cfg)
+    assert aug.clip_ids[3:] == TrainingMix.from_config(cfg).extra_ids(base.clip_ids)
     assert torch.equal(aug.x[:base.num_frames], base.x)  # the corpus clips are untouched
     # Mirrored copy: each joint's root-frame velocity is its mirror joint's, x negated.
     i = aug.clip_ids.index(base.clip_ids[0] + "#mirror")

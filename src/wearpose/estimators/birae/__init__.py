@@ -32,6 +32,7 @@ METHOD = MethodSpec(
     presets=("tiny", "cpu", "paper"),
     kits=("mimu6",),
     training=Training(
+        mix=True,
         entry="wearpose.estimators.birae.entry:train_from_options",
         doc="""Train BiRAE: clean synthetic orientations first, then noise/impulse/yaw-drift augmented.
 
@@ -46,13 +47,13 @@ METHOD = MethodSpec(
             TrainOption("width", None, "Override the input FC width.", int),
             TrainOption("batch_size", None, "Override the batch size.", int, min=1),
             TrainOption("train_clips", None, "Use only the first N training clips (quick runs).", int, min=1),
-            TrainOption("init_from", None, "Start from this BiRAE checkpoint's weights (same --rep); with "
-                                           "--epochs-clean 0 it continues in the augmented phase.", Path),
             TrainOption("lr", None, "Override the initial learning rate.", float),
         ),
         omit=frozenset({"epochs", "limit"}),  # two phases, each with its epochs; --train-clips
         defaults={"device": "cpu", "checkpoint_every": 50},
         help={"config": "Preset: tiny (smoke test), cpu (CPU-sized), paper (Sec. IV-A/E).",
+              "init_from": "Start from this BiRAE checkpoint's weights (same --rep); with --epochs-clean 0 it "
+                           "continues in the augmented phase.",
               "out": "Run directory (default runs/birae_<rep>_<config>).",
               "resume": "Continue each phase from its last.pt.", "device": "cpu, cuda[:i] or auto."},
     ),

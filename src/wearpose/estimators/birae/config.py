@@ -58,7 +58,7 @@ class BiraeConfig(TrainConfig):
     at ``rate`` (Sec. V-D: [130, 30] at 60 Hz).
     """
 
-    TUPLE_FIELDS = {"window": None}
+    TUPLE_FIELDS = {**TrainConfig.TUPLE_FIELDS, "window": None}
     LR_SCHEDULES = ("exp", "cosine", "constant")
 
     rep: str = "6param"

@@ -247,7 +247,8 @@ def build_split(split: str, cfg: BiraeConfig, *, store: Any = None, limit: int |
                 cache_root: str | Path | None = None, progress: Any = None) -> BiraeData:
     """Synthesise (or load from the cache) one corpus split (first ``limit`` sorted clip ids)."""
     settings = data_settings(cfg)
-    store, ids, fp, root = split_source(split, settings, "birae", store=store, limit=limit, cache_root=cache_root)
+    store, ids, fp, root = split_source(split, settings, "birae", store=store, limit=limit, cache_root=cache_root,
+                                        cfg=cfg)
     path = root / f"{split}-{fp[:16]}.pt"
     d = cached_clips(path, ids, fp, lambda: build_from_motions((store.load(c) for c in ids), ids, cfg,
                                                                 "train" if split == "train" else split, progress))

@@ -30,12 +30,12 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     if rep not in REPS:
         raise OptionError("--rep", f"unknown representation {rep!r}; expected one of {', '.join(REPS)}")
     cfg = BiraeConfig.preset(run.config, rep).override(
-        **{k: opts[k] for k in ("hidden", "width", "batch_size", "train_clips", "lr")})
+        **{k: opts[k] for k in ("hidden", "width", "batch_size", "train_clips", "lr")}, **run.config_overrides())
     out = run.out or Path("runs") / f"birae_{rep}_{run.config}"
     res = train_birae(BiraeEstimator(cfg), out, resume=run.resume, threads=run.threads, device=run.device,
                       epochs_clean=opts["epochs_clean"], epochs_aug=opts["epochs_aug"],
                       checkpoint_every=run.checkpoint_every, train_command=run.train_command,
-                      init_from=opts["init_from"], quiet=run.quiet, console=run.console, store=run.corpus_store(),
+                      init_from=run.init_from, quiet=run.quiet, console=run.console, store=run.corpus_store(),
                       recipe=run.recipe)
     return {"method": "birae", "rep": rep, "config": cfg.to_dict(), **res}
 

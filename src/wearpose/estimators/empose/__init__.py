@@ -39,6 +39,7 @@ METHOD = MethodSpec(
     presets=("tiny", "cpu", "paper"),
     kits=("em12", "em6"),
     training=Training(
+        mix=True,
         entry=f"{_P}.entry:train_from_options",
         doc="""Train EM-POSE (LGD-RNN or a Table 2 baseline) on virtual EM sensors.
 
@@ -54,6 +55,7 @@ METHOD = MethodSpec(
             TrainOption("width", None, "Override the update-MLP width.", int),
             TrainOption("iterations", None, "Override N, the LGD iterations.", int),
             TrainOption("batch_size", None, "Override the batch size.", int, min=1),
+            TrainOption("lr", None, "Override the learning rate.", float),
             TrainOption("offsets", None, "Subject offsets in training data: random (default) or none "
                                          "(EM-POSE's 'no [R|t]' ablation).", str),
             TrainOption("ablation", None, "An EM-POSE Table 3 ablation of the LGD-RNN: noRt, no_t, "

@@ -33,6 +33,7 @@ from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, 
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.inputs import hold_last_valid
 from wearpose.estimators.seeding import clip_seed
+from wearpose.estimators.trainmix import clip_body
 from wearpose.geometry import matrix_to_rot6d, rot6d_to_matrix
 from wearpose.motion import resample
 from wearpose.recording import Recording
@@ -165,10 +166,11 @@ def build_split(split: str, cfg: EmposeConfig, body: Any, *, store: Any = None, 
         progress: optional callable ``progress(done, total)``.
     """
     settings = data_settings(cfg, body)
-    store, ids, fp, root = split_source(split, settings, "empose", store=store, limit=limit, cache_root=cache_root)
+    store, ids, fp, root = split_source(split, settings, "empose", store=store, limit=limit, cache_root=cache_root,
+                                        cfg=cfg, body=body)
 
     def one(cid: str) -> dict[str, torch.Tensor]:
-        r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed))
+        r = simulate_clip(store.load(cid), cfg, clip_body(store, cid, body), clip_seed(cid, cfg.seed))
         return {"position": hold_last_valid(r["position"], r["valid"]),
                 "orientation": hold_last_valid(r["orientation"], r["valid"]), "valid": r["valid"],
                 "pose6": matrix_to_rot6d(r["pose"]), "joints": r["joints"],

@@ -36,6 +36,7 @@ METHOD = MethodSpec(
     presets=("tiny", "cpu", "paper"),
     kits=("miposer", "miposer1"),
     training=Training(
+        mix=True,
         entry=f"{_P}.entry:train_from_options",
         doc="""Train MI-Poser (AvatarPoser-style IK from head + wrist 6-DoF) or the IMUPoser baseline.
 
@@ -48,6 +49,7 @@ METHOD = MethodSpec(
             TrainOption("wrists", 2, "Wrist sensors: 2 (kit miposer) or 1 (left wrist, smartwatch variant, kit "
                                      "miposer1)."),
             TrainOption("batch_size", None, "Override the batch size.", int, min=1),
+            TrainOption("lr", None, "Override the learning rate.", float),
         ),
         help={"config": "Preset: tiny (smoke test: 8 training clips unless --limit, under a minute), cpu "
                         "(CPU-sized), paper (AvatarPoser / MI-Poser Sec. 4.2).",

@@ -38,6 +38,7 @@ from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, 
 from wearpose.estimators.seeding import clip_seed
 from wearpose.estimators.inputs import InputSpec, hold_last_valid, prepare
 from wearpose.estimators.miposer.config import PREDICTED_JOINTS, MiposerConfig
+from wearpose.estimators.trainmix import clip_body
 from wearpose.geometry import matrix_to_rot6d
 from wearpose.motion import resample
 from wearpose.recording import Recording
@@ -212,10 +213,10 @@ def build_split(split: str, cfg: MiposerConfig, body: Any, *, store: Any = None,
     """
     settings = data_settings(cfg, body)
     store, ids, fp, root = split_source(split, settings, "miposer", store=store, limit=limit, cache_root=cache_root,
-                                        clip_ids=clip_ids)
+                                        clip_ids=clip_ids, cfg=cfg, body=body)
 
     def one(cid: str) -> dict[str, torch.Tensor]:
-        r = simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed, "miposer"))
+        r = simulate_clip(store.load(cid), cfg, clip_body(store, cid, body), clip_seed(cid, cfg.seed, "miposer"))
         inc = torch.ones(r["R"].shape[0], dtype=torch.bool)
         inc[: r["prefix"]] = False
         return {"R": r["R"], "p": r["p"], "valid": r["valid"], "pose6": matrix_to_rot6d(r["pose"][:, :PREDICTED_JOINTS]),

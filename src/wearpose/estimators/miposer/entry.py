@@ -28,7 +28,8 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
         raise OptionError("--model", f"unknown model {model!r}; expected avatarposer or imuposer")
     if wrists not in (1, 2):
         raise OptionError("--wrists", f"expected 1 or 2, got {wrists}")
-    cfg = MiposerConfig.preset(run.config, wrists=wrists, model=model).override(batch_size=opts["batch_size"])
+    cfg = MiposerConfig.preset(run.config, wrists=wrists, model=model).override(
+        batch_size=opts["batch_size"], lr=opts["lr"], **run.config_overrides())
     if model == "imuposer":
         # start-up: wearpose.estimators.miposer.baselines (with torch) adds ~2.0 s to importing this module
         from wearpose.estimators.miposer.baselines import ImuPoserEstimator

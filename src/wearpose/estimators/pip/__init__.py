@@ -34,6 +34,7 @@ METHOD = MethodSpec(
     presets=("tiny", "cpu", "paper"),
     kits=("imu6",),
     training=Training(
+        mix=True,
         entry="wearpose.estimators.pip.entry:train_from_options",
         doc="""Train PIP's kinematics RNNs (P_L, P_A, R_A, V_A, C_F, I_PL, I_VA) on virtual IMUs (kit imu6).
 
@@ -63,9 +64,6 @@ METHOD = MethodSpec(
                                                      "(no lean) or lean (trunk lean, knees forward).", str),
             TrainOption("sitting_hanging_arms", None, "Fraction of the synthetic sitting clips whose arms hang "
                                                       "nearly straight.", float, min=0.0, max=1.0),
-            TrainOption("mirror", False, "Add the left/right mirror image of every training clip.", flags=("--mirror",)),
-            TrainOption("speed_copies", 0, "Add N copies of every training clip played 0.8-1.25x as fast "
-                                           "(PipConfig.aug_speed_range).", min=0),
             TrainOption("seq_len", None, "Override the training window length, frames.", int, min=2),
             TrainOption("window_stride", None, "Override the stride between windows, frames.", int, min=1),
             TrainOption("min_window", None, "Clips of at least N frames but shorter than the window train as one "
@@ -73,8 +71,6 @@ METHOD = MethodSpec(
             TrainOption("sitting_window", None, "Windows of N frames (every N/2) for the synthetic sitting clips "
                                                 "(0: as the corpus clips).", int, min=0),
             TrainOption("lr", None, "Override the learning rate.", float),
-            TrainOption("init_from", None, "Start from this checkpoint's weights (fine-tuning; fresh optimiser).",
-                        Path),
         ),
         help={"config": "Preset: tiny (smoke test: 8 training clips unless --limit, under a minute), cpu "
                         "(CPU-sized), paper (PIP appendix).",

@@ -56,11 +56,9 @@ class PipConfig(SimulatedTrainConfig):
     sitting clips every model up to session 7 saw; ``lean``: trunk lean and knees forward, see
     :mod:`~wearpose.estimators.pip.sitting`); ``sitting_hanging_arms`` the fraction of them whose
     arms hang nearly straight (0: the random arm posture only).
-    Augmentation of the *train* split's corpus clips (:mod:`wearpose.motion.augment`; the
-    sensors are simulated from the augmented motion): ``aug_mirror`` adds the left/right mirror
-    image of every clip; ``aug_speed_copies`` adds that many copies of every clip played at a
-    speed drawn per clip log-uniformly from ``aug_speed_range`` (each mirrored with probability
-    1/2 when ``aug_mirror``). Validation and test are never augmented.
+    Augmentation, procedural clips and wearers of the *train* split: the training mix every
+    method shares (``aug_*``, ``procedural_per_family``, ``train_shapes``,
+    :class:`~wearpose.estimators.trainconfig.TrainConfig`, :mod:`wearpose.estimators.trainmix`).
     Optimisation: ``epochs``, and :class:`~wearpose.estimators.trainconfig.TrainConfig`'s
     ``seed``, ``val_clips``, ``lr``, ``lr_schedule``, ``lr_min_factor``, ``batch_size``,
     ``grad_clip``; PIP's default batch: 256.
@@ -93,9 +91,6 @@ class PipConfig(SimulatedTrainConfig):
     sitting_stand_s: tuple[float, float] = STAND_HOLD_S
     sitting_transitions: str = "slerp"
     sitting_hanging_arms: float = 0.0
-    aug_mirror: bool = False
-    aug_speed_copies: int = 0
-    aug_speed_range: tuple[float, float] = (0.8, 1.25)
     batch_size: int = 256
     epochs: int = 100
 
@@ -112,9 +107,6 @@ class PipConfig(SimulatedTrainConfig):
         if not 0 <= self.min_window <= self.seq_len:
             raise ConfigError(f"PipConfig.min_window: expected 0 <= min_window <= seq_len ({self.seq_len}), "
                               f"got {self.min_window!r}")
-        if len(self.aug_speed_range) != 2 or not 0.0 < self.aug_speed_range[0] <= self.aug_speed_range[1]:
-            raise ConfigError(f"PipConfig.aug_speed_range: expected (low, high) with 0 < low <= high, "
-                              f"got {self.aug_speed_range!r}")
         if len(self.sitting_stand_s) != 2 or not 0.0 < self.sitting_stand_s[0] <= self.sitting_stand_s[1]:
             raise ConfigError(f"PipConfig.sitting_stand_s: expected (low, high) seconds with 0 < low <= high, "
                               f"got {self.sitting_stand_s!r}")
@@ -124,8 +116,6 @@ class PipConfig(SimulatedTrainConfig):
         if not 0.0 <= self.sitting_hanging_arms <= 1.0:
             raise ConfigError(f"PipConfig.sitting_hanging_arms: expected a fraction in [0, 1], "
                               f"got {self.sitting_hanging_arms!r}")
-        if self.aug_speed_copies < 0:
-            raise ConfigError(f"PipConfig.aug_speed_copies: expected >= 0, got {self.aug_speed_copies!r}")
         if len(self.init_widths) != 2:
             raise ConfigError(f"PipConfig.init_widths: expected two widths, got {self.init_widths!r}")
 

@@ -36,6 +36,7 @@ from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.estimators.checkpoint import fingerprint
 from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, kit_sites, num_batches
 from wearpose.estimators.seeding import clip_seed
+from wearpose.estimators.trainmix import clip_body, training_source
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.sitting import SITTING_PREFIX, STAND_HOLD_S, sitting_clip_id, sitting_motion
 from wearpose.evaluate.metrics import root_relative_global_rotations
@@ -52,6 +53,9 @@ NUM_SENSORS = 6
 #: acceleration stencil half-width at 60 Hz.
 EDGE_FRAMES = 4
 INPUT_DIM = NUM_SENSORS * 12
+#: Seed namespace of PIP's augmentation draws (:class:`~wearpose.estimators.trainmix.TrainingStore`):
+#: the one its shipped weights' augmented clips were drawn in.
+AUG_NAMESPACE = "pip-speed"
 
 
 def imu_features(acc: torch.Tensor, ori: torch.Tensor, acc_scale: float) -> torch.Tensor:
@@ -253,69 +257,36 @@ def build_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, lim
         cache_root: directory of the tensor cache (default ``<corpus cache>/estimators/pip``).
         progress: optional callable ``progress(done, total)``.
 
-    On the train split with ``cfg.aug_mirror`` / ``cfg.aug_speed_copies``, the augmented copies
-    (:func:`augmented_ids`) follow the corpus clips; with ``cfg.sitting_clips`` > 0, synthetic
-    sitting clips (:func:`sitting_count`) follow those (each cached separately, so the corpus
-    cache is shared with runs without them).
+    On the train split, the config's training mix (:mod:`wearpose.estimators.trainmix`: wearers,
+    site jitter, augmented copies, procedural clips) applies: the corpus clips on their wearers,
+    then the added clips (cached apart, so the corpus cache is shared with runs that add other
+    clips); with ``cfg.sitting_clips`` > 0, PIP's synthetic sitting clips (:func:`sitting_count`)
+    follow.
     """
     # start-up: wearpose.motion adds ~60 ms to importing this module
     from wearpose.motion import CorpusStore
 
     store = store or CorpusStore()
     root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "pip"
-    ids = _corpus_ids(split, store, limit)
-    data = _build_corpus_split(split, ids, cfg, body, store, root, progress)
-    if split == "train" and (cfg.aug_mirror or cfg.aug_speed_copies > 0):
-        data = concat_data(data, _build_augmented(split, ids, cfg, body, store, root, progress))
+    corpus = _corpus_ids(split, store, limit)
+    store, ids, mix = training_source(split, store, corpus, cfg, body, AUG_NAMESPACE)
+    data = _build_corpus_split(split, corpus, cfg, body, store, root, progress, mix)
+    if len(ids) > len(corpus):
+        data = concat_data(data, _build_added(split, ids[len(corpus):], cfg, body, store, root, progress, mix))
     n_sit = sitting_count(cfg, split)
     if n_sit == 0:
         return data
     return concat_data(data, _build_sitting(split, n_sit, cfg, body, root))
 
 
-def augment_settings(cfg: PipConfig) -> Any:
-    """PIP's augmentation as :class:`wearpose.motion.augment.AugmentSettings` (mirror, speed)."""
-    # start-up: wearpose.motion.augment adds ~60 ms to importing this module
-    from wearpose.motion.augment import AugmentSettings
-
-    return AugmentSettings(mirror=cfg.aug_mirror, speed_copies=cfg.aug_speed_copies,
-                           speed_range=tuple(cfg.aug_speed_range))
-
-
-def augmented_ids(ids: list[str], cfg: PipConfig) -> list[str]:
-    """Ids of the augmented copies of corpus clips ``ids`` (``<id>#mirror``, ``<id>#speed<k>``;
-    :func:`wearpose.motion.augment.augmented_ids`)."""
-    # start-up: wearpose.motion.augment adds ~60 ms to importing this module
-    from wearpose.motion.augment import augmented_ids as ids_of
-
-    return ids_of(ids, augment_settings(cfg))
-
-
-def augmented_motion(aid: str, store: Any, cfg: PipConfig, body: Any) -> Any:
-    """The motion of augmented clip ``aid`` (:func:`augmented_ids`): the corpus clip mirrored,
-    or played at a speed drawn log-uniformly from ``cfg.aug_speed_range`` (seeded by ``aid`` in
-    PIP's ``pip-speed`` namespace) and, when ``cfg.aug_mirror``, mirrored with probability 1/2
-    (:func:`wearpose.motion.augment.augment_clip`)."""
-    # start-up: wearpose.motion.augment adds ~60 ms to importing this module
-    from wearpose.motion.augment import augment_clip
-
-    cid = aid.rsplit("#", 1)[0]
-    m = store.load(cid)
-    root_rest = body.rest_joints(m.betas.to(body.dtype))[0]
-    g = torch.Generator().manual_seed(clip_seed(aid, cfg.seed, "pip-speed"))
-    return augment_clip(aid, m, augment_settings(cfg), g, root_rest)
-
-
-def _build_augmented(split: str, ids: list[str], cfg: PipConfig, body: Any, store: Any, root: Path,
-                     progress: Any = None) -> PipData:
-    """The augmented copies (:func:`augmented_ids`) of corpus clips ``ids``, simulated like corpus
-    clips (own noise seeds); cached apart from the corpus clips."""
-    aids = augmented_ids(ids, cfg)
-    settings = {**data_settings(cfg, body), "augment_version": 1, "aug_mirror": cfg.aug_mirror,
-                "aug_speed_copies": cfg.aug_speed_copies, "aug_speed_range": list(cfg.aug_speed_range)}
-    fp = fingerprint(aids, {**settings, "split": split})
-    return _simulate_cached(root / f"{split}-aug-{fp[:16]}.pt", aids, fp, settings,
-                            lambda aid: simulate_clip(augmented_motion(aid, store, cfg, body), cfg, body,
+def _build_added(split: str, ids: list[str], cfg: PipConfig, body: Any, store: Any, root: Path,
+                 progress: Any, mix: dict[str, Any]) -> PipData:
+    """The clips the training mix adds (augmented copies, procedural clips), simulated like
+    corpus clips (own noise seeds); cached apart from the corpus clips."""
+    settings = {**data_settings(cfg, body), **mix}
+    fp = fingerprint(ids, {**settings, "split": split})
+    return _simulate_cached(root / f"{split}-aug-{fp[:16]}.pt", ids, fp, settings,
+                            lambda aid: simulate_clip(store.load(aid), cfg, clip_body(store, aid, body),
                                                       clip_seed(aid, cfg.seed, "pip")), progress)
 
 
@@ -375,12 +346,17 @@ def _corpus_ids(split: str, store: Any, limit: int | None) -> list[str]:
 
 
 def _build_corpus_split(split: str, ids: list[str], cfg: PipConfig, body: Any, store: Any, root: Path,
-                        progress: Any = None) -> PipData:
+                        progress: Any = None, mix: dict[str, Any] | None = None) -> PipData:
+    """The corpus clips ``ids`` (on the training mix's wearers and sites when ``mix`` has
+    them: its wearers and jitter change these clips too)."""
     settings = data_settings(cfg, body)
+    m = (mix or {}).get("mix", {})
+    if m.get("shapes", "corpus") != "corpus" or m.get("augment", {}).get("site_jitter_m", 0.0) > 0:
+        settings = {**settings, "wearers": m["shapes"], "site_jitter_m": m["augment"]["site_jitter_m"]}
     fp = fingerprint(ids, {**settings, "split": split})
     return _simulate_cached(root / f"{split}-{fp[:16]}.pt", ids, fp, settings,
-                            lambda cid: simulate_clip(store.load(cid), cfg, body, clip_seed(cid, cfg.seed, "pip")),
-                            progress)
+                            lambda cid: simulate_clip(store.load(cid), cfg, clip_body(store, cid, body),
+                                                      clip_seed(cid, cfg.seed, "pip")), progress)
 
 
 def _simulate_cached(path: Path, ids: list[str], fp: str, settings: dict[str, Any], one: Any,

@@ -32,22 +32,12 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     from wearpose.estimators.pip.train import train_pip
 
     cfg = PipConfig.preset(run.config).override(
-        **{k: opts[k] for k in _SAME_NAME}, aug_mirror=opts["mirror"] or None,
-        aug_speed_copies=opts["speed_copies"] or None,
+        **{k: opts[k] for k in _SAME_NAME}, **run.config_overrides(),
         sitting_stand_s=SIT_HOLD_S if opts["balanced_sitting"] else None)
     if opts["hidden"] is not None:
         cfg = cfg.override(init_widths=(opts["hidden"], 2 * opts["hidden"]))
     out = run.out or Path("runs") / f"pip_{run.config}{'' if opts['learned_init'] else '_noinit'}"
     est = PipEstimator(cfg, physics=False)
-    init_from = opts["init_from"]
-    if init_from is not None and not run.resume:
-        # start-up: wearpose.estimators.checkpoint (with torch) adds ~1.5 s to importing this module
-        from wearpose.estimators.checkpoint import load_checkpoint
-
-        ck = load_checkpoint(init_from)
-        ck.check(method="pip", path=init_from)
-        est.model.load_state_dict(ck.weights)  # same architecture required (strict)
-        est.meta["init_from"] = str(init_from)
     res = train_pip(est, out, **run.loop())
     return {"method": "pip", "config": cfg.to_dict(), **res}
 

@@ -1,0 +1,161 @@
+"""The training mix every method shares (wearpose.estimators.trainmix): which clips the train
+split gets beyond its corpus clips, how each loads, the wearers and the site jitter, and that
+validation never changes. Tiny synthetic clips, one thread."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from tests.sensors.sensor_testutils import smooth_motion
+from wearpose.errors import ConfigError
+from wearpose.estimators.checkpoint import CheckpointMismatchError
+from wearpose.estimators.empose import EmposeConfig
+from wearpose.estimators.empose.baselines import estimator_class
+from wearpose.estimators.empose.data import build_split
+from wearpose.estimators.method import TrainRun
+from wearpose.estimators.trainmix import TrainingMix, TrainingStore, clip_body, training_source
+from wearpose.geometry import geodesic_angle
+from wearpose.motion import MotionSequence
+from wearpose.motion.augment import LOWER_BODY
+from wearpose.motion.procedural import FAMILIES
+
+
+class Store:
+    """Duck-typed CorpusStore: synthetic clips at 30 Hz (the corpus's Bandai rate)."""
+
+    def __init__(self, root: Path, n: dict[str, int]) -> None:
+        self.root = root
+        self._ids = {s: [f"synthetic/{s}_{i:02d}" for i in range(k)] for s, k in n.items()}
+
+    def clips(self, split: str | None = None) -> list[str]:
+        return list(self._ids.get(split, []))
+
+    def load(self, clip_id: str) -> MotionSequence:
+        return smooth_motion(T=40, fps=30.0, seed=sum(map(ord, clip_id)) % 1000, amp=0.3).to(torch.float32)
+
+
+def tiny(**kw) -> EmposeConfig:
+    return EmposeConfig.preset("tiny").override(**kw)
+
+
+def test_without_a_mix_the_split_is_unchanged(tmp_path: Path, body) -> None:
+    store = Store(tmp_path, {"train": 3})
+    ids = store.clips("train")
+    s, got, extra = training_source("train", store, ids, tiny(), body, "empose")
+    assert s is store and got == ids and extra == {}
+    assert not TrainingMix.from_config(tiny()).active and TrainingMix().settings() == {}
+
+
+def test_the_mix_adds_copies_then_procedural_clips_and_only_to_train(tmp_path: Path, body) -> None:
+    store = Store(tmp_path, {"train": 2, "val": 2})
+    cfg = tiny(aug_mirror=True, aug_heading_copies=1, procedural_per_family=2, train_shapes="random")
+    ids = store.clips("train")
+    s, got, extra = training_source("train", store, ids, cfg, body, "empose")
+    assert isinstance(s, TrainingStore)
+    assert got[:6] == [*ids, f"{ids[0]}#mirror", f"{ids[0]}#heading0", f"{ids[1]}#mirror", f"{ids[1]}#heading0"]
+    assert got[6:] == [f"procedural/{f}/train/{i:04d}" for f in FAMILIES for i in range(2)]
+    assert extra["mix"]["shapes"] == "random" and extra["mix"]["procedural_per_family"] == 2
+    assert extra["mix"]["augment"]["mirror"] is True
+    v, vids, vextra = training_source("val", store, store.clips("val"), cfg, body, "empose")
+    assert v is store and vids == store.clips("val") and vextra == {}
+
+
+def test_random_wearers_are_per_clip_and_the_same_for_every_method(tmp_path: Path, body) -> None:
+    store = Store(tmp_path, {"train": 2})
+    ids = store.clips("train")
+    mix = TrainingMix(shapes="random")
+    a = TrainingStore(store, mix, body, ids, 0, "empose")
+    b = TrainingStore(store, mix, body, ids, 0, "pip-speed")
+    m0, m0b, m1 = a.load(ids[0]), b.load(ids[0]), a.load(ids[1])
+    assert torch.equal(m0.betas, m0b.betas)  # seeded by the clip, not the method
+    assert not torch.equal(m0.betas, m1.betas) and float(m0.betas.abs().max()) > 0
+    assert torch.equal(m0.pose, store.load(ids[0]).pose)  # joint rotations kept; root re-fitted
+    assert not torch.equal(TrainingStore(store, mix, body, ids, 1, "empose").load(ids[0]).betas, m0.betas)
+
+
+def test_heading_and_mix_copies_load_from_the_corpus_clip(tmp_path: Path, body) -> None:
+    store = Store(tmp_path, {"train": 3})
+    ids = store.clips("train")
+    mix = TrainingMix.from_config(tiny(aug_heading_copies=1, aug_mix_copies=1))
+    ts = TrainingStore(store, mix, body, ids, 0, "empose")
+    src = store.load(ids[0])
+    turned = ts.load(f"{ids[0]}#heading0")
+    assert torch.allclose(turned.pose[:, 1:], src.pose[:, 1:])
+    ang = geodesic_angle(turned.pose[:, 0], src.pose[:, 0])
+    assert float(ang.max() - ang.min()) < 1e-4  # one constant turn of the whole clip
+    mixed = ts.load(f"{ids[0]}#mix0")
+    lower = list(LOWER_BODY)
+    assert torch.equal(mixed.pose[:, lower], src.pose[:mixed.num_frames, lower])
+    assert torch.equal(mixed.trans, src.trans[:mixed.num_frames])
+    upper = [j for j in range(24) if j not in lower]
+    partners = [store.load(c) for c in ids]
+    assert any(torch.equal(mixed.pose[:, upper], p.pose[:mixed.num_frames, upper]) for p in partners)
+    assert ts.load(f"{ids[0]}#mix0").meta == mixed.meta  # the same partner every time
+
+
+def test_procedural_clips_load_by_id_on_the_mean_or_a_drawn_body(tmp_path: Path, body) -> None:
+    store = Store(tmp_path, {"train": 1})
+    mean = TrainingStore(store, TrainingMix(procedural_per_family=1), body, [], 0, "empose")
+    drawn = TrainingStore(store, TrainingMix(procedural_per_family=1, shapes="random"), body, [], 0, "empose")
+    a, b = mean.load("procedural/pickup/train/0000"), drawn.load("procedural/pickup/train/0000")
+    assert a.meta["clip"] == "procedural/pickup/train/0000" and a.fps == 60.0
+    assert float(a.betas.abs().max()) == 0.0 and float(b.betas.abs().max()) > 0.0
+
+
+def test_site_jitter_moves_sites_per_clip(tmp_path: Path, body) -> None:
+    store = Store(tmp_path, {"train": 2})
+    plain = TrainingStore(store, TrainingMix(), body, [], 0, "empose")
+    assert clip_body(plain, "x", body) is body and clip_body(store, "x", body) is body
+    mix = TrainingMix.from_config(tiny(aug_site_jitter_m=0.05))
+    ts = TrainingStore(store, mix, body, [], 0, "empose")
+    j0, j0b, j1 = clip_body(ts, "a", body), clip_body(ts, "a", body), clip_body(ts, "b", body)
+    assert list(j0._site_vertices) == list(j0b._site_vertices)
+    assert list(j0._site_vertices) != list(body._site_vertices)
+    assert list(j0._site_vertices) != list(j1._site_vertices)
+    v = body.v_template
+    moved = (v[torch.as_tensor(j0._site_vertices)] - v[torch.as_tensor(body._site_vertices)]).norm(dim=-1)
+    assert float(moved.max()) <= 0.05 + 1e-6
+
+
+def test_empose_train_split_holds_the_wearers_shapes(tmp_path: Path, body) -> None:
+    """EM-POSE's shape target follows the wearer, so its shape estimate trains (issue 24.5)."""
+    store = Store(tmp_path / "store", {"train": 2, "val": 1})
+    cfg = tiny(aug_mirror=True, train_shapes="random")
+    tr = build_split("train", cfg, body, store=store, cache_root=tmp_path / "cache")
+    assert len(tr.clip_ids) == 4 and tr.clip_ids[2:] == [f"{c}#mirror" for c in store.clips("train")]
+    assert tr.betas.shape == (4, 10) and len({tuple(b.tolist()) for b in tr.betas}) == 4
+    plain = build_split("train", tiny(), body, store=store, cache_root=tmp_path / "cache")
+    assert plain.fingerprint != tr.fingerprint and float(plain.betas.abs().max()) == 0.0
+    assert build_split("val", cfg, body, store=store, cache_root=tmp_path / "cache").clip_ids == store.clips("val")
+
+
+@pytest.mark.parametrize("bad", [{"aug_speed_copies": -1}, {"procedural_per_family": -2}, {"aug_site_jitter_m": 0.5},
+                                 {"train_shapes": "giant"}, {"aug_speed_range": (1.2, 0.9)}])
+def test_config_refuses_bad_mix_fields(bad) -> None:
+    with pytest.raises(ConfigError, match=next(iter(bad))):
+        tiny(**bad)
+
+
+def test_train_run_sets_seed_and_mix_on_the_config() -> None:
+    run = TrainRun(seed=7, mirror=True, procedural=3, shapes="random", site_jitter=0.02)
+    cfg = tiny().override(**run.config_overrides())
+    assert (cfg.seed, cfg.aug_mirror, cfg.procedural_per_family, cfg.train_shapes, cfg.aug_site_jitter_m) == \
+        (7, True, 3, "random", 0.02)
+    assert tiny().override(**TrainRun().config_overrides()) == tiny()  # nothing given: the preset's
+
+
+def test_warm_start_loads_matching_weights_and_names_a_mismatch(tmp_path: Path, body) -> None:
+    cls = estimator_class("lgd")
+    src = cls(tiny(), body=body)
+    path = src.save(tmp_path / "a.pt")
+    dst = cls(tiny(seed=3), body=body)
+    assert not all(torch.equal(a, b) for a, b in zip(src.model.state_dict().values(), dst.model.state_dict().values()))
+    dst.warm_start(path)
+    assert all(torch.equal(a, b) for a, b in zip(src.model.state_dict().values(), dst.model.state_dict().values()))
+    assert dst.meta["init_from"] == str(path)
+    wide = cls(tiny(hidden=tiny().hidden * 2), body=body)
+    with pytest.raises(CheckpointMismatchError, match="this network's is"):
+        wide.warm_start(path)
