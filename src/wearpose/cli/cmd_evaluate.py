@@ -23,7 +23,7 @@ from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from wearpose.cli.models import check_pose_weights
+from wearpose.cli.models import check_pose_weights, parse_settings
 from wearpose.errors import ConfigError
 from wearpose.weights import weight_path
 
@@ -78,6 +78,23 @@ def _entries() -> dict[str, EstimatorEntry]:
 
 def _entry(method: str) -> EstimatorEntry | None:
     return _entries().get(method)
+
+
+def _with_settings(ckpts: dict[str, Path], settings: dict[str, str]) -> dict[str, Any]:
+    """Every checkpoint loaded (:func:`~wearpose.estimators.empose.baselines.load_any`) with the
+    ``--set`` settings applied (:func:`wearpose.evaluate.latency.apply_settings`)."""
+    from wearpose.estimators.empose.baselines import load_any  # start-up: loads torch, +1.6 s to wearpose --help
+    from wearpose.evaluate.latency import apply_settings  # start-up: loads torch, +1.8 s to wearpose --help
+
+    ests = {}
+    for name, path in ckpts.items():
+        est = load_any(path)
+        try:
+            apply_settings(est, settings)
+        except ConfigError as exc:
+            raise typer.BadParameter(f"{name}: {exc}", param_hint="--set") from None
+        ests[name] = est
+    return ests
 
 
 def _store(cache: Path | None, protocol: str, source: str | None, per_family: int | None, split: str) -> Any:
@@ -199,6 +216,9 @@ def evaluate(
     bodies: str = typer.Option("corpus", help="Wearers: corpus (each clip's own body, beta = 0) or heldout (a body "
                                               "per clip from the held-out shape stream, seeded per clip, the clip "
                                               "re-fitted to it; the same body for every model)."),
+    settings: Optional[list[str]] = typer.Option(None, "--set", help="KEY=VALUE: an EM-POSE setting changed after "
+                                                 "loading, for every model (repeatable), e.g. --set refine_steps=5 "
+                                                 "--set refine_threshold=0.06 (docs/empose.md)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (progress goes to stderr)."),
 ) -> None:
     """Evaluate checkpoints on simulated held-out recordings with the paper's metrics.
@@ -219,6 +239,7 @@ def evaluate(
     Unseen motion: wearpose evaluate birae6_cpu --protocol unseen-motion --out results/unseen_birae6
     Unseen lab: wearpose evaluate empose12_cpu --source cmu_daz
     Held-out wearers: wearpose evaluate empose12_cpu --bodies heldout
+    Refinement: wearpose evaluate empose12_cpu --set refine_steps=5 --set refine_threshold=0.06
     """
     import torch  # start-up: torch loads torch, +1.3 s to wearpose --help
 
@@ -250,6 +271,10 @@ def evaluate(
         raise typer.BadParameter(f"EM-POSE models ({', '.join(sorted(compared))}) and others "
                                  f"({', '.join(sorted(set(sources) - compared))}) have different protocols; "
                                  "evaluate them in separate commands", param_hint="MODELS")
+    if settings and not compared:
+        raise typer.BadParameter("--set changes EM-POSE models here; the other methods' settings are timed with "
+                                 "`wearpose bench latency --set`", param_hint="--set")
+    models_in: dict[str, Any] = _with_settings(ckpts, parse_settings(settings)) if settings else dict(ckpts)
     store = _store(cache, protocol, source, per_family, split)
     if not store.clips(split=split):
         raise typer.BadParameter(f"corpus store {store.root}: the {split!r} split has no clips (nothing to "
@@ -265,8 +290,10 @@ def evaluate(
                 raise typer.BadParameter("the EM-POSE protocol scores every frame", param_hint="--frame-stride")
             from wearpose.evaluate.protocols import compare_models  # start-up: wearpose.evaluate.protocols loads torch, +1.8 s to wearpose --help
 
-            res = compare_models(next(iter(compare.values())), ckpts, split, clips, noise=noise, seed=seed,
+            res = compare_models(next(iter(compare.values())), models_in, split, clips, noise=noise, seed=seed,
                                  offsets=offsets, spread=spread, store=store, progress=tick, bodies=bodies)
+            for n, m in res["models"].items():
+                m["checkpoint"] = str(ckpts[n])
         else:
             from wearpose.evaluate.protocols import evaluate_model  # start-up: wearpose.evaluate.protocols loads torch, +1.8 s to wearpose --help
 

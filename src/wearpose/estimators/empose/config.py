@@ -57,6 +57,13 @@ class EmposeConfig(SimulatedTrainConfig):
     ``"closed"`` (closed-form pose from the mapped orientations, :mod:`.twostage`);
     ``mapper_input`` what its joint mapper sees per sensor, ``"raw"`` (the measurement, default)
     or ``"site"`` (the skin-site pose the measurement and the subject offsets imply).
+    Measurement-consistency refinement at inference (:mod:`wearpose.estimators.empose.refine`;
+    issue 24): ``refine_steps`` L-BFGS iterations on L_r plus the pose prior after the learned
+    updates (0 = off, the trained model as it is), on the frames whose L_r exceeds
+    ``refine_threshold`` (m^2 + squared Frobenius, summed over sensors; calibrated on validation
+    clips, :func:`~wearpose.estimators.empose.refine.calibrate_threshold`; None = not
+    calibrated); ``refine_weight`` the prior's weight (L_r per squared 6D unit). Training
+    ignores them.
     """
 
     sensors: int = 12
@@ -86,6 +93,9 @@ class EmposeConfig(SimulatedTrainConfig):
     init: str = "rnn"
     ik: str = "lgd"
     mapper_input: str = "raw"
+    refine_steps: int = 0
+    refine_threshold: float | None = None
+    refine_weight: float = 0.01
 
     def __post_init__(self) -> None:
         super().__post_init__()  # the shared training fields (SimulatedTrainConfig)
@@ -105,6 +115,13 @@ class EmposeConfig(SimulatedTrainConfig):
             raise ConfigError(f"EmposeConfig.ik: expected 'lgd' or 'closed', got {self.ik!r}")
         if self.mapper_input not in ("raw", "site"):
             raise ConfigError(f"EmposeConfig.mapper_input: expected 'raw' or 'site', got {self.mapper_input!r}")
+        if isinstance(self.refine_steps, bool) or not isinstance(self.refine_steps, int) or self.refine_steps < 0:
+            raise ConfigError(f"EmposeConfig.refine_steps: expected a whole number >= 0, got {self.refine_steps!r}")
+        if self.refine_threshold is not None and not self.refine_threshold >= 0.0:
+            raise ConfigError(f"EmposeConfig.refine_threshold: expected an L_r level >= 0 or None, "
+                              f"got {self.refine_threshold!r}")
+        if not self.refine_weight >= 0.0:
+            raise ConfigError(f"EmposeConfig.refine_weight: expected a weight >= 0, got {self.refine_weight!r}")
         if self.model not in ("lgd", "resnet", "birnn", "twostage"):
             raise ConfigError(f"EmposeConfig.model: expected 'lgd', 'resnet', 'birnn' or 'twostage', got {self.model!r}")
 

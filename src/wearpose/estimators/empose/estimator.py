@@ -28,6 +28,7 @@ from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFram
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.config import EmposeConfig
 from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, module_version, sensor_features
+from wearpose.estimators.empose.refine import Refined, refine_frames, require_threshold
 from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.estimators.seeding import init_seed, seeded
@@ -189,7 +190,10 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         """Offline estimate (the causal network run over the whole sequence).
 
         Returns a :class:`PoseTrack` with ``trans=None`` and ``extras["frame"] = "em_source"``;
-        ``extras["rec_loss"]`` ``(T,)`` is L_r of the final estimate.
+        ``extras["rec_loss"]`` ``(T,)`` is L_r of the final estimate. With the refinement on
+        (``config.refine_steps > 0``, :meth:`_refine`) also ``extras["rec_loss_learned"]``
+        ``(T,)`` (L_r of the learned estimate) and ``extras["refined"]`` ``(T,)`` bool (the
+        frames the gate refined).
         """
         p, R, valid = self._measurements(recording)
         offR, offt = self._offsets_from(recording)
@@ -199,22 +203,44 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         omega0, _ = self.model.initial(x[None])
         omega0 = omega0[0]
         T, S = p.shape[:2]
-        rots, betas, rec = [], [], []
+        rots, betas, rec, learned, gated = [], [], [], [], []
         for a in range(0, T, chunk):
             b = min(T, a + chunk)
             n = b - a
             outs = self.model.refine(omega0[a:b], x[a:b], p[a:b].to(dev), R[a:b].to(dev),
                                      offR.to(dev).expand(n, S, 3, 3), offt.to(dev).expand(n, S, 3), self.sensors,
                                      train=False)
-            rots.append(outs[-1]["local_rot"].detach())
-            betas.append(outs[-1]["betas"].detach())
-            rec.append(outs[-1]["rec"].detach())
+            last = outs[-1]
+            ref = self._refine(last["local_rot"].detach(), last["betas"].detach(), last["rec"].detach(),
+                               p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
+            rots.append(ref.local_rot)
+            betas.append(last["betas"].detach())
+            rec.append(ref.rec)
+            learned.append(last["rec"].detach())
+            gated.append(ref.gated)
         local_rot, b_all = torch.cat(rots).cpu(), torch.cat(betas).cpu()
         ok = valid.all(1)
         beta = (b_all[ok] if bool(ok.any()) else b_all).mean(0)  # one shape per sequence (Sec. 5.3)
-        return PoseTrack(local_rot, beta, None, ok, self.fps,
-                         extras={"frame": "em_source", "rec_loss": torch.cat(rec).cpu(), "method": self.name,
-                                 "betas_per_frame": b_all})
+        extras = {"frame": "em_source", "rec_loss": torch.cat(rec).cpu(), "method": self.name, "betas_per_frame": b_all}
+        if self.config.refine_steps > 0:
+            extras.update(rec_loss_learned=torch.cat(learned).cpu(), refined=torch.cat(gated).cpu())
+        return PoseTrack(local_rot, beta, None, ok, self.fps, extras=extras)
+
+    def _refine(self, local_rot: torch.Tensor, betas: torch.Tensor, rec: torch.Tensor, p: torch.Tensor,
+                R: torch.Tensor, offR: torch.Tensor, offt: torch.Tensor) -> Refined:
+        """The measurement-consistency refinement of the learned estimate
+        (:func:`~wearpose.estimators.empose.refine.refine_frames` with this config's
+        ``refine_steps``, ``refine_threshold``, ``refine_weight``): ``local_rot`` ``(N, 24, 3, 3)``,
+        ``betas`` ``(N, 10)``, ``rec`` ``(N,)``, measurements ``p`` ``(N, S, 3)`` m and ``R``
+        ``(N, S, 3, 3)``, offsets ``(S, 3, 3)`` and ``(S, 3)`` m. Off (``refine_steps == 0``):
+        the inputs themselves."""
+        cfg = self.config
+        require_threshold(cfg.refine_steps, cfg.refine_threshold)
+        if cfg.refine_steps == 0:
+            return Refined(local_rot, rec, torch.zeros_like(rec, dtype=torch.bool))
+        return refine_frames(self.sensors.lean(), local_rot, betas, rec, p, R, offR, offt, steps=cfg.refine_steps,
+                             threshold=float(cfg.refine_threshold), weight=cfg.refine_weight,
+                             rec_weights=self.model.rec_weights)
 
     @torch.no_grad()
     def to_world(self, track: PoseTrack, source_R: torch.Tensor, source_p: torch.Tensor) -> PoseTrack:
@@ -264,6 +290,29 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         self.model.cfg = self.config
         self.reset()
 
+    def _set_config(self, **kw: Any) -> None:
+        self.config = replace(self.config, **kw)  # EmposeConfig checks the values
+        self.model.cfg = self.config
+        self.reset()
+
+    def set_refine_steps(self, n: int) -> None:
+        """Refine the gated frames with ``n`` L-BFGS iterations from now on (0 = off; module doc of
+        :mod:`~wearpose.estimators.empose.refine`), e.g. ``--set refine_steps=5``.
+
+        Raises:
+            ConfigError: ``n`` is not a whole number >= 0.
+        """
+        self._set_config(refine_steps=n)
+
+    def set_refine_threshold(self, level: float) -> None:
+        """The gate of the refinement: frames with L_r above ``level`` are refined (a calibrated
+        level, :func:`~wearpose.estimators.empose.refine.calibrate_threshold`)."""
+        self._set_config(refine_threshold=float(level))
+
+    def set_refine_weight(self, w: float) -> None:
+        """The weight of the refinement's pose prior (pull to the learned estimate)."""
+        self._set_config(refine_weight=float(w))
+
     # ------------------------------------------------------------------ online
     def reset(self) -> None:
         self._state = None
@@ -301,7 +350,9 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         """One frame: LSTM state carried over, N LGD updates on this frame (offsets from
         :meth:`set_offsets`, identity with a warning if never set). With the 6D pose the updates
         use the closed-form gradient (:mod:`~wearpose.estimators.empose.fastgrad`) in a traced
-        function (:meth:`_online_fn`; the first call traces it, ~1 s)."""
+        function (:meth:`_online_fn`; the first call traces it, ~1 s). With the refinement on
+        (``config.refine_steps > 0``) a frame over the gate is refined after the updates
+        (:meth:`_refine`; extras ``rec_loss_learned`` and ``refined`` as in :meth:`estimate`)."""
         if self._offsets is None:
             self._offsets = self._offsets_from(None)
         (p, R), v = self._input(frame)
@@ -320,10 +371,14 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
                 self._state = (z, z)
             rot, b, rec, h, c = fn(x, p, R, offR, offt, *self._state)
             self._state = (h, c)
-            return PoseFrame(rot.cpu(), b.cpu(), None, bool(v.all()), frame.timestamp,
-                             extras={"frame": "em_source", "rec_loss": float(rec)})
-        omega0, self._state = self.model.initial(x[None, None], self._state)
-        outs = self.model.refine(omega0[0], x[None], p[None], R[None], offR[None], offt[None], self.sensors, train=False)
-        last = outs[-1]
-        return PoseFrame(last["local_rot"][0].detach().cpu(), last["betas"][0].detach().cpu(), None, bool(v.all()),
-                         frame.timestamp, extras={"frame": "em_source", "rec_loss": float(last["rec"][0])})
+        else:
+            omega0, self._state = self.model.initial(x[None, None], self._state)
+            last = self.model.refine(omega0[0], x[None], p[None], R[None], offR[None], offt[None], self.sensors,
+                                     train=False)[-1]
+            rot, b, rec = last["local_rot"][0].detach(), last["betas"][0].detach(), last["rec"][0].detach()
+        extras: dict[str, Any] = {"frame": "em_source", "rec_loss": float(rec)}
+        if self.config.refine_steps > 0:
+            ref = self._refine(rot[None], b[None], rec.reshape(1), p[None], R[None], offR, offt)
+            rot = ref.local_rot[0]
+            extras.update(rec_loss=float(ref.rec[0]), rec_loss_learned=float(rec), refined=bool(ref.gated[0]))
+        return PoseFrame(rot.cpu(), b.cpu(), None, bool(v.all()), frame.timestamp, extras=extras)

@@ -154,6 +154,14 @@ def _shape_summary(rows: list[dict[str, Any]]) -> dict[str, float]:
     return out
 
 
+def _refined_summary(rows: list[dict[str, Any]]) -> dict[str, float]:
+    """``{"refined_fraction"}``: the fraction of scored frames the refinement gate refined
+    (frame-weighted over clips); none when the model has no refinement on."""
+    have = [r for r in rows if "refined_fraction" in r]
+    n = sum(r["frames"] for r in have)
+    return {"refined_fraction": sum(r["refined_fraction"] * r["frames"] for r in have) / n} if n else {}
+
+
 def _provenance(store: Any) -> dict[str, Any] | None:
     """Which store and corpus version the clips came from (:meth:`wearpose.motion.CorpusStore.provenance`;
     None for a stand-in store without it)."""
@@ -190,7 +198,9 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         "zero_pose_vertex_error_median_mm", ..., "frames", "method", "checkpoint", "epoch",
         "val_mpjpe_mm", "data_fingerprint", "train_command", "seconds", "per_clip": [{"clip",
         "frames", "mpjpe_mm", "pa_mpjpe_mm", "mpjae_deg", "height_error_cm",
-        "height_difference_cm", "zero_pose_vertex_error_mm", "wearer_height_cm"}]}}}``.
+        "height_difference_cm", "zero_pose_vertex_error_mm", "wearer_height_cm"}]}}}``; with EM-POSE's
+        refinement on (``config.refine_steps > 0``) also ``"refined_fraction"`` (frames the gate
+        refined) per model and per clip.
     """
     from wearpose.estimators.empose.baselines import load_any  # start-up: empose.baselines adds ~368 ms to import this module
     from wearpose.estimators.empose.data import recording_from_clip  # start-up: empose.data adds ~256 ms to import this module
@@ -228,6 +238,8 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
             row = _clip_row(cid, errs[name])
             if getattr(track, "betas", None) is not None:  # the family's shape estimate
                 row.update(_shape_row(est.body, track.betas, r["betas"]))
+            if "refined" in track.extras and bool(ok.any()):  # EM-POSE's measurement-consistency gate
+                row["refined_fraction"] = float(track.extras["refined"][ok].float().mean())
             per_clip[name].append(row)
         frames += int(ok.sum())
         if progress is not None:
@@ -239,6 +251,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         src = checkpoints[name]
         models[name] = {"mpjpe_mm": m1, "mpjpe_std_mm": s1, "pa_mpjpe_mm": m2, "pa_mpjpe_std_mm": s2,
                         "mpjae_deg": m3, "mpjae_std_deg": s3, **_shape_summary(per_clip[name]),
+                        **_refined_summary(per_clip[name]),
                         "frames": sum(int(x.numel()) for x in errs[name]["pe"]),
                         "method": est.name, "checkpoint": str(src) if isinstance(src, (str, Path)) else None,
                         "epoch": est.meta.get("epoch"), "val_mpjpe_mm": est.meta.get("val_mpjpe_mm"),
