@@ -244,3 +244,24 @@ def test_heldout_bodies_in_a_single_model_protocol(tmp_path: Path) -> None:
     assert (worn["bodies"], own["bodies"], own["betas"]) == ("heldout", "corpus", {})
     assert worn["betas"] == {c: pytest.approx(heldout_betas(c, 4).tolist(), abs=1e-4) for c in worn["clip_ids"]}
     assert worn["metrics"]["mpjae_all_deg"] == pytest.approx(own["metrics"]["mpjae_all_deg"], abs=1e-6)
+
+
+def test_set_turns_on_the_empose_refinement(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """--set reaches every EM-POSE model: the refined fraction appears (all frames with a zero
+    gate), the checkpoint path is still recorded; a missing threshold or a setting the
+    estimator lacks is refused naming --set."""
+    torch.manual_seed(0)
+    ck = tmp_path / "tiny12" / "best.pt"
+    EmposeEstimator(EmposeConfig.preset("tiny", 12)).save(ck)
+    monkeypatch.setattr("wearpose.motion.CorpusStore", lambda *a, **k: FakeStore(tmp_path, {"test": 1}))
+    res = runner.invoke(app, ["evaluate", str(ck), "--json", "--set", "refine_steps=2", "--set", "refine_threshold=0"])
+    assert res.exit_code == 0, res.output
+    m = json.loads(res.stdout[res.stdout.index("{"):])["models"]["tiny12"]
+    assert m["refined_fraction"] == 1.0 and m["config"]["refine_steps"] == 2 and m["checkpoint"] == str(ck)
+    plain = json.loads((r := runner.invoke(app, ["evaluate", str(ck), "--json"])).stdout[r.stdout.index("{"):])
+    assert "refined_fraction" not in plain["models"]["tiny12"] and plain["models"]["tiny12"]["checkpoint"] == str(ck)
+    assert plain["models"]["tiny12"]["mpjpe_mm"] != m["mpjpe_mm"]
+    res = runner.invoke(app, ["evaluate", str(ck), "--set", "mc_samples=3"])
+    assert res.exit_code == 2 and "--set" in res.output
+    res = runner.invoke(app, ["evaluate", str(ck), "--set", "refine_steps=2"])
+    assert res.exit_code != 0 and "refine_threshold" in (res.output + str(res.exception))
