@@ -64,6 +64,11 @@ class EmposeConfig(SimulatedTrainConfig):
     clips, :func:`~wearpose.estimators.empose.refine.calibrate_threshold`; None = not
     calibrated); ``refine_weight`` the prior's weight (L_r per squared 6D unit). Training
     ignores them.
+    Per-recording shape fit at inference (:mod:`wearpose.estimators.empose.shapefit`; issue
+    24): ``shape_fit_frames`` frames with every sensor valid on which one body shape is fitted
+    to L_r jointly with their poses (0 = off: the learned shape), ``shape_fit_steps`` L-BFGS
+    iterations, ``shape_fit_prior`` the weight of ``||beta||^2`` (L_r units). Training ignores
+    them.
     """
 
     sensors: int = 12
@@ -96,6 +101,9 @@ class EmposeConfig(SimulatedTrainConfig):
     refine_steps: int = 0
     refine_threshold: float | None = None
     refine_weight: float = 0.01
+    shape_fit_frames: int = 0
+    shape_fit_steps: int = 80
+    shape_fit_prior: float = 1e-3
 
     def __post_init__(self) -> None:
         super().__post_init__()  # the shared training fields (SimulatedTrainConfig)
@@ -122,6 +130,12 @@ class EmposeConfig(SimulatedTrainConfig):
                               f"got {self.refine_threshold!r}")
         if not self.refine_weight >= 0.0:
             raise ConfigError(f"EmposeConfig.refine_weight: expected a weight >= 0, got {self.refine_weight!r}")
+        for key in ("shape_fit_frames", "shape_fit_steps"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ConfigError(f"EmposeConfig.{key}: expected a whole number >= 0, got {v!r}")
+        if not self.shape_fit_prior >= 0.0:
+            raise ConfigError(f"EmposeConfig.shape_fit_prior: expected a weight >= 0, got {self.shape_fit_prior!r}")
         if self.model not in ("lgd", "resnet", "birnn", "twostage"):
             raise ConfigError(f"EmposeConfig.model: expected 'lgd', 'resnet', 'birnn' or 'twostage', got {self.model!r}")
 

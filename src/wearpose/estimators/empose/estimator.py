@@ -27,11 +27,13 @@ from wearpose.errors import ConfigError, ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.config import EmposeConfig
-from wearpose.estimators.empose.model import LGDRNN, VirtualSensors, module_version, sensor_features
+from wearpose.estimators.empose.model import LGDRNN, PRED_JOINTS, VirtualSensors, module_version, sensor_features
 from wearpose.estimators.empose.refine import Refined, refine_frames, require_threshold
+from wearpose.estimators.empose.shapefit import ShapeFit, fit_frames, fit_shape
 from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.estimators.seeding import init_seed, seeded
+from wearpose.geometry import matrix_to_rot6d
 from wearpose.sensors import get_kit, resolve_sites
 
 
@@ -84,6 +86,8 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         self._input = OnlineInput(self.sensor_names, ("position", "orientation"), who=self.name)
         self._offsets: tuple[torch.Tensor, torch.Tensor] | None = None
         self._traced: tuple[Any, Any] | None = None
+        self._fit_buffer: list[dict[str, torch.Tensor]] = []  # online shape fit: the first valid frames
+        self._shape: torch.Tensor | None = None  # online shape fit: the fitted shape, once fitted
 
     # ------------------------------------------------------------------ checkpoints
     def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
@@ -193,7 +197,11 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         ``extras["rec_loss"]`` ``(T,)`` is L_r of the final estimate. With the refinement on
         (``config.refine_steps > 0``, :meth:`_refine`) also ``extras["rec_loss_learned"]``
         ``(T,)`` (L_r of the learned estimate) and ``extras["refined"]`` ``(T,)`` bool (the
-        frames the gate refined).
+        frames the gate refined). With the shape fit on (``config.shape_fit_frames > 0``,
+        :mod:`~wearpose.estimators.empose.shapefit`): ``betas`` is the shape fitted to
+        ``shape_fit_frames`` frames spread over the recording, every frame keeps its learned pose
+        and is scored (``rec_loss``, the refinement) with that shape; also
+        ``extras["rec_loss_learned"]`` and ``extras["shape_fit"]`` (:meth:`ShapeFit.summary`).
         """
         p, R, valid = self._measurements(recording)
         offR, offt = self._offsets_from(recording)
@@ -203,28 +211,63 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         omega0, _ = self.model.initial(x[None])
         omega0 = omega0[0]
         T, S = p.shape[:2]
-        rots, betas, rec, learned, gated = [], [], [], [], []
-        for a in range(0, T, chunk):
-            b = min(T, a + chunk)
+        spans = [(a, min(T, a + chunk)) for a in range(0, T, chunk)]
+        lasts = []
+        for a, b in spans:
             n = b - a
-            outs = self.model.refine(omega0[a:b], x[a:b], p[a:b].to(dev), R[a:b].to(dev),
-                                     offR.to(dev).expand(n, S, 3, 3), offt.to(dev).expand(n, S, 3), self.sensors,
-                                     train=False)
-            last = outs[-1]
-            ref = self._refine(last["local_rot"].detach(), last["betas"].detach(), last["rec"].detach(),
-                               p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
+            lasts.append(self.model.refine(omega0[a:b], x[a:b], p[a:b].to(dev), R[a:b].to(dev),
+                                           offR.to(dev).expand(n, S, 3, 3), offt.to(dev).expand(n, S, 3), self.sensors,
+                                           train=False)[-1])
+        ok = valid.all(1)
+        fit = self._fit_shape(lasts, ok, p, R, offR, offt) if self.config.shape_fit_frames > 0 else None
+        rots, betas, rec, learned, gated = [], [], [], [], []
+        for (a, b), last in zip(spans, lasts):
+            lrot, lb, lrec = last["local_rot"].detach(), last["betas"].detach(), last["rec"].detach()
+            if fit is not None:  # every frame's learned pose, scored with the fitted shape
+                lb = fit.betas.to(dev).expand(b - a, -1)
+                lrec = self._rec(lrot, lb, p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
+            ref = self._refine(lrot, lb, lrec, p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
             rots.append(ref.local_rot)
             betas.append(last["betas"].detach())
             rec.append(ref.rec)
             learned.append(last["rec"].detach())
             gated.append(ref.gated)
         local_rot, b_all = torch.cat(rots).cpu(), torch.cat(betas).cpu()
-        ok = valid.all(1)
         beta = (b_all[ok] if bool(ok.any()) else b_all).mean(0)  # one shape per sequence (Sec. 5.3)
         extras = {"frame": "em_source", "rec_loss": torch.cat(rec).cpu(), "method": self.name, "betas_per_frame": b_all}
+        if self.config.refine_steps > 0 or fit is not None:
+            extras["rec_loss_learned"] = torch.cat(learned).cpu()
         if self.config.refine_steps > 0:
-            extras.update(rec_loss_learned=torch.cat(learned).cpu(), refined=torch.cat(gated).cpu())
+            extras["refined"] = torch.cat(gated).cpu()
+        if fit is not None:
+            beta = fit.betas.cpu()
+            extras["shape_fit"] = fit.summary()
         return PoseTrack(local_rot, beta, None, ok, self.fps, extras=extras)
+
+    def _rec(self, local_rot: torch.Tensor, betas: torch.Tensor, p: torch.Tensor, R: torch.Tensor,
+             offR: torch.Tensor, offt: torch.Tensor) -> torch.Tensor:
+        """L_r ``(N,)`` of poses ``(N, 24, 3, 3)`` with shapes ``betas`` ``(N, 10)`` against the
+        measurements ``p`` ``(N, S, 3)`` m, ``R`` ``(N, S, 3, 3)`` (the closed-form kernel)."""
+        u = matrix_to_rot6d(local_rot[:, list(PRED_JOINTS)]).reshape(local_rot.shape[0], -1)
+        return self.sensors.lean().forward(torch.cat([u, betas], -1), p, R, offR, offt, self.model.rec_weights)["rec"]
+
+    def _fit_shape(self, lasts: list[dict[str, torch.Tensor]], ok: torch.Tensor, p: torch.Tensor, R: torch.Tensor,
+                   offR: torch.Tensor, offt: torch.Tensor, spread: bool = True) -> ShapeFit | None:
+        """The per-recording shape fit (:func:`~wearpose.estimators.empose.shapefit.fit_shape`)
+        on ``config.shape_fit_frames`` of the frames where ``ok`` ``(T,)`` (every sensor valid),
+        spread over them or the first ones (:func:`fit_frames`); ``lasts`` the learned outputs
+        (dicts of :meth:`LGDRNN.refine`'s last iteration) covering the ``T`` frames in order,
+        measurements ``p`` ``(T, S, 3)`` m and ``R`` ``(T, S, 3, 3)``. None when no frame has
+        every sensor (nothing to fit: the learned shape stays)."""
+        idx = fit_frames(ok, self.config.shape_fit_frames, spread)
+        if idx.numel() == 0:
+            return None
+        cat = {k: torch.cat([o[k].detach() for o in lasts]).index_select(0, idx.to(self.device))
+               for k in ("local_rot", "betas", "rec")}
+        dev = self.device
+        return fit_shape(self.sensors.lean(), cat["local_rot"], cat["betas"], cat["rec"], p[idx].to(dev),
+                         R[idx].to(dev), offR.to(dev), offt.to(dev), steps=self.config.shape_fit_steps,
+                         prior=self.config.shape_fit_prior, rec_weights=self.model.rec_weights)
 
     def _refine(self, local_rot: torch.Tensor, betas: torch.Tensor, rec: torch.Tensor, p: torch.Tensor,
                 R: torch.Tensor, offR: torch.Tensor, offt: torch.Tensor) -> Refined:
@@ -313,10 +356,47 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         """The weight of the refinement's pose prior (pull to the learned estimate)."""
         self._set_config(refine_weight=float(w))
 
+    def set_shape_fit_frames(self, n: int) -> None:
+        """Fit one body shape per recording on ``n`` frames from now on (0 = off;
+        :mod:`~wearpose.estimators.empose.shapefit`), e.g. ``--set shape_fit_frames=20``.
+
+        Raises:
+            ConfigError: ``n`` is not a whole number >= 0.
+        """
+        self._set_config(shape_fit_frames=n)
+
+    def set_shape_fit_steps(self, n: int) -> None:
+        """L-BFGS iterations of the shape fit."""
+        self._set_config(shape_fit_steps=n)
+
+    def set_shape_fit_prior(self, w: float) -> None:
+        """The weight of the shape fit's prior ``||beta||^2`` (L_r units)."""
+        self._set_config(shape_fit_prior=float(w))
+
     # ------------------------------------------------------------------ online
+    def _online_shape(self, rot: torch.Tensor, b: torch.Tensor, rec: torch.Tensor, p: torch.Tensor, R: torch.Tensor,
+                      valid: bool) -> tuple[torch.Tensor, torch.Tensor]:
+        """The online shape fit for one frame (:meth:`step`): the learned pose ``rot``
+        ``(24, 3, 3)``, shape ``b`` ``(10,)`` and L_r ``rec`` ``()`` of a frame with measurements
+        ``p`` ``(S, 3)`` m and ``R`` ``(S, 3, 3)``. Buffers the frame while the fit waits for
+        ``config.shape_fit_frames`` valid frames, fits on the n-th (:meth:`_fit_shape` on the
+        first n); returns the shape to output and the frame's L_r with it."""
+        if self._shape is None and valid:
+            self._fit_buffer.append({"local_rot": rot[None], "betas": b[None], "rec": rec.reshape(1), "p": p, "R": R})
+            if len(self._fit_buffer) >= self.config.shape_fit_frames:
+                buf = self._fit_buffer
+                fit = self._fit_shape(buf, torch.ones(len(buf), dtype=torch.bool), torch.stack([f["p"] for f in buf]),
+                                      torch.stack([f["R"] for f in buf]), *self._offsets, spread=False)
+                self._shape, self._fit_buffer = fit.betas, []
+        if self._shape is None:
+            return b, rec
+        offR, offt = self._offsets
+        return self._shape, self._rec(rot[None], self._shape[None], p[None], R[None], offR, offt)[0]
+
     def reset(self) -> None:
         self._state = None
         self._input = OnlineInput(self.sensor_names, ("position", "orientation"), who=self.name)
+        self._fit_buffer, self._shape = [], None
 
     def _online_fn(self) -> Any:
         """The per-frame computation (LSTM step + N closed-form LGD updates) as a TorchScript trace
@@ -352,7 +432,12 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         use the closed-form gradient (:mod:`~wearpose.estimators.empose.fastgrad`) in a traced
         function (:meth:`_online_fn`; the first call traces it, ~1 s). With the refinement on
         (``config.refine_steps > 0``) a frame over the gate is refined after the updates
-        (:meth:`_refine`; extras ``rec_loss_learned`` and ``refined`` as in :meth:`estimate`)."""
+        (:meth:`_refine`; extras ``rec_loss_learned`` and ``refined`` as in :meth:`estimate`).
+        With the shape fit on (``config.shape_fit_frames = n > 0``): the first ``n`` frames with
+        every sensor valid are kept, and at the n-th the shape is fitted to them once
+        (:meth:`_online_shape`; that frame costs the fit, see docs/empose.md); from then on every
+        frame returns the fitted shape and is scored with it, before it the learned shape
+        (extras ``shape_fitted`` bool, ``rec_loss_learned``)."""
         if self._offsets is None:
             self._offsets = self._offsets_from(None)
         (p, R), v = self._input(frame)
@@ -377,8 +462,12 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
                                      train=False)[-1]
             rot, b, rec = last["local_rot"][0].detach(), last["betas"][0].detach(), last["rec"][0].detach()
         extras: dict[str, Any] = {"frame": "em_source", "rec_loss": float(rec)}
+        learned_rec = rec
+        if self.config.shape_fit_frames > 0:
+            b, rec = self._online_shape(rot, b, rec, p, R, bool(v.all()))
+            extras.update(rec_loss=float(rec), rec_loss_learned=float(learned_rec), shape_fitted=self._shape is not None)
         if self.config.refine_steps > 0:
             ref = self._refine(rot[None], b[None], rec.reshape(1), p[None], R[None], offR, offt)
             rot = ref.local_rot[0]
-            extras.update(rec_loss=float(ref.rec[0]), rec_loss_learned=float(rec), refined=bool(ref.gated[0]))
+            extras.update(rec_loss=float(ref.rec[0]), rec_loss_learned=float(learned_rec), refined=bool(ref.gated[0]))
         return PoseFrame(rot.cpu(), b.cpu(), None, bool(v.all()), frame.timestamp, extras=extras)
