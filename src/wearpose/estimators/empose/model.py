@@ -71,15 +71,6 @@ def decode_omega(omega: torch.Tensor, rep: str) -> tuple[torch.Tensor, torch.Ten
     return full, omega[..., NUM_PRED * k:]
 
 
-def _hold(omega: torch.Tensor, betas: torch.Tensor | None) -> torch.Tensor:
-    """Omega ``(N, D)`` with its shape part (the last ``len(betas)`` entries) set to ``betas``
-    (a known body shape, :meth:`LGDRNN.refine`'s ``hold_betas``); Omega itself when None."""
-    if betas is None:
-        return omega
-    B = betas.numel()
-    return torch.cat([omega[:, :-B], betas.to(omega).expand(omega.shape[0], B)], -1)
-
-
 def module_version(module: nn.Module) -> tuple[int, ...]:
     """Version counters of a module's parameters and buffers: changes whenever any of them is
     modified in place (optimiser steps, running statistics, ``load_state_dict``)."""
@@ -314,8 +305,8 @@ class LGDRNN(nn.Module):
         return self.head(inp) + self.omega_rest, (torch.stack(hs), torch.stack(cs))
 
     def refine(self, omega0: torch.Tensor, x: torch.Tensor, meas_p: torch.Tensor, meas_R: torch.Tensor,
-               off_R: torch.Tensor, off_t: torch.Tensor, sensors: VirtualSensors, *, train: bool,
-               hold_betas: torch.Tensor | None = None) -> list[dict[str, torch.Tensor]]:
+               off_R: torch.Tensor, off_t: torch.Tensor, sensors: VirtualSensors, *, train: bool
+               ) -> list[dict[str, torch.Tensor]]:
         """N LGD updates on a flat batch of frames.
 
         Args:
@@ -323,22 +314,17 @@ class LGDRNN(nn.Module):
                 the measurements; off_R ``(N, S, 3, 3)``, off_t ``(N, S, 3)`` the subject offsets.
             sensors: sigma.
             train: build the graph through the gradients (``create_graph``) for training.
-            hold_betas: ``(10,)`` a known body shape (EM-POSE's per-recording shape fit,
-                :mod:`~wearpose.estimators.empose.shapefit`): Omega's shape part is set to it
-                before every evaluation of L_r, so the updates move the pose only; None (default):
-                the learned shape, as trained.
 
         Returns:
             N + 1 dicts (n = 0..N) with ``omega`` ``(N, D)``, ``local_rot``, ``betas``, ``joints``
             ``(N, 24, 3)`` and ``rec`` ``(N,)`` = L_r at that estimate.
         """
         if not train and self.lean_inference and self.rep == "rot6d":
-            return self._refine_lean(omega0, x, meas_p, meas_R, off_R, off_t, sensors, hold_betas)
+            return self._refine_lean(omega0, x, meas_p, meas_R, off_R, off_t, sensors)
         x = self.select_inputs(x)
         out = []
         omega = omega0
         for n in range(self.cfg.iterations + 1):
-            omega = _hold(omega, hold_betas)
             with torch.enable_grad():
                 if not omega.requires_grad:
                     omega = omega.detach().requires_grad_(True)
@@ -357,14 +343,12 @@ class LGDRNN(nn.Module):
 
     @torch.no_grad()
     def _refine_lean(self, omega: torch.Tensor, x: torch.Tensor, meas_p: torch.Tensor, meas_R: torch.Tensor,
-                     off_R: torch.Tensor, off_t: torch.Tensor, sensors: VirtualSensors,
-                     hold_betas: torch.Tensor | None = None) -> list[dict[str, torch.Tensor]]:
+                     off_R: torch.Tensor, off_t: torch.Tensor, sensors: VirtualSensors) -> list[dict[str, torch.Tensor]]:
         """:meth:`refine` for inference with the closed-form dL_r/dOmega (no graph)."""
         kernel = sensors.lean()
         x = self.select_inputs(x)
         out = []
         for n in range(self.cfg.iterations + 1):
-            omega = _hold(omega, hold_betas)
             ctx = kernel.forward(omega, meas_p, meas_R, off_R, off_t, self.rec_weights)
             out.append({"omega": omega, "local_rot": ctx["local_rot"], "betas": ctx["betas"], "joints": ctx["joints"],
                         "rec": ctx["rec"]})
