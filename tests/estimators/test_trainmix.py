@@ -159,3 +159,12 @@ def test_warm_start_loads_matching_weights_and_names_a_mismatch(tmp_path: Path, 
     wide = cls(tiny(hidden=tiny().hidden * 2), body=body)
     with pytest.raises(CheckpointMismatchError, match="this network's is"):
         wide.warm_start(path)
+
+
+def test_the_card_sentence_names_every_part_of_the_mix() -> None:
+    assert TrainingMix().describe() == ""
+    text = TrainingMix.from_config(tiny(aug_mirror=True, aug_speed_copies=2, aug_heading_copies=1, aug_mix_copies=1,
+                                        aug_site_jitter_m=0.02, procedural_per_family=5, train_shapes="random")).describe()
+    for words in ("mirror image", "2 copies played at a speed drawn log-uniformly from 0.8-1.25x", "one copy turned",
+                  "upper body of another", "5 procedural clips of each family", "adult body drawn", "up to 2 cm"):
+        assert words in text, (words, text)

@@ -86,11 +86,41 @@ class TrainingMix:
         return {"mix_version": 1, "augment": self.augment.to_dict(), "procedural_per_family": self.procedural_per_family,
                 "shapes": self.shapes, "families": list(self.families)}
 
+    def describe(self) -> str:
+        """The weight card's sentence about the mix (``""`` when inactive): what the train split
+        held beyond its corpus clips, and their licences."""
+        a, parts = self.augment, []
+        if a.mirror:
+            parts.append("the left/right mirror image of every clip")
+        if a.speed_copies:
+            parts.append(f"{_copies(a.speed_copies)} played at a speed drawn log-uniformly from "
+                         f"{a.speed_range[0]:g}-{a.speed_range[1]:g}x" + (" (mirrored with probability 1/2)" if a.mirror else ""))
+        if a.heading_copies:
+            parts.append(f"{_copies(a.heading_copies)} turned to a uniform random heading")
+        if a.mix_copies:
+            parts.append(f"{_copies(a.mix_copies)} with the upper body of another train clip")
+        text = ("augmented copies of the same train clips (same sources and licences): " + " and ".join(parts)
+                + ", wearpose.motion.augment, simulated after augmenting") if parts else ""
+        extra = []
+        if self.procedural_per_family:
+            extra.append(f"{self.procedural_per_family} procedural clips of each family ({', '.join(self.families)}; "
+                         "wearpose.motion.procedural, train seed namespace; generated here, no licence restriction)")
+        if self.shapes == "random":
+            extra.append("every clip worn by an adult body drawn for it (wearpose.body.shapes, train stream) and "
+                         "re-fitted to it")
+        if a.site_jitter_m > 0:
+            extra.append(f"sensor sites jittered up to {a.site_jitter_m * 100:g} cm per clip")
+        return "; ".join(x for x in (text, *extra) if x)
+
     def extra_ids(self, corpus_ids: Sequence[str]) -> list[str]:
         """Ids of the clips added to corpus clips ``corpus_ids``: their augmented copies, then the
         procedural clips family by family."""
         procedural = [procedural_id(f, "train", i) for f in self.families for i in range(self.procedural_per_family)]
         return [*augmented_ids(list(corpus_ids), self.augment), *procedural]
+
+
+def _copies(n: int) -> str:
+    return "one copy" if n == 1 else f"{n} copies"
 
 
 class TrainingStore:

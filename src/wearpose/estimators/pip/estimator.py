@@ -51,6 +51,7 @@ from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.data import EDGE_FRAMES, LEAF_JOINTS, imu_features
 from wearpose.estimators.pip.model import NumpyStepper, PipNet
 from wearpose.estimators.pip.sitting import SIT_HOLD_S
+from wearpose.estimators.trainmix import TrainingMix
 from wearpose.estimators.pip.train import train_pip
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import rot6d_to_matrix
@@ -151,14 +152,9 @@ class PipEstimator(NetworkCheckpointing, Estimator):
                 f"Eq. 14 joint velocities, foot contacts")
         if cfg.max_train_clips > 0:
             text += f"; only {cfg.max_train_clips} train clips, spread evenly over the sorted split"
-        extra = ["the left/right mirror image of every clip"] if cfg.aug_mirror else []
-        if cfg.aug_speed_copies > 0:
-            n = cfg.aug_speed_copies
-            extra.append(f"{'one copy' if n == 1 else f'{n} copies'} played at a speed drawn log-uniformly from "
-                         f"{_span(cfg.aug_speed_range)}x" + (" (mirrored with probability 1/2)" if cfg.aug_mirror else ""))
-        if extra:
-            text += ("; plus augmented copies of the same train clips (same sources and licences): "
-                     + " and ".join(extra) + ", wearpose.motion.augment, simulated after augmenting")
+        mix = TrainingMix.from_config(cfg).describe()
+        if mix:
+            text += "; plus " + mix
         if cfg.sitting_clips > 0:
             held = (f"balanced standing/seated holds of {_span(SIT_HOLD_S)} s"
                     if tuple(cfg.sitting_stand_s) == SIT_HOLD_S else
