@@ -68,12 +68,13 @@ def _producer(stem: str, js: dict | None, md: str | None) -> str:
 
 
 def shipped_runs() -> dict[str, str]:
-    """``{run directory name: shipped weights name}`` from the cards' ``shipped_with`` commands."""
+    """``{run directory name: shipped weights name}`` from the cards' ``shipped_with`` commands;
+    archived weights (``weights/archive/<name>.json``) by their archive name (``pip_cpu_v1``)."""
     out = {}
-    for card in sorted(CARDS.glob("*.json")):
+    for card in [*sorted((CARDS / "archive").glob("*.json")), *sorted(CARDS.glob("*.json"))]:
         m = re.search(r"(\S+\.pt) (\w+)", str(json.loads(card.read_text(encoding="utf-8")).get("shipped_with", "")))
         if m and Path(m.group(1)).parent.name:
-            out[Path(m.group(1)).parent.name] = m.group(2)
+            out[Path(m.group(1)).parent.name] = card.stem if card.parent.name == "archive" else m.group(2)
     return out
 
 

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from wearpose.cli import app
 from wearpose.errors import ConfigError, InputFileError
 from wearpose.estimators.recipe import check_corpus, check_seed, find_recipe, load_recipe, shipped_recipes
-from wearpose.weights import weight_path
+from wearpose.weights import WEIGHTS_DIR, weight_path
 
 runner = CliRunner()
 HEADER = "format: wearpose.recipe\nversion: 1\n"
@@ -32,12 +32,17 @@ def _card_options(card: dict) -> dict[str, str]:
 
 
 def test_shipped_recipes_load_and_miposer_cpu_is_its_cards_command() -> None:
-    assert {"miposer_cpu", "empose12_smoke"} <= set(shipped_recipes())
+    """Recipe miposer_cpu is the command of the v1 weights (now archived); miposer_cpu_v2 made the
+    shipped ones, and their card records that very file (name and SHA-1)."""
+    assert {"miposer_cpu", "miposer_cpu_v2", "pip_cpu", "empose12_smoke"} <= set(shipped_recipes())
     for name in shipped_recipes():
         r = load_recipe(name)
         assert r.name == name and r.seed is not None and r.corpus is not None, name
+    for weights, recipe in (("miposer_cpu", "miposer_cpu_v2"), ("pip_cpu", "pip_cpu")):
+        rec = json.loads(weight_path(weights).with_suffix(".json").read_text())["recipe"]
+        assert (rec["name"], rec["sha1"]) == (recipe, load_recipe(recipe).sha1), weights
     r = load_recipe("miposer_cpu")
-    card = json.loads(weight_path("miposer_cpu").with_suffix(".json").read_text())
+    card = json.loads((WEIGHTS_DIR / "archive" / "miposer_cpu_v1.json").read_text())
     given = _card_options(card)
     given.pop("out")
     assert {k: str(r.values[k]) for k in given} == given == {"config": "cpu", "epochs": "5", "threads": "1",

@@ -33,8 +33,9 @@ def test_weights_named_by_run_and_shipped_name() -> None:
     assert results_index._weight_name("runs/twostage12_lgdik_site.pt", shipped) == "twostage12_lgdik_site"
     assert results_index._weights(None, "python b.py --ckpt a=runs/x/best.pt --weights miposer_cpu", shipped) \
         == "x, miposer_cpu"
-    # the cards name the run each shipped weights file came from
-    assert results_index.shipped_runs()["pip_w256_arms"] == "pip_cpu"
+    # the cards name the run each shipped (or archived) weights file came from
+    runs = results_index.shipped_runs()
+    assert runs["pip_w256_arms"] == "pip_cpu_v1" and runs["pip_v2"] == "pip_cpu" and runs["miposer_v2"] == "miposer_cpu"
 
 
 def _result_like(name: str, prefixes: set[str]) -> bool:
