@@ -202,17 +202,22 @@ class NetworkCheckpointing:
             ckpt.check(body_asset=body.asset_id, path=path)
         return body
 
-    def warm_start(self, path: str | Path) -> Any:
+    def warm_start(self, path: str | Path, same: Sequence[str] = ()) -> Any:
         """Start training from the weights of checkpoint ``path`` (fine-tuning): the same method,
-        kit and body asset, every tensor of the same shape; the provenance stays this run's,
-        with ``meta["init_from"]`` = ``path``. Returns the estimator.
+        kit and body asset, the same value of every config field in ``same`` (BiRAE: ``rep``,
+        which the tensor shapes do not always tell apart), every tensor of the same shape; the
+        provenance stays this run's, with ``meta["init_from"]`` = ``path``. Returns the estimator.
 
         Raises:
-            CheckpointMismatchError: another method / kit / asset, or a weight whose shape or
-                name differs (both sides named).
+            CheckpointMismatchError: another method / kit / asset / ``same`` field, or a weight
+                whose shape or name differs (both sides named).
         """
         ckpt = load_checkpoint(path)
         ckpt.check(method=self.name, kit=self.kit_name, body_asset=self.body_asset_id, path=path)
+        for k in same:
+            if ckpt.config.get(k) != getattr(self.config, k):
+                raise CheckpointMismatchError(f"{path}: --init-from checkpoint has {k} {ckpt.config.get(k)!r}, "
+                                              f"this run trains {getattr(self.config, k)!r}")
         own = self.model.state_dict()
         missing, extra = sorted(set(own) - set(ckpt.weights)), sorted(set(ckpt.weights) - set(own))
         if missing or extra:

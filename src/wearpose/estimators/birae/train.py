@@ -29,7 +29,7 @@ import torch
 from wearpose.estimators.birae.data import BiraeData, build_from_motions, build_split
 from wearpose.estimators.birae.model import masked_mse, nll_loss
 from wearpose.estimators.birae.representations import target_to_pose
-from wearpose.estimators.checkpoint import CheckpointMismatchError, fingerprint, load_checkpoint, save_checkpoint
+from wearpose.estimators.checkpoint import fingerprint, load_checkpoint, save_checkpoint
 from wearpose.estimators.train import loop_settings, train
 from wearpose.evaluate.metrics import mpjae
 
@@ -148,13 +148,7 @@ def train_birae(est: Any, out_dir: str | Path, *, resume: bool = False, threads:
     if recipe is not None:
         est.meta["recipe"] = dict(recipe)
     if init_from is not None:
-        init = load_checkpoint(init_from)
-        init.check(method=est.name, kit=est.kit_name, path=init_from)
-        if init.config.get("rep") != cfg.rep:
-            raise CheckpointMismatchError(f"{init_from}: --init-from checkpoint has rep {init.config.get('rep')!r}, "
-                                          f"this run trains {cfg.rep!r}")
-        est.model.load_state_dict(init.weights)
-        est.meta["init_from"] = str(init_from)
+        est.warm_start(init_from, same=("rep",))
         console.print(f"initialised from {init_from}")
     est.model.to(torch.device(device))
     kw = dict(resume=resume, threads=threads, device=device, checkpoint_every=checkpoint_every, max_steps=max_steps,
