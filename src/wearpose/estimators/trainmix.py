@@ -86,6 +86,13 @@ class TrainingMix:
         return {"mix_version": 1, "augment": self.augment.to_dict(), "procedural_per_family": self.procedural_per_family,
                 "shapes": self.shapes, "families": list(self.families)}
 
+    def corpus_settings(self) -> dict[str, Any]:
+        """What changes the *corpus* clips themselves (their wearers and sensor sites), for a
+        cache that keeps them apart from the added clips (PIP's): ``{}`` when neither does."""
+        if self.shapes == "corpus" and self.augment.site_jitter_m <= 0:
+            return {}
+        return {"wearers": self.shapes, "site_jitter_m": self.augment.site_jitter_m}
+
     def describe(self) -> str:
         """The weight card's sentence about the mix (``""`` when inactive): what the train split
         held beyond its corpus clips, and their licences."""

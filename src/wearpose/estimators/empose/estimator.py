@@ -329,9 +329,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         """
         if isinstance(n, bool) or not isinstance(n, int) or n < 0:
             raise ConfigError(f"EM-POSE iterations: expected a whole number of LGD updates >= 0, got {n!r}")
-        self.config = replace(self.config, iterations=n)
-        self.model.cfg = self.config
-        self.reset()
+        self._set_config(iterations=n)
 
     def _set_config(self, **kw: Any) -> None:
         self.config = replace(self.config, **kw)  # EmposeConfig checks the values

@@ -36,7 +36,7 @@ from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.estimators.checkpoint import fingerprint
 from wearpose.estimators.clipstore import ClipData, cached_clips, concat_clips, kit_sites, num_batches
 from wearpose.estimators.seeding import clip_seed
-from wearpose.estimators.trainmix import clip_body, training_source
+from wearpose.estimators.trainmix import TrainingMix, clip_body, training_source
 from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.sitting import SITTING_PREFIX, STAND_HOLD_S, sitting_clip_id, sitting_motion
 from wearpose.evaluate.metrics import root_relative_global_rotations
@@ -270,7 +270,8 @@ def build_split(split: str, cfg: PipConfig, body: Any, *, store: Any = None, lim
     root = Path(cache_root) if cache_root is not None else Path(store.root) / "estimators" / "pip"
     corpus = _corpus_ids(split, store, limit)
     store, ids, mix = training_source(split, store, corpus, cfg, body, AUG_NAMESPACE)
-    data = _build_corpus_split(split, corpus, cfg, body, store, root, progress, mix)
+    wearers = TrainingMix.from_config(cfg).corpus_settings() if split == "train" else {}
+    data = _build_corpus_split(split, corpus, cfg, body, store, root, progress, wearers)
     if len(ids) > len(corpus):
         data = concat_data(data, _build_added(split, ids[len(corpus):], cfg, body, store, root, progress, mix))
     n_sit = sitting_count(cfg, split)
@@ -346,13 +347,11 @@ def _corpus_ids(split: str, store: Any, limit: int | None) -> list[str]:
 
 
 def _build_corpus_split(split: str, ids: list[str], cfg: PipConfig, body: Any, store: Any, root: Path,
-                        progress: Any = None, mix: dict[str, Any] | None = None) -> PipData:
-    """The corpus clips ``ids`` (on the training mix's wearers and sites when ``mix`` has
-    them: its wearers and jitter change these clips too)."""
-    settings = data_settings(cfg, body)
-    m = (mix or {}).get("mix", {})
-    if m.get("shapes", "corpus") != "corpus" or m.get("augment", {}).get("site_jitter_m", 0.0) > 0:
-        settings = {**settings, "wearers": m["shapes"], "site_jitter_m": m["augment"]["site_jitter_m"]}
+                        progress: Any = None, wearers: dict[str, Any] | None = None) -> PipData:
+    """The corpus clips ``ids``; ``wearers``: the training mix's
+    :meth:`~wearpose.estimators.trainmix.TrainingMix.corpus_settings` (its wearers and site
+    jitter change these clips too, so they join the cache key)."""
+    settings = {**data_settings(cfg, body), **(wearers or {})}
     fp = fingerprint(ids, {**settings, "split": split})
     return _simulate_cached(root / f"{split}-{fp[:16]}.pt", ids, fp, settings,
                             lambda cid: simulate_clip(store.load(cid), cfg, clip_body(store, cid, body),
