@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from tests.sensors.sensor_testutils import smooth_motion
+from tests.estimators.pip.test_pip_kinematics import FakeStore as Store
 from wearpose.errors import ConfigError
 from wearpose.estimators.checkpoint import CheckpointMismatchError
 from wearpose.estimators.empose import EmposeConfig
@@ -18,23 +18,8 @@ from wearpose.estimators.empose.data import build_split
 from wearpose.estimators.method import TrainRun
 from wearpose.estimators.trainmix import TrainingMix, TrainingStore, clip_body, training_source
 from wearpose.geometry import geodesic_angle
-from wearpose.motion import MotionSequence
 from wearpose.motion.augment import LOWER_BODY
 from wearpose.motion.procedural import FAMILIES
-
-
-class Store:
-    """Duck-typed CorpusStore: synthetic clips at 30 Hz (the corpus's Bandai rate)."""
-
-    def __init__(self, root: Path, n: dict[str, int]) -> None:
-        self.root = root
-        self._ids = {s: [f"synthetic/{s}_{i:02d}" for i in range(k)] for s, k in n.items()}
-
-    def clips(self, split: str | None = None) -> list[str]:
-        return list(self._ids.get(split, []))
-
-    def load(self, clip_id: str) -> MotionSequence:
-        return smooth_motion(T=40, fps=30.0, seed=sum(map(ord, clip_id)) % 1000, amp=0.3).to(torch.float32)
 
 
 def tiny(**kw) -> EmposeConfig:
