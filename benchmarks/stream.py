@@ -24,7 +24,8 @@ thread hand-off) and ``transport_ms`` (everything outside the server: encode, lo
 the client's event loop). CPU use of both processes comes from psutil (100 % = one core).
 The server's own per-stage breakdown (``server_stats.stages_ms``: reorder, queue, compute, encode,
 send; with each stage's mean over the slowest 1 % of frames), its GC pauses (``server_stats.gc``)
-and the client's (``client_gc``), the slowest 1 % of frames split by stage (``tail_top1pct``)
+and the client's (``client_gc``), the slowest 1 % of frames split by stage (``tail_top1pct``),
+the first two seconds' frames split the same way with their slowest frame (``first_two_seconds``)
 and the load average sampled during the run (``load_average_samples``) say where a tail comes from.
 Writes ``benchmarks/results/stream.json`` and prints a table.
 

@@ -75,6 +75,23 @@ def _summary_ms(x: list[float] | np.ndarray) -> dict[str, float | None]:
             "max": round(float(a.max()), 3), "n": int(len(a))}
 
 
+def _stages(seqs: list[int], e2e: list[float], srv: list[float], comp: list[float], limit: float) -> dict[str, Any]:
+    """Where the time of the frames with sequence number below ``limit`` went (the start of a
+    stream, where a one-off stall shows): end to end, compute (the estimator's step), queue (in
+    the server, waiting for the estimator) and transport (the rest: sockets and both event loops),
+    each as :func:`_summary_ms`, plus the slowest of those frames with its split, in ms."""
+    n = int(np.searchsorted(np.asarray(seqs), limit))  # ``seqs`` ascending, like e2e/srv/comp
+    if n == 0:
+        return {"frames": 0}
+    a_e2e, a_srv, a_comp = (np.asarray(x[:n], dtype=np.float64) for x in (e2e, srv, comp))
+    k = int(np.argmax(a_e2e))
+    return {"frames": n, "latency_ms": _summary_ms(a_e2e), "compute_ms": _summary_ms(a_comp),
+            "queue_ms": _summary_ms(a_srv - a_comp), "transport_ms": _summary_ms(a_e2e - a_srv),
+            "slowest": {"seq": int(seqs[k]), "latency_ms": round(float(a_e2e[k]), 3),
+                        "compute_ms": round(float(a_comp[k]), 3), "queue_ms": round(float(a_srv[k] - a_comp[k]), 3),
+                        "transport_ms": round(float(a_e2e[k] - a_srv[k]), 3)}}
+
+
 def _malformed(kind: int, good: bytes, hello: Hello, rng: np.random.Generator) -> str | bytes:
     """One malformed message of type ``kind % 8`` derived from a good binary frame."""
     kind %= 8
@@ -284,6 +301,7 @@ async def replay(recording: Any, url: str, *, subject: int = 0, fmt: str = "bina
         "queue_ms": _summary_ms(np.asarray(srv) - np.asarray(comp)),
         "send_lag_ms": _summary_ms(lag) if lag else None, "tail_top1pct": tail,
         "first_frames_latency_ms": [round(x, 3) for x in e2e[:10]],
+        "first_two_seconds": _stages(got, e2e, srv, comp, limit=2.0 * st.rate),
         "injected": {"malformed": n_malformed, "reordered": n_reordered, "dropped_sensor_samples": n_dropped_samples},
         "faults": asdict(faults), "ready": ready, "server_stats": server_stats,
     }
