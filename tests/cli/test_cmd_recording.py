@@ -136,3 +136,15 @@ def test_bad_options_and_no_files(tmp_path: Path) -> None:
     assert _run("dip-imu", str(p), "--sensors", "3,99")[0] == 2
     code, _, out = _run("empose", str(tmp_path), "--out", str(tmp_path / "o"))
     assert code == 1 and "no EM-POSE" in out
+
+
+def test_out_given_as_a_file_name_is_refused_naming_the_fix(tmp_path: Path) -> None:
+    p = tmp_path / "01.pkl"
+    _write_dip(p)
+    code, _, out = _run("dip-imu", str(p), "--out", str(tmp_path / "trial.npz"))
+    assert code == 2
+    assert "--out" in out and "folder" in out and "trial" in out
+    assert not (tmp_path / "trial.npz").exists()  # used to become a folder of that name
+    (tmp_path / "taken").write_text("x")
+    code, _, out = _run("dip-imu", str(p), "--out", str(tmp_path / "taken"))
+    assert code == 2 and "folder" in out

@@ -286,6 +286,11 @@ def recording_import(
     parsed = _parse_sensors(fmt, sensors)
     if fps is not None and not fps > 0:
         raise typer.BadParameter(f"{fps}; expected a positive rate in Hz", param_hint="--fps")
+    if out.suffix.lower() == ".npz" or out.is_file():
+        # --out is a folder of one .npz per input file; a file name here used to become a folder of that name.
+        raise typer.BadParameter(f"{out} is a file name, but --out is the folder that gets one Recording .npz per "
+                                 f"input file; give a folder, e.g. --out {out.with_suffix('') if out.suffix else out.parent / 'recordings'}",
+                                 param_hint="--out")
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
         raise typer.BadParameter(f"no such file or folder: {', '.join(missing)}", param_hint="PATHS")

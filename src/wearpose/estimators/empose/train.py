@@ -14,7 +14,6 @@ from wearpose.estimators.empose.estimator import EmposeEstimator
 from wearpose.estimators.empose.model import lgd_loss, sensor_features
 from wearpose.estimators.train import WindowTask, train_estimator
 from wearpose.body.skeleton import MAJOR_JOINTS
-from wearpose.evaluate.metrics import mpjae, mpjpe
 from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
 from wearpose.motion import CorpusStore
 
