@@ -136,3 +136,44 @@ def test_archive_init_from_and_seed_set_the_run(tmp_path: Path) -> None:
     r = load_recipe(f)
     assert Path(r.values["init_from"]) == WEIGHTS_DIR / "archive" / "empose12_cpu_v1.pt"
     assert Path(r.values["init_from"]).is_file() and r.values["seed"] == 4 and r.seed == 4
+
+
+def test_empose12_cpu_recipe_is_the_shipped_cards_command_and_corpus() -> None:
+    """The recipe written after the fact for the shipped EM-POSE 12 (v1) says what its card says."""
+    r = load_recipe("empose12_cpu")
+    card = json.loads(weight_path("empose12_cpu").with_suffix(".json").read_text())
+    given = _card_options(card)
+    given.pop("out")
+    assert {k: str(r.values[k]) for k in given} == given
+    assert r.values["epochs"] == card["config"]["epochs"] and r.seed == card["config"]["seed"]
+    assert r.values["source"] is None and not r.values["mirror"] and r.values["init_from"] is None
+    assert r.corpus is not None and r.corpus["name"] == "data"  # corpus v1: 1143 train clips on the card
+    assert card["training_data"]["clips"] == 1143
+
+
+def _ckpt(path: Path, val: float, w: float, fp: str = "same", extra: bool = False) -> Path:
+    import torch
+
+    from wearpose.estimators.checkpoint import Checkpoint, save_checkpoint
+
+    weights = {"a": torch.full((2, 3), w), **({"b": torch.zeros(1)} if extra else {})}
+    return save_checkpoint(Checkpoint("empose", {}, "em12", ["back"], "none", weights, fp, "",
+                                      {"epoch": 3, "val_mpjpe_mm": val, "val_loss": 0.5, "val_note": "x"}), path)
+
+
+def test_reproduction_compares_the_selection_figure_weights_and_data(tmp_path: Path) -> None:
+    from wearpose.estimators.recipe import reproduction, selection_metric
+
+    assert [selection_metric(m) for m in ("empose", "pip", "birae", "miposer")] == [
+        "val_mpjpe_mm", "val_joints_mm", "val_mpjae_deg", "val_mpjpe_upper_mm"]
+    ref = _ckpt(tmp_path / "ref.pt", 10.0, 1.0)
+    same = reproduction("empose12_smoke", _ckpt(tmp_path / "same.pt", 10.0, 1.0), ref)
+    assert same["passes"] and same["max_abs_weight_difference"] == 0.0 and same["same_data"]
+    assert same["headline"] == "val_mpjpe_mm" and set(same["figures"]) == {"val_mpjpe_mm", "val_loss"}  # numbers only
+    close = reproduction("empose12_smoke", _ckpt(tmp_path / "close.pt", 10.15, 1.25), ref)
+    assert close["passes"] and close["figures"]["val_mpjpe_mm"]["relative"] == pytest.approx(0.015)
+    assert close["max_abs_weight_difference"] == pytest.approx(0.25)
+    far = reproduction("empose12_smoke", _ckpt(tmp_path / "far.pt", 9.7, 1.0, fp="other", extra=True), ref)
+    assert not far["passes"] and far["figures"]["val_mpjpe_mm"]["relative"] == pytest.approx(-0.03)
+    assert far["max_abs_weight_difference"] is None and not far["same_data"]
+    assert not reproduction("empose12_smoke", _ckpt(tmp_path / "tight.pt", 10.15, 1.0), ref, tolerance=0.01)["passes"]

@@ -237,5 +237,46 @@ def check_seed(recipe: Recipe, config: Mapping[str, Any] | None) -> None:
                           "the preset changed since the recipe was written: update the recipe's seed or the preset")
 
 
+def selection_metric(method: str) -> str:
+    """The validation figure ``wearpose train <method>`` keeps ``best.pt`` by (lower is better):
+    the ``val_metric`` of the training task in the ``train`` module beside the method's training
+    entry (every trainable method's package has one)."""
+    import importlib
+
+    spec = _method(Path("<recipe>"), method)
+    assert spec.training is not None
+    mod = importlib.import_module(spec.training.entry.split(":")[0].rsplit(".", 1)[0] + ".train")
+    found = {c.val_metric for c in vars(mod).values() if isinstance(c, type) and c.__module__ == mod.__name__
+             and isinstance(getattr(c, "val_metric", None), str)}
+    if len(found) != 1:
+        raise ConfigError(f"{mod.__name__}: expected one training task with a val_metric, found {sorted(found)}")
+    return found.pop()
+
+
+def reproduction(recipe: str | Path, rerun: str | Path, reference: str | Path, tolerance: float = 0.02) -> dict[str, Any]:
+    """Does a rerun of ``recipe`` reproduce ``reference`` (the weights it made, or an earlier run's
+    kept checkpoint)? Compares the validation figures both kept checkpoints recorded (``meta``:
+    every numeric ``val_*``, relative difference to the reference), the largest absolute
+    difference between their weights (0: bit-identical; None: different tensor sets) and their
+    data fingerprints. ``passes``: the method's :func:`selection_metric` within ``tolerance``."""
+    from wearpose.estimators.checkpoint import load_checkpoint  # start-up: torch only when comparing
+
+    r = load_recipe(recipe)
+    a, b = load_checkpoint(rerun), load_checkpoint(reference)
+    key = selection_metric(r.method)
+    num = lambda m, k: isinstance(m.get(k), (int, float)) and not isinstance(m.get(k), bool)  # noqa: E731
+    figures = {k: {"rerun": a.meta[k], "reference": b.meta[k],
+                   "relative": (a.meta[k] - b.meta[k]) / abs(b.meta[k]) if b.meta[k] else None}
+               for k in sorted(set(a.meta) & set(b.meta)) if k.startswith("val_") and num(a.meta, k) and num(b.meta, k)}
+    same = set(a.weights) == set(b.weights) and all(a.weights[k].shape == b.weights[k].shape for k in a.weights)
+    diff = max((float((a.weights[k].double() - b.weights[k].double()).abs().max()) for k in a.weights
+                if a.weights[k].numel()), default=0.0) if same else None
+    head = figures.get(key, {}).get("relative")
+    return {"recipe": r.name, "method": r.method, "recipe_sha1": r.sha1, "rerun": str(rerun), "reference": str(reference),
+            "epoch": {"rerun": a.meta.get("epoch"), "reference": b.meta.get("epoch")}, "headline": key,
+            "figures": figures, "passes": head is not None and abs(head) <= tolerance,
+            "max_abs_weight_difference": diff, "same_data": a.data_fingerprint == b.data_fingerprint}
+
+
 __all__ = ["Recipe", "load_recipe", "find_recipe", "shipped_recipes", "recipe_dirs", "check_corpus", "check_seed",
-           "FORMAT", "VERSION"]
+           "selection_metric", "reproduction", "FORMAT", "VERSION"]
