@@ -11,7 +11,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import torch
@@ -233,6 +233,12 @@ class BodyModel(nn.Module):
     def _batch(self, pose: torch.Tensor | None, betas: torch.Tensor | None, trans: torch.Tensor | None
                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, tuple[int, ...]]:
         R = self._pose_matrices(pose) if pose is not None else None
+        if (R is not None and betas is not None and trans is not None and R.dim() == 4 and betas.dim() == 2
+                and trans.dim() == 2 and betas.shape[1] == self.num_betas and trans.shape[1] == 3
+                and R.shape[0] == betas.shape[0] == trans.shape[0] and betas.dtype == trans.dtype == self.dtype):
+            # A flat batch given in full (the common call): what the general path below returns,
+            # without its broadcast and reshapes (a third of a call's set-up at B = 1).
+            return R, betas, trans, (R.shape[0],)
         shapes = []
         if R is not None:
             shapes.append(R.shape[:-3])
@@ -474,15 +480,17 @@ class BodyModel(nn.Module):
         """
         if vertex_ids is not None:
             vids = np.asarray(vertex_ids, dtype=np.int64)
+            if len(vids) and (vids.max() >= self.num_vertices or vids.min() < 0):
+                raise ShapeError(f"vertex ids must be in [0, {self.num_vertices}), got {vids.tolist()}")
             tids = np.asarray(tangent_ids, dtype=np.int64) if tangent_ids is not None else np.array(
                 [self._neighbour(int(v)) for v in vids], dtype=np.int64)
             names = tuple(f"v{v}" for v in vids)
+            pt = self._patch(("sites", tuple(int(v) for v in vids), tuple(int(v) for v in tids)), lambda: (vids, tids))
         else:
-            names, vids, tids = self.site_ids(names)
-        if len(vids) and (vids.max() >= self.num_vertices or vids.min() < 0):
-            raise ShapeError(f"vertex ids must be in [0, {self.num_vertices}), got {vids.tolist()}")
+            # Keyed by the names: resolving them to ids on every call was a tenth of a call at B = 1.
+            names = tuple(names) if names is not None else self.site_names
+            pt = self._patch(("site names", names), lambda: self.site_ids(names)[1:])
         R, b, t, batch = self._batch(pose, betas, trans)
-        pt = self._patch(vids, tids)
         verts, normals, J, G = self._skin_patch(pt, R, b, t)
         p, n = verts[:, pt.site], normals[:, pt.site]
         e = verts[:, pt.tangent] - p
@@ -493,11 +501,13 @@ class BodyModel(nn.Module):
         un = lambda x: x.reshape(*batch, *x.shape[1:])  # noqa: E731
         return SiteOutput(names=names, positions=un(p), rotations=un(rot), joints=un(J), global_rot=un(G))
 
-    def _patch(self, vids: np.ndarray, tids: np.ndarray) -> _Patch:
-        """The local patch of these sites (site and tangent vertices and the sites' one-ring
-        faces), its local ids and sliced skinning buffers: built once per site list, device and
-        dtype (a call at B = 1 used to spend most of its time here)."""
+    def _patch(self, key: tuple, ids: Callable[[], tuple[np.ndarray, np.ndarray]]) -> _Patch:
+        """The local patch of some sites (site and tangent vertices and the sites' one-ring
+        faces), its local ids and sliced skinning buffers: built once per ``key`` (the site list),
+        device and dtype (a call at B = 1 used to spend most of its time here). ``ids()`` gives
+        the site and tangent vertex ids ``(K,)``, called only to build."""
         def make() -> _Patch:
+            vids, tids = ids()
             patch_faces = np.unique(np.concatenate([self._faces_of(int(v)) for v in vids])) if len(vids) else np.zeros(0, np.int64)
             faces = self.faces.cpu().numpy()[patch_faces].reshape(-1, 3)
             used = np.unique(np.concatenate([vids, tids, faces.ravel()]))
@@ -505,12 +515,14 @@ class BodyModel(nn.Module):
             vidx = torch.as_tensor(used, dtype=torch.long, device=self.device)
             return _Patch(vidx, local(faces), local(vids), local(tids), self._skin_buffers(vidx))
 
-        return self._cached(("sites", tuple(int(v) for v in vids), tuple(int(v) for v in tids)), make)
+        return self._cached(key, make)
 
     def _cached(self, name: Any, make: Any) -> Any:
         """``make()`` cached per ``name``, device, dtype and buffer state (buffers replaced by ``.to``
         or written in place by ``load_state_dict`` give a new entry)."""
-        state = tuple((b.data_ptr(), b._version) for b in self.buffers())
+        # This module's own buffers (it has no submodules): ``self.buffers()``'s recursive walk
+        # cost as much as the rest of the key.
+        state = tuple((b.data_ptr(), b._version) for b in self._buffers.values() if b is not None)
         key = (name, str(self.device), self.dtype, state)
         if key not in self._patches:
             if len(self._patches) > 64:
