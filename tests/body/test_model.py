@@ -173,9 +173,11 @@ def test_level_fk_equals_joint_loop() -> None:
         for B in (1, 5, 64):
             R = axis_angle_to_matrix(torch.randn(B, 24, 3, generator=g, dtype=dtype))
             rest = torch.randn(24, 3, generator=g, dtype=dtype)
-            G, P = forward_kinematics(R, rest)
+            G, P = forward_kinematics(R, rest)  # no autograd: the in-place joint-major levels
             G0, P0 = _fk_loop(R, rest.expand(B, 24, 3), PARENTS)
             assert torch.equal(G, G0) and torch.equal(P, P0), (dtype, B)
+            Gg, Pg = forward_kinematics(R.clone().requires_grad_(), rest)  # autograd: the levels concatenated
+            assert Gg.requires_grad and torch.equal(Gg, G0) and torch.equal(Pg, P0), (dtype, B)
     assert _level_plan(PARENTS) is not None and len(_level_plan(PARENTS)) == 8
     chain_then_branch = (-1, 0, 1, 0)  # depths 0 1 2 1: not sorted
     assert _level_plan(chain_then_branch) is None

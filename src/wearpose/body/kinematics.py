@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from functools import lru_cache
+from typing import Any
 
 import torch
 
@@ -64,6 +65,74 @@ def _fk_levels(local_rot: torch.Tensor, rest_joints: torch.Tensor, parents: tupl
     return T[..., :3], T[..., 3]
 
 
+@lru_cache(maxsize=64)
+def _level_steps(parents: tuple[int, ...], n: int, device: torch.device
+                 ) -> tuple[tuple[int, ...], tuple[tuple[int, str, Any], ...], torch.Tensor] | None:
+    """The plan of :func:`_fk_levels_nograd` for a flat batch of ``n``: split sizes of the
+    joint-major ``(J * n, 4, 4)`` blocks by level; per level the parent level and how its parents'
+    blocks are taken ("all": the whole parent level, "narrow": a run of it, "expand": one parent
+    for every joint, "index": ids); the parent ids of joints 1.. as a tensor."""
+    plan = _level_plan(parents)
+    if plan is None:
+        return None
+    starts = [0] + [a for a, _, _, _ in plan] + [len(parents)]
+    sizes = tuple(n * (starts[i + 1] - starts[i]) for i in range(len(starts) - 1))
+    steps: list[tuple[int, str, Any]] = []
+    for a, b, pl, local in plan:
+        k, level_size = b - a, starts[pl + 1] - starts[pl]
+        if local == tuple(range(level_size)):
+            steps.append((pl, "all", None))
+        elif local == tuple(range(local[0], local[0] + k)):
+            steps.append((pl, "narrow", (local[0] * n, k * n)))
+        elif len(set(local)) == 1:
+            steps.append((pl, "expand", (local[0] * n, k)))
+        else:
+            steps.append((pl, "index", torch.tensor([q * n + i for q in local for i in range(n)], device=device)))
+    return sizes, tuple(steps), torch.tensor(parents[1:], device=device)
+
+
+def _fk_levels_nograd(local_rot: torch.Tensor, rest_joints: torch.Tensor, parents: tuple[int, ...]
+                      ) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """:func:`_fk_levels` without autograd, for small batches where the cost is per torch call:
+    the same ``(4, 4)`` blocks and products (bit-equal, tested), laid out joint-major ``(J, n, 4,
+    4)`` so that each level is one ``bmm`` written in place and most parent blocks are a level
+    as it is (no per-level slicing, reshaping and final concatenation). ``None`` when the joint
+    order has no level plan."""
+    J = local_rot.shape[-3]
+    batch = local_rot.shape[:-3]
+    n = math.prod(batch)
+    got = _level_steps(parents, n, local_rot.device)
+    if got is None:
+        return None
+    sizes, steps, par = got
+    R = local_rot.reshape(n, J, 3, 3).transpose(0, 1)  # (J, n, 3, 3)
+    rest = rest_joints.reshape(n, J, 3).transpose(0, 1)  # (J, n, 3)
+    offset = torch.cat([rest[:1], rest[1:] - rest.index_select(0, par)])  # (J, n, 3): root's is its rest position
+    last = _last_row(local_rot.dtype, local_rot.device).expand(J, n, 1, 4)
+    child = torch.cat([torch.cat([R, offset.unsqueeze(-1)], -1), last], -2).view(J * n, 4, 4)
+    C = child.split(sizes)
+    T = torch.empty_like(child)
+    Ts = T.split(sizes)
+    Ts[0].copy_(C[0])
+    for d, (pl, how, arg) in enumerate(steps, 1):
+        P = Ts[pl]
+        if how == "narrow":
+            P = P.narrow(0, arg[0], arg[1])
+        elif how == "expand":
+            P = P.narrow(0, arg[0], n).expand(arg[1], n, 4, 4).reshape(-1, 4, 4)
+        elif how == "index":
+            P = P.index_select(0, arg)
+        torch.bmm(P, C[d], out=Ts[d])
+    T = T.view(J, n, 4, 4).transpose(0, 1).reshape(*batch, J, 4, 4)
+    return T[..., :3, :3], T[..., :3, 3]
+
+
+@lru_cache(maxsize=16)
+def _last_row(dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """``[0, 0, 0, 1]``: the bottom row of a homogeneous transform (made once per dtype and device)."""
+    return torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=dtype, device=device)
+
+
 def forward_kinematics(
     local_rot: torch.Tensor,
     rest_joints: torch.Tensor,
@@ -76,7 +145,8 @@ def forward_kinematics(
     frame.
 
     Small batches (up to :data:`LEVEL_FK_MAX_BATCH`) go one tree level at a time (9 levels for
-    SMPL instead of 23 joints); larger ones joint by joint. Both compute the same products.
+    SMPL instead of 23 joints; without autograd, each level one in-place ``bmm`` on a joint-major
+    layout, :func:`_fk_levels_nograd`); larger ones joint by joint. All compute the same products.
 
     Args:
         local_rot: ``(..., J, 3, 3)`` rotation of each joint relative to its parent (joint 0:
@@ -92,9 +162,13 @@ def forward_kinematics(
     rest_joints = rest_joints.to(local_rot)
     batch = local_rot.shape[:-3]
     rest_joints = rest_joints.expand(*batch, J, 3)
-    par = tuple(int(p) for p in parents)
+    par = parents if type(parents) is tuple else tuple(int(p) for p in parents)  # SMPL's PARENTS is one already
     plan = _level_plan(par) if J > 1 else None
     if plan is not None and math.prod(batch) <= LEVEL_FK_MAX_BATCH:
+        if not (torch.is_grad_enabled() and (local_rot.requires_grad or rest_joints.requires_grad)):
+            fast = _fk_levels_nograd(local_rot, rest_joints, par)
+            if fast is not None:
+                return fast
         return _fk_levels(local_rot, rest_joints, par, plan)
     return _fk_loop(local_rot, rest_joints, parents)
 
