@@ -110,9 +110,9 @@ def _fk_levels_nograd(local_rot: torch.Tensor, rest_joints: torch.Tensor, parent
     offset = torch.cat([rest[:1], rest[1:] - rest.index_select(0, par)])  # (J, n, 3): root's is its rest position
     last = _last_row(local_rot.dtype, local_rot.device).expand(J, n, 1, 4)
     child = torch.cat([torch.cat([R, offset.unsqueeze(-1)], -1), last], -2).view(J * n, 4, 4)
-    C = child.split(sizes)
+    C = child.split_with_sizes(sizes)  # (Tensor.split's Python wrapper cost as much as the split)
     T = torch.empty_like(child)
-    Ts = T.split(sizes)
+    Ts = T.split_with_sizes(sizes)
     Ts[0].copy_(C[0])
     for d, (pl, how, arg) in enumerate(steps, 1):
         P = Ts[pl]

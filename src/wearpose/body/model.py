@@ -113,17 +113,31 @@ def _normals_vmajor(Y: torch.Tensor, ops: _FaceOps) -> torch.Tensor:
     return nv / torch.sqrt(x * x + y * y + z * z).clamp_min(1e-12).unsqueeze(1)
 
 
-def _normals_cmajor(Y: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
-    """Area-weighted unit vertex normals of a small patch, component-major: ``Y`` ``(3, n, V')``
-    -> ``(3, n, V')``; faces ``(F', 3)`` local ids. A vertex sums its faces' normals corner 0's
-    faces first, then corner 1's, then 2's, each in face order: its normal does not depend on
-    which other vertices share the patch."""
-    f0, f1, f2 = faces[:, 0], faces[:, 1], faces[:, 2]
-    x0 = Y.index_select(2, f0)
-    a, b = Y.index_select(2, f1) - x0, Y.index_select(2, f2) - x0  # (3, n, F)
-    fn = torch.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])  # |fn| = 2 area
-    n = torch.zeros_like(Y).index_add(2, f0, fn).index_add(2, f1, fn).index_add(2, f2, fn)
-    return n / torch.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).clamp_min(1e-12)
+def _normals_patch(X: torch.Tensor, corners: tuple[torch.Tensor, torch.Tensor, torch.Tensor], vdim: int, cdim: int
+                   ) -> torch.Tensor:
+    """Area-weighted unit vertex normals of a small patch ``X`` with its vertices along ``vdim``
+    and the x, y, z components along ``cdim`` (component-major ``(3, n, V')``: 2, 0; vertex-major
+    ``(V', 3, n)``: 0, 1); the same shape out. ``corners``: the faces' corners 0, 1, 2, ``(F',)``
+    local ids each. A vertex sums its faces' normals corner 0's faces first, then corner 1's, then
+    2's, each in face order: its normal does not depend on which other vertices share the patch.
+
+    The same values in either layout; vertex-major gathers and scatters along dim 0 at half the
+    cost of those along the last dim. One ``select`` per use (not ``unbind``): autograd then sums
+    the gradients of ``a``, ``b`` and ``n`` in the order EM-POSE's closed-form gradient is pinned to
+    (without autograd, one ``unbind`` per tensor: the same views)."""
+    f0, f1, f2 = corners
+    x0 = X.index_select(vdim, f0)
+    a, b = X.index_select(vdim, f1) - x0, X.index_select(vdim, f2) - x0  # (F, 3, n) or (3, n, F)
+    if torch.is_grad_enabled() and X.requires_grad:
+        comp = lambda t: lambda i: t.select(cdim, i)  # noqa: E731
+    else:
+        comp = lambda t: t.unbind(cdim).__getitem__  # noqa: E731
+    ca, cb = comp(a), comp(b)
+    fn = torch.stack([ca(1) * cb(2) - ca(2) * cb(1), ca(2) * cb(0) - ca(0) * cb(2),
+                      ca(0) * cb(1) - ca(1) * cb(0)], cdim)  # |fn| = 2 area
+    n = torch.zeros_like(X).index_add(vdim, f0, fn).index_add(vdim, f1, fn).index_add(vdim, f2, fn)
+    cn = comp(n)
+    return n / torch.sqrt(cn(0) * cn(0) + cn(1) * cn(1) + cn(2) * cn(2)).clamp_min(1e-12).unsqueeze(cdim)
 
 
 @dataclass
@@ -131,7 +145,7 @@ class _Patch:
     """Set-up of one site list for :meth:`BodyModel.sites`, made once per (sites, device, dtype)."""
 
     vidx: torch.Tensor  # (V',) mesh ids of the patch vertices
-    faces: torch.Tensor  # (F', 3) faces of the patch, local ids
+    corners: tuple[torch.Tensor, torch.Tensor, torch.Tensor]  # (F',) each: corner 0, 1, 2 of the patch's faces, local ids
     site: torch.Tensor  # (K,) local ids of the site vertices
     tangent: torch.Tensor  # (K,) local ids of the tangent vertices
     buffers: tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]  # :meth:`BodyModel._skin_buffers`
@@ -298,12 +312,17 @@ class BodyModel(nn.Module):
         rotations ``(N, 24, 3, 3)``, posed joints with ``trans`` ``(N, 24, 3)``, skinning
         transforms ``A`` ``(N, 24, 12)`` (joint j: ``x -> G_j (x - J_rest_j) + J_j + trans``,
         G's columns then the translation) and, if asked, pose features ``(N, 207)``."""
-        J_rest = self.J_template + torch.einsum("jcs,ns->njc", self.J_shapedirs, betas)  # (N, 24, 3)
+        # The product einsum("jcs,ns->njc", J_shapedirs, betas) makes (same operands, strides and
+        # kernel: the same values), without its ~30 us of equation parsing and permutes at B = 1.
+        sdT = self.J_shapedirs.reshape(NUM_JOINTS * 3, -1).t().unsqueeze(0)  # (1, S, 72)
+        J_rest = self.J_template + torch.bmm(betas.unsqueeze(0), sdT).view(-1, NUM_JOINTS, 3)  # (N, 24, 3)
         G, J = forward_kinematics(R, J_rest, self.parents)  # (N, 24, 3, 3), (N, 24, 3)
-        t = J - (G @ J_rest.unsqueeze(-1)).squeeze(-1)  # (N, 24, 3)
-        A = torch.cat([G.transpose(-1, -2).reshape(-1, NUM_JOINTS, 9), t + trans[:, None]], dim=-1)  # (N, 24, 12)
+        # G_j J_rest_j as the one bmm that G @ J_rest[..., None] reshapes to (the same values).
+        t = J - torch.bmm(G.reshape(-1, 3, 3), J_rest.reshape(-1, 3, 1)).view(J.shape)  # (N, 24, 3)
+        tr = trans.unsqueeze(1)
+        A = torch.cat([G.transpose(-1, -2).reshape(-1, NUM_JOINTS, 9), t + tr], dim=-1)  # (N, 24, 12)
         feat = (R[:, 1:] - torch.eye(3, dtype=R.dtype, device=R.device)).reshape(R.shape[0], -1) if pose_features else None
-        return J_rest, G, J + trans[:, None], A, feat
+        return J_rest, G, J + tr, A, feat
 
     def _skin_mesh(self, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor, normals: bool
                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
@@ -347,22 +366,30 @@ class BodyModel(nn.Module):
         other sites share the call: a kit's sensor reads the same with or without the others).
         Returns verts (N, V', 3), normals (N, V', 3), joints (N, 24, 3), global rot (N, 24, 3, 3).
 
-        Vertex-major products (see :meth:`_skin_buffers`), then component-major ``(3, n, V')``."""
+        Vertex-major products (see :meth:`_skin_buffers`), then the patch's vertices as below."""
         v_t, sd, w, pd = pt.buffers
         _, G, J, A, feat = self._skin_prefix(R, betas, trans, pd is not None)
         n, Vp = R.shape[0], w.shape[0]
         vs = v_t + betas @ sd  # (n, V'*3)
         if pd is not None and feat is not None:
             vs = vs + feat @ pd
-        vs = vs.view(n, Vp, 3).permute(2, 0, 1)  # (3, n, V')
-        T = (w @ A.permute(1, 2, 0).reshape(NUM_JOINTS, 12 * n)).view(Vp, 12, n).permute(1, 2, 0)
-        X = torch.addcmul(T[9:12], T[0:3], vs[0:1])
-        X = torch.addcmul(X, T[3:6], vs[1:2])
-        X = torch.addcmul(X, T[6:9], vs[2:3])  # (3, n, V')
+        # Without autograd vertex-major (V', 3, n) (cheaper gathers for the normals); with it
+        # component-major (3, n, V'): the layouts of the backward's products, and so the rounding
+        # of the gradients, that EM-POSE's closed-form gradient is pinned to. The same values.
+        vmajor = not (torch.is_grad_enabled() and (vs.requires_grad or A.requires_grad))
+        vdim, cdim = (0, 1) if vmajor else (2, 0)
+        back = (2, 0, 1) if vmajor else (1, 2, 0)  # -> (n, V', 3)
+        vs = vs.view(n, Vp, 3).permute(*((1, 2, 0) if vmajor else (2, 0, 1)))
+        T = (w @ A.permute(1, 2, 0).reshape(NUM_JOINTS, 12 * n)).view(Vp, 12, n)
+        T = T if vmajor else T.permute(1, 2, 0)
+        # split_with_sizes: Tensor.split's Python wrapper cost as much as the split
+        T0, T1, T2, Tt = T.split_with_sizes((3, 3, 3, 3), cdim)  # G's columns and the translation
+        v0, v1, v2 = vs.split_with_sizes((1, 1, 1), cdim)
+        X = torch.addcmul(torch.addcmul(torch.addcmul(Tt, T0, v0), T1, v1), T2, v2)
         # Normals before the vertices' copy: autograd sums X's gradient in the order of its uses,
         # and EM-POSE's closed-form gradient is pinned to this order (tests/estimators/test_empose_fastgrad).
-        nrm = _normals_cmajor(X, pt.faces).permute(1, 2, 0)
-        return X.permute(1, 2, 0).contiguous(), nrm.contiguous(), J, G
+        nrm = _normals_patch(X, pt.corners, vdim, cdim).permute(*back)
+        return X.permute(*back).contiguous(), nrm.contiguous(), J, G
 
     def forward(self, pose: torch.Tensor | None = None, betas: torch.Tensor | None = None,
                 trans: torch.Tensor | None = None, *, return_vertices: bool = True,
@@ -492,12 +519,16 @@ class BodyModel(nn.Module):
             pt = self._patch(("site names", names), lambda: self.site_ids(names)[1:])
         R, b, t, batch = self._batch(pose, betas, trans)
         verts, normals, J, G = self._skin_patch(pt, R, b, t)
-        p, n = verts[:, pt.site], normals[:, pt.site]
-        e = verts[:, pt.tangent] - p
+        # index_select and linalg.vector_norm: the gathers and the norm that indexing and
+        # Tensor.norm make, at half their per-call cost.
+        p, n = verts.index_select(1, pt.site), normals.index_select(1, pt.site)
+        e = verts.index_select(1, pt.tangent) - p
         e = e - (e * n).sum(-1, keepdim=True) * n
-        tan = e / e.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        tan = e / torch.linalg.vector_norm(e, dim=-1, keepdim=True).clamp_min(1e-12)
         bit = torch.linalg.cross(n, tan, dim=-1)
         rot = torch.stack([tan, bit, n], dim=-1)  # columns
+        if len(batch) == 1:  # a flat batch already
+            return SiteOutput(names=names, positions=p, rotations=rot, joints=J, global_rot=G)
         un = lambda x: x.reshape(*batch, *x.shape[1:])  # noqa: E731
         return SiteOutput(names=names, positions=un(p), rotations=un(rot), joints=un(J), global_rot=un(G))
 
@@ -513,7 +544,8 @@ class BodyModel(nn.Module):
             used = np.unique(np.concatenate([vids, tids, faces.ravel()]))
             local = lambda x: torch.as_tensor(np.searchsorted(used, x), dtype=torch.long, device=self.device)  # noqa: E731
             vidx = torch.as_tensor(used, dtype=torch.long, device=self.device)
-            return _Patch(vidx, local(faces), local(vids), local(tids), self._skin_buffers(vidx))
+            corners = (local(faces[:, 0]), local(faces[:, 1]), local(faces[:, 2]))
+            return _Patch(vidx, corners, local(vids), local(tids), self._skin_buffers(vidx))
 
         return self._cached(key, make)
 
