@@ -241,3 +241,24 @@ def test_normals_with_autograd() -> None:
     body = BodyModel(make_tiny_asset(), dtype=torch.float64)
     aa = (torch.randn(2, 72, generator=g, dtype=torch.float64) * 0.3).requires_grad_()
     assert torch.autograd.gradcheck(lambda x: body(x, return_normals=True).normals, (aa,))
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_sites_without_autograd_equal_sites_with_it(dtype: torch.dtype) -> None:
+    """Without autograd the site patch is skinned vertex-major and forward kinematics goes in
+    place (:func:`wearpose.body.kinematics._fk_levels_nograd`); with it, component-major and
+    concatenated. The same arithmetic: bit-equal positions, frames, joints and rotations, at
+    B = 1 and at a batch of the level path, on the embedded asset (real faces and sites)."""
+    body = BodyModel(dtype=dtype)
+    g = torch.Generator().manual_seed(5)
+    for B in (1, 7):
+        R = axis_angle_to_matrix(torch.randn(B, 24, 3, generator=g, dtype=dtype) * 0.5)
+        betas, trans = torch.randn(B, 10, generator=g, dtype=dtype), torch.randn(B, 3, generator=g, dtype=dtype)
+        with torch.no_grad():
+            plain = body.sites(R, betas, trans)
+        tracked = body.sites(R.clone().requires_grad_(), betas.clone().requires_grad_(), trans)
+        assert tracked.rotations.requires_grad
+        for k in ("positions", "rotations", "joints", "global_rot"):
+            assert torch.equal(getattr(plain, k), getattr(tracked, k).detach()), (B, k)
+        # the skinning's rest joints (one bmm) are rest_joints' (einsum) bit for bit
+        assert torch.equal(body._skin_prefix(R, betas, trans, False)[0], body.rest_joints(betas))
