@@ -105,8 +105,11 @@ def _fk_levels_nograd(local_rot: torch.Tensor, rest_joints: torch.Tensor, parent
     if got is None:
         return None
     sizes, steps, par = got
-    R = local_rot.reshape(n, J, 3, 3).transpose(0, 1)  # (J, n, 3, 3)
-    rest = rest_joints.reshape(n, J, 3).transpose(0, 1)  # (J, n, 3)
+    if n == 1:  # joint-major is the given layout: one view, not a reshape and a transpose
+        R, rest = local_rot.reshape(J, 1, 3, 3), rest_joints.reshape(J, 1, 3)
+    else:
+        R = local_rot.reshape(n, J, 3, 3).transpose(0, 1)  # (J, n, 3, 3)
+        rest = rest_joints.reshape(n, J, 3).transpose(0, 1)  # (J, n, 3)
     offset = torch.cat([rest[:1], rest[1:] - rest.index_select(0, par)])  # (J, n, 3): root's is its rest position
     last = _last_row(local_rot.dtype, local_rot.device).expand(J, n, 1, 4)
     child = torch.cat([torch.cat([R, offset.unsqueeze(-1)], -1), last], -2).view(J * n, 4, 4)
@@ -123,7 +126,7 @@ def _fk_levels_nograd(local_rot: torch.Tensor, rest_joints: torch.Tensor, parent
         elif how == "index":
             P = P.index_select(0, arg)
         torch.bmm(P, C[d], out=Ts[d])
-    T = T.view(J, n, 4, 4).transpose(0, 1).reshape(*batch, J, 4, 4)
+    T = T.view(*batch, J, 4, 4) if n == 1 else T.view(J, n, 4, 4).transpose(0, 1).reshape(*batch, J, 4, 4)
     return T[..., :3, :3], T[..., :3, 3]
 
 

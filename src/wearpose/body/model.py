@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -122,22 +123,35 @@ def _normals_patch(X: torch.Tensor, corners: tuple[torch.Tensor, torch.Tensor, t
     2's, each in face order: its normal does not depend on which other vertices share the patch.
 
     The same values in either layout; vertex-major gathers and scatters along dim 0 at half the
-    cost of those along the last dim. One ``select`` per use (not ``unbind``): autograd then sums
-    the gradients of ``a``, ``b`` and ``n`` in the order EM-POSE's closed-form gradient is pinned to
-    (without autograd, one ``unbind`` per tensor: the same views)."""
+    cost of those along the last dim. With autograd one ``select`` per use (not ``unbind``): autograd
+    then sums the gradients of ``a``, ``b`` and ``n`` in the order EM-POSE's closed-form gradient is
+    pinned to."""
     f0, f1, f2 = corners
     x0 = X.index_select(vdim, f0)
     a, b = X.index_select(vdim, f1) - x0, X.index_select(vdim, f2) - x0  # (F, 3, n) or (3, n, F)
     if torch.is_grad_enabled() and X.requires_grad:
-        comp = lambda t: lambda i: t.select(cdim, i)  # noqa: E731
-    else:
-        comp = lambda t: t.unbind(cdim).__getitem__  # noqa: E731
-    ca, cb = comp(a), comp(b)
-    fn = torch.stack([ca(1) * cb(2) - ca(2) * cb(1), ca(2) * cb(0) - ca(0) * cb(2),
-                      ca(0) * cb(1) - ca(1) * cb(0)], cdim)  # |fn| = 2 area
-    n = torch.zeros_like(X).index_add(vdim, f0, fn).index_add(vdim, f1, fn).index_add(vdim, f2, fn)
-    cn = comp(n)
-    return n / torch.sqrt(cn(0) * cn(0) + cn(1) * cn(1) + cn(2) * cn(2)).clamp_min(1e-12).unsqueeze(cdim)
+        c = lambda t, i: t.select(cdim, i)  # noqa: E731
+        fn = torch.stack([c(a, 1) * c(b, 2) - c(a, 2) * c(b, 1), c(a, 2) * c(b, 0) - c(a, 0) * c(b, 2),
+                          c(a, 0) * c(b, 1) - c(a, 1) * c(b, 0)], cdim)  # |fn| = 2 area
+        n = torch.zeros_like(X).index_add(vdim, f0, fn).index_add(vdim, f1, fn).index_add(vdim, f2, fn)
+        return n / torch.sqrt(c(n, 0) * c(n, 0) + c(n, 1) * c(n, 1) + c(n, 2) * c(n, 2)).clamp_min(1e-12).unsqueeze(cdim)
+    # Without autograd the same products in fewer calls (at B = 1 the cost is per call): the six
+    # products of the cross product as one (a1 b2, a2 b0, a0 b1 | a2 b1, a0 b2, a1 b0), the scatter
+    # in place, the squares as one product.
+    yzx_zxy, zxy_yzx = _cross_perms(X.device)
+    p1, p2 = (a.index_select(cdim, yzx_zxy) * b.index_select(cdim, zxy_yzx)).split_with_sizes((3, 3), cdim)
+    fn = p1 - p2  # |fn| = 2 area
+    n = torch.zeros_like(X)
+    for f in corners:
+        n.index_add_(vdim, f, fn)
+    s0, s1, s2 = (n * n).unbind(cdim)
+    return n / torch.sqrt(s0 + s1 + s2).clamp_min(1e-12).unsqueeze(cdim)
+
+
+@lru_cache(maxsize=8)
+def _cross_perms(device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Component orders (y, z, x, z, x, y) and (z, x, y, y, z, x) of :func:`_normals_patch`'s cross product."""
+    return (torch.tensor([1, 2, 0, 2, 0, 1], device=device), torch.tensor([2, 0, 1, 1, 2, 0], device=device))
 
 
 @dataclass
@@ -370,9 +384,9 @@ class BodyModel(nn.Module):
         v_t, sd, w, pd = pt.buffers
         _, G, J, A, feat = self._skin_prefix(R, betas, trans, pd is not None)
         n, Vp = R.shape[0], w.shape[0]
-        vs = v_t + betas @ sd  # (n, V'*3)
+        vs = v_t + torch.mm(betas, sd)  # (n, V'*3); mm: matmul's 2-d case without its dispatch
         if pd is not None and feat is not None:
-            vs = vs + feat @ pd
+            vs = vs + torch.mm(feat, pd)
         # Without autograd vertex-major (V', 3, n) (cheaper gathers for the normals); with it
         # component-major (3, n, V'): the layouts of the backward's products, and so the rounding
         # of the gradients, that EM-POSE's closed-form gradient is pinned to. The same values.
@@ -380,7 +394,7 @@ class BodyModel(nn.Module):
         vdim, cdim = (0, 1) if vmajor else (2, 0)
         back = (2, 0, 1) if vmajor else (1, 2, 0)  # -> (n, V', 3)
         vs = vs.view(n, Vp, 3).permute(*((1, 2, 0) if vmajor else (2, 0, 1)))
-        T = (w @ A.permute(1, 2, 0).reshape(NUM_JOINTS, 12 * n)).view(Vp, 12, n)
+        T = torch.mm(w, A.permute(1, 2, 0).reshape(NUM_JOINTS, 12 * n)).view(Vp, 12, n)
         T = T if vmajor else T.permute(1, 2, 0)
         # split_with_sizes: Tensor.split's Python wrapper cost as much as the split
         T0, T1, T2, Tt = T.split_with_sizes((3, 3, 3, 3), cdim)  # G's columns and the translation
