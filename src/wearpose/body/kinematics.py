@@ -121,8 +121,8 @@ def _fk_levels_nograd(local_rot: torch.Tensor, rest_joints: torch.Tensor, parent
         P = Ts[pl]
         if how == "narrow":
             P = P.narrow(0, arg[0], arg[1])
-        elif how == "expand":
-            P = P.narrow(0, arg[0], n).expand(arg[1], n, 4, 4).reshape(-1, 4, 4)
+        elif how == "expand":  # (at n = 1 a stride-0 batch, no copy)
+            P = P.narrow(0, arg[0], n).expand(arg[1], n, 4, 4).reshape(-1, 4, 4) if n > 1 else P[arg[0]].expand(arg[1], 4, 4)
         elif how == "index":
             P = P.index_select(0, arg)
         torch.bmm(P, C[d], out=Ts[d])
