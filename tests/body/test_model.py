@@ -262,3 +262,18 @@ def test_sites_without_autograd_equal_sites_with_it(dtype: torch.dtype) -> None:
             assert torch.equal(getattr(plain, k), getattr(tracked, k).detach()), (B, k)
         # the skinning's rest joints (one bmm) are rest_joints' (einsum) bit for bit
         assert torch.equal(body._skin_prefix(R, betas, trans, False)[0], body.rest_joints(betas))
+
+
+def test_site_patch_follows_a_copy_with_other_site_vertices(body: BodyModel) -> None:
+    """The patch cache is keyed by the names and the site table: a shallow copy sharing the cache
+    with a site moved (as motion.augment.jitter_sites makes) gets its own patch, the original keeps its."""
+    import copy
+
+    pose = axis_angle_to_matrix(torch.randn(2, 24, 3, dtype=torch.float64) * 0.3)
+    before = body.sites(pose).positions
+    moved = copy.copy(body)
+    moved._site_vertices = body._site_vertices.copy()
+    moved._site_vertices[0] = body._site_tangent[0]  # a neighbouring vertex
+    verts = body(pose).vertices
+    np.testing.assert_allclose(moved.sites(pose).positions[:, 0].numpy(), verts[:, body._site_tangent[0]].numpy(), atol=1e-12)
+    assert torch.equal(body.sites(pose).positions, before)

@@ -528,9 +528,12 @@ class BodyModel(nn.Module):
             names = tuple(f"v{v}" for v in vids)
             pt = self._patch(("sites", tuple(int(v) for v in vids), tuple(int(v) for v in tids)), lambda: (vids, tids))
         else:
-            # Keyed by the names: resolving them to ids on every call was a tenth of a call at B = 1.
+            # Keyed by the names and the site table's bytes (resolving the names to ids on every
+            # call was a tenth of a call at B = 1); the bytes, because a copy of the body may share
+            # the cache with other sites under the same names (motion.augment.jitter_sites).
             names = tuple(names) if names is not None else self.site_names
-            pt = self._patch(("site names", names), lambda: self.site_ids(names)[1:])
+            key = ("site names", names, self._site_vertices.tobytes(), self._site_tangent.tobytes())
+            pt = self._patch(key, lambda: self.site_ids(names)[1:])
         R, b, t, batch = self._batch(pose, betas, trans)
         verts, normals, J, G = self._skin_patch(pt, R, b, t)
         # index_select and linalg.vector_norm: the gathers and the norm that indexing and
