@@ -42,8 +42,16 @@ PRODUCERS = {
 NOTES = {
     "birae_heading_sweep": "current for birae3_cpu (3param); its 6param row is the width-128 birae6_cpu of commit "
                            "ddbc6df, the shipped width-256 birae6_cpu is in birae_heading_sweep_w256",
-    "birae_heading_sweep_w256": "current for birae6_cpu (6param_w256 = the run shipped as birae6_cpu in 5570a1e); "
-                                "its 6param row is the previous width-128 birae6_cpu",
+    "birae_heading_sweep_w256": "6param_w256 = birae6_cpu v1 (archive:birae6_cpu_v1, shipped in 5570a1e), not "
+                                "re-run with v2; its 6param row is the previous width-128 birae6_cpu",
+    **{k: "its 6param row is birae6_cpu v1 (archive:birae6_cpu_v1); v2 (same architecture) not re-run here"
+       for k in ("birae_framerate", "birae_window", "birae_stream_latency", "birae_stream_test")},
+    "birae_tables": "its 6param row is birae6_cpu v1 (archive:birae6_cpu_v1); v2 in birae_tables_v2",
+    "birae_calibration": "its 6param row is birae6_cpu v1 (archive:birae6_cpu_v1); v2 in birae_calibration_v2",
+    **{k: "birae6_cpu v1 (archive:birae6_cpu_v1); v2 has the same architecture, so the same cost"
+       for k in ("latency_birae6_cpu", "latency_birae6_cpu_stream")},
+    "unseen_motion_birae6_cpu": "birae6_cpu v1 (archive:birae6_cpu_v1); v1 and v2 side by side in "
+                                "generalisation_birae_unseen_motion",
     "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals')",
     "empose_table3_rep": "a second training of four Table 3 rows: the run-to-run spread",
     "physics_val_kres0.1": "made before contact_no_lift; with physics_val_literal_weights the evidence "
