@@ -22,8 +22,8 @@ CARDS = ROOT / "src" / "wearpose" / "weights"
 #: (``git log -- benchmarks/results/<stem>.json``); re-running the benchmark records it in the file.
 PRODUCERS = {
     "birae_stream_latency": "python benchmarks/birae_stream.py --skip-eval (commit 45d3452)",
-    "birae_stream_test": "python benchmarks/birae_stream.py (evaluate mode='stream', noise scenario, test split, "
-                         "every 10th frame; commit 0d23f7c)",
+    "birae_stream_test": "python benchmarks/birae_stream.py --skip-latency (birae6_cpu v2; evaluate mode='stream', "
+                         "noise scenario, test split, every 10th frame; commit daae08e)",
     "body": "python benchmarks/body.py --baseline <a checkout of e726f1e>/src (commit 0e330e5)",
     "body_vs_smplx": "python benchmarks/body_vs_smplx.py --threads 1 (commit 9d01953)",
     "card_reproduction": "python benchmarks/card_reproduction.py (commit 2c8556c)",
@@ -45,7 +45,7 @@ NOTES = {
     "birae_heading_sweep_w256": "6param_w256 = birae6_cpu v1 (archive:birae6_cpu_v1, shipped in 5570a1e), not "
                                 "re-run with v2; its 6param row is the previous width-128 birae6_cpu",
     **{k: "its 6param row is birae6_cpu v1 (archive:birae6_cpu_v1); v2 (same architecture) not re-run here"
-       for k in ("birae_framerate", "birae_window", "birae_stream_latency", "birae_stream_test")},
+       for k in ("birae_framerate", "birae_window", "birae_stream_latency")},
     "birae_tables": "its 6param row is birae6_cpu v1 (archive:birae6_cpu_v1); v2 in birae_tables_v2",
     "birae_calibration": "its 6param row is birae6_cpu v1 (archive:birae6_cpu_v1); v2 in birae_calibration_v2",
     **{k: "birae6_cpu v1 (archive:birae6_cpu_v1); v2 has the same architecture, so the same cost"
