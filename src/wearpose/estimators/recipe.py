@@ -26,6 +26,7 @@ copies it into the weights' card.
 from __future__ import annotations
 
 import hashlib
+import importlib
 import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
@@ -241,8 +242,6 @@ def selection_metric(method: str) -> str:
     """The validation figure ``wearpose train <method>`` keeps ``best.pt`` by (lower is better):
     the ``val_metric`` of the training task in the ``train`` module beside the method's training
     entry (every trainable method's package has one)."""
-    import importlib
-
     spec = _method(Path("<recipe>"), method)
     assert spec.training is not None
     mod = importlib.import_module(spec.training.entry.split(":")[0].rsplit(".", 1)[0] + ".train")
