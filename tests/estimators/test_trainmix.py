@@ -16,7 +16,7 @@ from wearpose.estimators.empose import EmposeConfig
 from wearpose.estimators.empose.baselines import estimator_class
 from wearpose.estimators.empose.data import build_split
 from wearpose.estimators.method import TrainRun
-from wearpose.estimators.trainmix import TrainingMix, TrainingStore, clip_body, training_source
+from wearpose.estimators.trainmix import TrainingMix, TrainingStore, clip_body, mix_clause, training_source
 from wearpose.geometry import geodesic_angle
 from wearpose.motion.augment import LOWER_BODY
 from wearpose.motion.procedural import FAMILIES
@@ -153,3 +153,17 @@ def test_the_card_sentence_names_every_part_of_the_mix() -> None:
     for words in ("mirror image", "2 copies played at a speed drawn log-uniformly from 0.8-1.25x", "one copy turned",
                   "upper body of another", "5 procedural clips of each family", "adult body drawn", "up to 2 cm"):
         assert words in text, (words, text)
+
+
+def test_every_methods_card_sentence_names_its_mix() -> None:
+    """EM-POSE, PIP, BiRAE and MI-Poser describe the same mix in the same words (EM-POSE's card
+    sentence used to leave it out); without a mix the sentence has no mix clause."""
+    from wearpose.estimators.registry import get_estimator
+
+    mix = {"aug_mirror": True, "procedural_per_family": 20}
+    clause = mix_clause(tiny(**mix))
+    assert clause.startswith("; plus ") and "20 procedural clips" in clause and mix_clause(tiny()) == ""
+    for name in ("empose", "pip", "birae", "miposer"):
+        cls = get_estimator(name)
+        assert "; plus" not in cls.training_data_description({}), name
+        assert clause in cls.training_data_description(mix), name

@@ -126,6 +126,14 @@ class TrainingMix:
         return [*augmented_ids(list(corpus_ids), self.augment), *procedural]
 
 
+def mix_clause(cfg: Any) -> str:
+    """What every method's card sentence (``training_data_description``) ends with about the
+    training mix of ``cfg`` (a :class:`~wearpose.estimators.trainconfig.TrainConfig`):
+    ``"; plus "`` and :meth:`TrainingMix.describe`, or ``""`` when the mix is inactive."""
+    text = TrainingMix.from_config(cfg).describe()
+    return f"; plus {text}" if text else ""
+
+
 def _copies(n: int) -> str:
     return "one copy" if n == 1 else f"{n} copies"
 
@@ -226,4 +234,4 @@ def clip_body(store: Any, clip_id: str, body: Any) -> Any:
 
 
 __all__ = ["BODY_NAMESPACE", "JITTER_NAMESPACE", "PROCEDURAL_FPS", "TrainingMix", "TrainingStore", "clip_body",
-           "training_source"]
+           "mix_clause", "training_source"]

@@ -62,7 +62,7 @@ from wearpose.body.skeleton import MAJOR_JOINTS, NUM_JOINTS
 from wearpose.estimators.birae.data import augmentation_noise
 from wearpose.estimators.birae.train import finetune, train_birae
 from wearpose.estimators.seeding import init_seed, seeded
-from wearpose.estimators.trainmix import TrainingMix
+from wearpose.estimators.trainmix import mix_clause
 
 
 @register_estimator("birae")
@@ -172,7 +172,7 @@ class BiraeEstimator(NetworkCheckpointing, Estimator):
                        f"orientation noise, impulses (p={cfg.aug_impulse_prob:g} per frame, {cfg.aug_impulse_deg:g} deg), "
                        f"per-sensor yaw drift from a random yaw-rate bias (std {cfg.aug_yaw_bias_dps:g} deg/s, random "
                        f"walk {walk:.2g} deg/s/sqrt(s)), no magnetic disturbance (wearpose.estimators.birae.data)"
-                       + (f"; plus {mix}" if (mix := TrainingMix.from_config(cfg).describe()) else ""))
+                       + mix_clause(cfg))
 
     def finetune(self, motions: Any, out_dir: str | Path, **kwargs: Any) -> Any:
         """Fine-tune on target-domain motions (see :func:`wearpose.estimators.birae.train.finetune`)."""

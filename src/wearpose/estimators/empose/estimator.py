@@ -33,6 +33,7 @@ from wearpose.estimators.empose.shapefit import ShapeFit, fit_frames, fit_shape
 from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
 from wearpose.estimators.registry import register_estimator
 from wearpose.estimators.seeding import init_seed, seeded
+from wearpose.estimators.trainmix import mix_clause
 from wearpose.geometry import matrix_to_rot6d
 from wearpose.sensors import get_kit, resolve_sites
 
@@ -142,7 +143,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
 
             text += (f"; the joint mapper trains with 1-{MAX_REMOVED} sensors removed (zeros, flag off) for half of "
                      f"the window in {P_REMOVE:.0%} of the windows")
-        return text
+        return text + mix_clause(cfg)
 
     # ------------------------------------------------------------------ inputs
     def _offsets_from(self, recording: Any) -> tuple[torch.Tensor, torch.Tensor]:

@@ -50,7 +50,7 @@ from wearpose.estimators.miposer.train import train_miposer
 from wearpose.estimators.registry import register_estimator
 from wearpose.sensors import get_kit
 from wearpose.estimators.seeding import init_seed, seeded
-from wearpose.estimators.trainmix import TrainingMix
+from wearpose.estimators.trainmix import mix_clause
 
 
 def resolve_calibration(recording: Any, calibration: Any, window: tuple[float, float] | None, body: Any) -> Any:
@@ -185,7 +185,7 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
                 f"{noise}, a random subject's EM sensor offsets per clip) after a {cfg.tpose_s:g} s T-pose per clip "
                 f"blended into it over {cfg.blend_s:g} s, calibrated with calibration.calibrate('miposer-tpose'); "
                 f"{cfg.rate:g} Hz" + (", dropped samples held at the last valid value" if cfg.train_noise == "default" else "")
-                + f"; windows of {cfg.window} frames every {cfg.stride}" + _mix_sentence(cfg))
+                + f"; windows of {cfg.window} frames every {cfg.stride}" + mix_clause(cfg))
 
     # ------------------------------------------------------------------ network
     @torch.no_grad()
@@ -309,10 +309,3 @@ class MiposerEstimator(NetworkCheckpointing, Estimator):
         pose = decode_pose(*self.model(x), C)
         trans = head_anchored_translation(self.body, pose, ps[-1:, 0].to(self.device))
         return PoseFrame(pose[0].cpu(), torch.zeros(10), trans[0].cpu(), bool(v.all()), frame.timestamp, extras=extras)
-
-
-def _mix_sentence(cfg: MiposerConfig) -> str:
-    """The card's words on the training mix (:meth:`TrainingMix.describe`), or ``""``."""
-    mix = TrainingMix.from_config(cfg).describe()
-    return f"; plus {mix}" if mix else ""
-

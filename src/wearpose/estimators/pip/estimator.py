@@ -51,7 +51,7 @@ from wearpose.estimators.pip.config import PipConfig
 from wearpose.estimators.pip.data import EDGE_FRAMES, LEAF_JOINTS, imu_features
 from wearpose.estimators.pip.model import NumpyStepper, PipNet
 from wearpose.estimators.pip.sitting import SIT_HOLD_S
-from wearpose.estimators.trainmix import TrainingMix
+from wearpose.estimators.trainmix import mix_clause
 from wearpose.estimators.pip.train import train_pip
 from wearpose.estimators.registry import register_estimator
 from wearpose.geometry import rot6d_to_matrix
@@ -152,9 +152,7 @@ class PipEstimator(NetworkCheckpointing, Estimator):
                 f"Eq. 14 joint velocities, foot contacts")
         if cfg.max_train_clips > 0:
             text += f"; only {cfg.max_train_clips} train clips, spread evenly over the sorted split"
-        mix = TrainingMix.from_config(cfg).describe()
-        if mix:
-            text += "; plus " + mix
+        text += mix_clause(cfg)
         if cfg.sitting_clips > 0:
             held = (f"balanced standing/seated holds of {_span(SIT_HOLD_S)} s"
                     if tuple(cfg.sitting_stand_s) == SIT_HOLD_S else
