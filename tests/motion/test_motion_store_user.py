@@ -42,6 +42,15 @@ def test_split_and_source_for_your_folders(mine: Path, tmp_path: Path) -> None:
     assert {e["split"] for e in CorpusStore(cache).entries.values()} == {"val"}
 
 
+def test_two_files_naming_one_clip_are_refused_not_dropped(mine: Path, tmp_path: Path) -> None:
+    # walk.bvh beside walk.bvh.gz: both are clip lab/p01/walk; keeping one would drop the other unseen.
+    (mine / "p01" / "walk.bvh").write_text(bandai_like_bvh(3))
+    cache = tmp_path / "store"
+    with pytest.raises(ConfigError, match=r"walk.bvh and .*walk.bvh.gz both become clip lab/p01/walk.*keep one"):
+        prepare_corpus([mine], cache, progress=False, workers=1, rest_joints=REST, split="test", source="lab")
+    assert not (cache / "index.json").exists()
+
+
 def test_manifest_corpus_records_its_version_and_refuses_split(tmp_path: Path) -> None:
     data = tmp_path / "data-v9"
     write_gz(data / "bandai" / "s1" / "walk.bvh.gz", bandai_like_bvh(0))

@@ -147,7 +147,21 @@ def _scan_folders(folders: Sequence[Path], split: str = "hash", source: str | No
             out.append({"file": p, "source": src, "subject": subject, "clip": _clip_name(p),
                         "split": _hash_split(subject) if split == "hash" else split, "licence": "unknown", "description": "",
                         "skip_first": False, "user_files": True})
+    _refuse_shared_ids(out)
     return out
+
+
+def _refuse_shared_ids(rows: list[dict[str, Any]]) -> None:
+    """Two files that name one clip id (``02_01.bvh.gz`` beside ``02_01.amc.gz``: the id is
+    source/subject/file name without its suffix) would keep one and drop the other unseen."""
+    seen: dict[str, Path] = {}
+    for r in rows:
+        cid = _clip_id(r)
+        if cid in seen:
+            raise ConfigError(f"{seen[cid]} and {r['file']} both become clip {cid} (the clip id is the folder and the "
+                              "file name without its suffix); keep one of them, or move one into a folder of its own "
+                              "and prepare that folder into another store (--cache)")
+        seen[cid] = Path(r["file"])
 
 
 def _check_user_options(split: str | None, source: str | None, manifest: Path | None, asf: Any = None,
