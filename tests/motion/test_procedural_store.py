@@ -50,11 +50,26 @@ def test_store_of_eval_clips_reads_back_and_is_kept(tmp_path: Path, body: BodyMo
     assert not torch.allclose(CorpusStore(tmp_path / "s").load(ids[1]).pose[:50], seq.pose[:50])
 
 
+@pytest.mark.budget(20)
+def test_val_namespace_store_is_a_validation_split_with_its_own_draws(tmp_path: Path, body: BodyModel) -> None:
+    res = build_procedural_store(tmp_path / "v", per_family=1, families=("reach",), body=body, namespace="val")
+    store = CorpusStore(tmp_path / "v")
+    assert res["clips"] == 1 and store.clips(split="val") == ["procedural/reach/val/0000"] and not store.clips(split="test")
+    assert store.index["corpus"]["namespace"] == "val" and store.entry("procedural/reach/val/0000")["clip"] == "val/0000"
+    seq = store.load("procedural/reach/val/0000")
+    assert torch.allclose(seq.pose, procedural_clip("reach", 0, body, seed=0, namespace="val", body_shape=False).pose, atol=1e-5)
+    held_out = procedural_clip("reach", 0, body, seed=0, namespace="eval", body_shape=False)
+    n = min(seq.num_frames, held_out.num_frames)
+    assert not torch.allclose(seq.pose[:n], held_out.pose[:n])  # another draw than the evaluation clip
+
+
 def test_bad_settings_are_refused(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="per_family = 0"):
         build_procedural_store(tmp_path, per_family=0)
     with pytest.raises(ConfigError, match="unknown families"):
         build_procedural_store(tmp_path, families=("cartwheel",))
+    with pytest.raises(ConfigError, match="namespace 'train'; expected one of eval, val"):
+        build_procedural_store(tmp_path, namespace="train")
     assert unseen_motion_dir().name == "unseen-motion-n6-s0" and unseen_motion_dir().parent.name == "protocols"
 
 
