@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shlex
 import sys
 import tempfile
 import time
@@ -116,6 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     def log(msg: str) -> None:
         print(f"  {msg} ({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
 
+    command = "python " + shlex.join(["benchmarks/birae_calibration_sets.py", *(argv if argv is not None else sys.argv[1:])])
     est = BiraeEstimator.load(weight_path(a.weights))
     shipped = est.sigma_scale
     with tempfile.TemporaryDirectory() as tmp:
@@ -124,9 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     table = {rule: {name: _cov(d, ab[0], ab[1]) for name, d in sets.items()} for rule, ab in fitted.items()}
     names = list(sets)
     md = ["# BiRAE: which validation data to fit the sigma scale on\n",
-          f"Weights `{a.weights}` (shipped scale {shipped:.3f}, fitted on corpus val); `python benchmarks/"
-          f"birae_calibration_sets.py --weights {a.weights} --per-family {a.per_family} --unseen-per-family "
-          f"{a.unseen_per_family}`. +-1 sigma coverage (%) per exp-map component of the 15 major joints; every "
+          f"Produced by `{command}`. Weights `{a.weights}` (shipped scale {shipped:.3f}, fitted on corpus val). "
+          "+-1 sigma coverage (%) per exp-map component of the 15 major joints; every "
           "rule is fitted on the two validation sets only (corpus val; procedural clips of the families the corpus "
           "lacks from the `val` seed namespace); test and unseen-motion are scored, never fitted. Goal: 68 +- 5 %.\n",
           "| set | clips | frames | MPJAE [deg] | mean sigma at scale 1 [deg] |", "| --- | --- | --- | --- | --- |"]
@@ -137,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
            for rule, ab in fitted.items()]
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.with_suffix(".md").write_text("\n".join(md) + "\n")
-    js = {"weights": a.weights, "shipped_scale": shipped, "per_family": a.per_family,
+    js = {"command": command, "weights": a.weights, "shipped_scale": shipped, "per_family": a.per_family,
           "unseen_per_family": a.unseen_per_family, "machine": machine_info(), "wall_seconds": time.time() - t0,
           "sets": {n: {k: v for k, v in d.items() if k not in ("residual", "sigma")} for n, d in sets.items()},
           "rules": {rule: {"a": ab[0], "b": ab[1], "coverage_1sigma_pct": table[rule]} for rule, ab in fitted.items()}}
