@@ -132,6 +132,24 @@ def test_train_run_sets_seed_and_mix_on_the_config() -> None:
     assert tiny().override(**TrainRun().config_overrides()) == tiny()  # nothing given: the preset's
 
 
+def test_families_leave_some_out_and_unknown_ones_are_refused(tmp_path: Path, body) -> None:
+    """--families crawl,lie... draws only those families: the others stay motion the model never saw."""
+    run = TrainRun(procedural=2, families="squat, kneel,reach")
+    cfg = tiny().override(**run.config_overrides())
+    assert cfg.procedural_families == ("squat", "kneel", "reach")
+    assert EmposeConfig.from_dict(cfg.to_dict()) == cfg  # the checkpoint's config keeps the tuple
+    store = Store(tmp_path, {"train": 1})
+    _, got, extra = training_source("train", store, store.clips("train"), cfg, body, "empose")
+    assert got[1:] == [f"procedural/{f}/train/{i:04d}" for f in ("squat", "kneel", "reach") for i in range(2)]
+    assert extra["mix"]["families"] == ["squat", "kneel", "reach"]
+    assert "(squat, kneel, reach;" in mix_clause(cfg) and "crawl" not in mix_clause(cfg)
+    assert TrainingMix.from_config(tiny(procedural_per_family=2)).families == FAMILIES  # default: all seven
+    with pytest.raises(ConfigError, match=r"procedural_families: unknown families \['cartwheel'\]; expected some of squat"):
+        TrainingMix.from_config(tiny(procedural_families=("squat", "cartwheel")))
+    with pytest.raises(ConfigError, match="procedural_families: expected distinct family names"):
+        tiny(procedural_families=("lie", "lie"))
+
+
 def test_warm_start_loads_matching_weights_and_names_a_mismatch(tmp_path: Path, body) -> None:
     cls = estimator_class("lgd")
     src = cls(tiny(), body=body)

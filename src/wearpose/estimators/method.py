@@ -121,7 +121,7 @@ SHARED_OPTIONS: tuple[TrainOption, ...] = (
 
 #: The options of a method whose config is a :class:`~wearpose.estimators.trainconfig.TrainConfig`
 #: and whose training data go through the training mix (:attr:`Training.mix`; declared once):
-#: the seed, the fine-tuning start, and the mix (TrainConfig's ``aug_*``, ``procedural_per_family``,
+#: the seed, the fine-tuning start, and the mix (TrainConfig's ``aug_*``, ``procedural_*``,
 #: ``train_shapes``; docs/augmentation.md). They come after the method's own options.
 MIX_OPTIONS: tuple[TrainOption, ...] = (
     TrainOption("seed", None, "Base seed of the data draws, batch order and initial weights (default: the "
@@ -140,6 +140,8 @@ MIX_OPTIONS: tuple[TrainOption, ...] = (
                                     "pick up, sit, lie down, crawl, reach).", int, min=0),
     TrainOption("shapes", None, "Wearers of the training clips: corpus (the clips' own body) or random (an adult "
                                 "body drawn per clip).", str),
+    TrainOption("families", None, "Procedural families --procedural draws from, comma-separated (default: all "
+                                  "seven); leave some out to test them as motion the model never saw.", str),
 )
 
 
@@ -167,6 +169,7 @@ class TrainRun:
     site_jitter: float | None = None
     procedural: int | None = None
     shapes: str | None = None
+    families: str | None = None
     train_command: str = ""
     quiet: bool = False
     console: Any = None
@@ -178,7 +181,9 @@ class TrainRun:
         return {"seed": self.seed, "aug_mirror": self.mirror or None, "aug_speed_copies": self.speed_copies,
                 "aug_heading_copies": self.heading_copies, "aug_mix_copies": self.mix_copies,
                 "aug_site_jitter_m": self.site_jitter, "procedural_per_family": self.procedural,
-                "train_shapes": self.shapes}
+                "train_shapes": self.shapes,
+                "procedural_families": None if self.families is None else tuple(
+                    f.strip() for f in self.families.split(",") if f.strip())}
 
     @property
     def limit_train(self) -> int | None:

@@ -36,6 +36,8 @@ class TrainConfig(ConfigIO):
     ``aug_mix_copies`` copies whose upper body comes from another clip; ``aug_site_jitter_m``
     sensors strapped up to that far (m) off their sites, drawn per clip; ``procedural_per_family``
     procedural clips of each family of :mod:`wearpose.motion.procedural` (squat, kneel, ...);
+    ``procedural_families`` the families drawn (``()``: all seven; names are checked against
+    the generator's where the mix is built, :meth:`wearpose.estimators.trainmix.TrainingMix.from_config`);
     ``train_shapes`` the wearers, ``"corpus"`` (the clips' own body, beta = 0) or ``"random"``
     (one adult body drawn per clip, :func:`wearpose.body.shapes.sample_betas`).
     """
@@ -44,7 +46,7 @@ class TrainConfig(ConfigIO):
     LR_SCHEDULES: ClassVar[tuple[str, ...]] = ("constant", "cosine")
     #: ``train_shapes`` values.
     TRAIN_SHAPES: ClassVar[tuple[str, ...]] = ("corpus", "random")
-    TUPLE_FIELDS = {"aug_speed_range": float}
+    TUPLE_FIELDS = {"aug_speed_range": float, "procedural_families": str}
 
     seed: int = 0
     val_clips: int = 0
@@ -60,6 +62,7 @@ class TrainConfig(ConfigIO):
     aug_mix_copies: int = 0
     aug_site_jitter_m: float = 0.0
     procedural_per_family: int = 0
+    procedural_families: tuple[str, ...] = ()
     train_shapes: str = "corpus"
 
     def __post_init__(self) -> None:
@@ -76,6 +79,9 @@ class TrainConfig(ConfigIO):
                               f"got {self.aug_speed_range!r}")
         if not 0.0 <= self.aug_site_jitter_m <= 0.1:
             raise ConfigError(f"{name}.aug_site_jitter_m: expected 0-0.1 m, got {self.aug_site_jitter_m!r}")
+        fams = tuple(self.procedural_families)
+        if len(set(fams)) != len(fams) or not all(isinstance(f, str) and f for f in fams):
+            raise ConfigError(f"{name}.procedural_families: expected distinct family names, got {self.procedural_families!r}")
         if self.train_shapes not in self.TRAIN_SHAPES:
             raise ConfigError(f"{name}.train_shapes: expected one of "
                               f"{', '.join(repr(s) for s in self.TRAIN_SHAPES)}, got {self.train_shapes!r}")

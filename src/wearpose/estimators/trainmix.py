@@ -31,6 +31,7 @@ from typing import Any, Sequence
 
 import torch
 
+from wearpose.errors import ConfigError
 from wearpose.estimators.seeding import clip_seed
 from wearpose.motion.augment import AugmentSettings, augment_clip, augmented_ids, jitter_sites
 from wearpose.motion.procedural import FAMILIES, PREFIX, procedural_clip
@@ -67,7 +68,12 @@ class TrainingMix:
         aug = AugmentSettings(mirror=bool(cfg.aug_mirror), speed_copies=int(cfg.aug_speed_copies),
                               speed_range=tuple(cfg.aug_speed_range), heading_copies=int(cfg.aug_heading_copies),
                               mix_copies=int(cfg.aug_mix_copies), site_jitter_m=float(cfg.aug_site_jitter_m))
-        return cls(aug, int(cfg.procedural_per_family), str(cfg.train_shapes))
+        families = tuple(getattr(cfg, "procedural_families", ()) or FAMILIES)
+        unknown = [f for f in families if f not in FAMILIES]
+        if unknown:
+            raise ConfigError(f"{type(cfg).__name__}.procedural_families: unknown families {unknown}; expected some of "
+                              f"{', '.join(FAMILIES)}")
+        return cls(aug, int(cfg.procedural_per_family), str(cfg.train_shapes), families)
 
     @property
     def adds_clips(self) -> bool:

@@ -64,7 +64,7 @@ class PipConfig(SimulatedTrainConfig):
     ``grad_clip``; PIP's default batch: 256.
     """
 
-    TUPLE_FIELDS = {"init_widths": int, "vel_windows": int, "aug_speed_range": float, "sitting_stand_s": float}
+    TUPLE_FIELDS = {**SimulatedTrainConfig.TUPLE_FIELDS, "init_widths": int, "vel_windows": int, "sitting_stand_s": float}
 
     hidden: int = 256
     rnn_layers: int = 2
