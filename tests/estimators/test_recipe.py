@@ -105,6 +105,8 @@ def test_corpus_and_seed_checks() -> None:
 def test_recipe_and_a_method_are_one_or_the_other() -> None:
     res = runner.invoke(app, ["train", "--recipe", "miposer_cpu", "miposer", "--help"])
     assert res.exit_code == 2 and "--recipe" in res.output, res.output
+    res = runner.invoke(app, ["train", "--resume", "miposer", "--help"])
+    assert res.exit_code == 2 and "--resume" in res.output, res.output
     res = runner.invoke(app, ["train", "--recipe", "no_such_recipe"])
     assert res.exit_code == 2 and "no_such_recipe" in res.output, res.output
     res = runner.invoke(app, ["train", "--help"])
@@ -125,6 +127,10 @@ def test_smoke_recipe_runs_end_to_end_and_is_recorded(tmp_path: Path, corpus_sto
     assert rec["options"]["config"] == "tiny" and rec["options"]["epochs"] == 1 and rec["options"]["limit"] == 2
     assert rec["sha1"] == load_recipe("empose12_smoke").sha1 and ck.meta["train_clips"] == 2
     assert ck.train_command == "wearpose train --recipe empose12_smoke"
+    # A run stopped part-way continues from its last checkpoint (here: nothing left to train).
+    again = _train(["--recipe", "empose12_smoke", "--out", str(tmp_path / "run"), "--resume"])
+    assert again["recipe"]["sha1"] == rec["sha1"] and again["config"] == out["config"]
+    assert load_checkpoint(tmp_path / "run" / "best.pt").meta["recipe"]["sha1"] == rec["sha1"]
 
 
 def test_archive_init_from_and_seed_set_the_run(tmp_path: Path) -> None:

@@ -103,12 +103,14 @@ def train_recipe(
     out: Optional[Path] = typer.Option(None, "--out", help="With --recipe: run directory (default: the recipe's "
                                                            "out option, else runs/<recipe name>)."),
     as_json: bool = typer.Option(False, "--json", help="With --recipe: print the result as JSON."),
+    resume: bool = typer.Option(False, "--resume", help="With --recipe: continue the run in --out from its last "
+                                                        "checkpoint (a run stopped part-way)."),
 ) -> None:
     """Train an estimator: `wearpose train <method> [options]`, or `wearpose train --recipe NAME`
     (one YAML file: method, every option, budget, augmentation, seed, corpus; docs/recipes.md)."""
     if ctx.invoked_subcommand is not None:
-        if recipe is not None or out is not None or as_json:
-            raise typer.BadParameter("--recipe/--out/--json before the method: give either a recipe or "
+        if recipe is not None or out is not None or as_json or resume:
+            raise typer.BadParameter("--recipe/--out/--json/--resume before the method: give either a recipe or "
                                      f"`wearpose train {ctx.invoked_subcommand} [options]`", param_hint="--recipe")
         return
     if recipe is None:
@@ -125,11 +127,12 @@ def train_recipe(
         from wearpose.motion import CorpusStore  # start-up: wearpose.motion loads torch, +1.7 s to wearpose --help
 
         check_corpus(r, CorpusStore().provenance().get("corpus"))
-    values = {**r.values, "as_json": as_json,
+    values = {**r.values, "as_json": as_json, "resume": resume or bool(r.values.get("resume")),
               "out": out if out is not None else (r.values.get("out") or Path("runs") / r.name)}
     training = get_method(r.method).training
     assert training is not None, r.method  # load_recipe refuses a method without a training entry
-    run_training(training, values, f"wearpose train --recipe {shlex.quote(str(recipe))}", recipe=r)
+    run_training(training, values, f"wearpose train --recipe {shlex.quote(str(recipe))}" + (" --resume" if resume else ""),
+                 recipe=r)
 
 
 def training_command(name: str, training: Training) -> click.Command:
