@@ -68,7 +68,7 @@ class TrainingMix:
         aug = AugmentSettings(mirror=bool(cfg.aug_mirror), speed_copies=int(cfg.aug_speed_copies),
                               speed_range=tuple(cfg.aug_speed_range), heading_copies=int(cfg.aug_heading_copies),
                               mix_copies=int(cfg.aug_mix_copies), site_jitter_m=float(cfg.aug_site_jitter_m))
-        families = tuple(getattr(cfg, "procedural_families", ()) or FAMILIES)
+        families = tuple(cfg.procedural_families) or FAMILIES
         unknown = [f for f in families if f not in FAMILIES]
         if unknown:
             raise ConfigError(f"{type(cfg).__name__}.procedural_families: unknown families {unknown}; expected some of "

@@ -152,8 +152,9 @@ def _scan_folders(folders: Sequence[Path], split: str = "hash", source: str | No
 
 
 def _refuse_shared_ids(rows: list[dict[str, Any]]) -> None:
-    """Two files that name one clip id (``02_01.bvh.gz`` beside ``02_01.amc.gz``: the id is
-    source/subject/file name without its suffix) would keep one and drop the other unseen."""
+    """Refuse two files that name one clip id (``02_01.bvh.gz`` beside ``02_01.amc.gz``: the id is
+    source/subject/file name without its suffix): the store holds one clip per id, so one file
+    would have become the clip and the other a failure with no word on why."""
     seen: dict[str, Path] = {}
     for r in rows:
         cid = _clip_id(r)
