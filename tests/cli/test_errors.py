@@ -8,6 +8,8 @@ file-system errors into that line) or through typer's runner for option errors (
 from __future__ import annotations
 
 import importlib
+import signal
+import subprocess
 import sys
 import warnings
 from pathlib import Path
@@ -316,3 +318,21 @@ def test_clip_id_without_a_corpus_says_to_set_wearpose_data(tmp_path: Path, caps
     monkeypatch.setenv("WEARPOSE_CACHE", str(tmp_path / "no_store"))
     code, err = run_main(["view", "cmu_daz/05/05_01"], capsys, monkeypatch)
     assert code == 1 and "cmu_daz/05/05_01: no such motion" in err and "set WEARPOSE_DATA" in err
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGUSR1"), reason="no SIGUSR1 on this platform")
+def test_sigusr1_prints_every_threads_stack_and_the_command_runs_on() -> None:
+    """A command that will not stop can be asked where it is (`kill -USR1 PID`): the entry point
+    registers a stack dump; the process is not ended by it."""
+    code = ("import os, signal, threading, time\n"
+            "from wearpose.cli.app import dump_stacks_on_sigusr1\n"
+            "dump_stacks_on_sigusr1()\n"
+            "def parked():\n    time.sleep(5)\n"
+            "threading.Thread(target=parked, daemon=True).start()\n"
+            "time.sleep(0.2)\n"
+            "os.kill(os.getpid(), signal.SIGUSR1)\n"
+            "print('still running')\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert "still running" in r.stdout
+    assert "in parked" in r.stderr and "Current thread" in r.stderr, r.stderr

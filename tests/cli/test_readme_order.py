@@ -260,8 +260,11 @@ def _stop(cmd: str, proc: subprocess.Popen, log: list[str]) -> None:
     try:
         out, _ = proc.communicate(timeout=30)
     except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGUSR1)  # every thread's stack to its output (wearpose.cli.app.main)
+        time.sleep(2)
         os.killpg(proc.pid, signal.SIGKILL)
-        pytest.fail(f"README command did not stop on Ctrl-C within 30 s: {cmd}")
+        out, _ = proc.communicate()
+        pytest.fail(f"README command did not stop on Ctrl-C within 30 s: {cmd}\n--- its output and stacks\n{out[-8000:]}")
     _note(log, f"  stopped rc {proc.returncode}  cpu {_children_cpu_s() - c0:5.1f} s (its whole run)  {cmd}")
     assert proc.returncode == 0, f"README command ended with {proc.returncode} on Ctrl-C: {cmd}\n{out[-3000:]}"
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import faulthandler
 import json
 import os
+import signal
 import sys
 from pathlib import Path
 from typing import Any, Optional
@@ -304,10 +306,21 @@ def _show_warning(message: Any, category: Any, filename: str, lineno: int, file:
     err_console.print(f"[yellow]warning:[/] {escape(str(message))}")
 
 
+def dump_stacks_on_sigusr1() -> None:
+    """``kill -USR1 PID`` prints every thread's Python stack to stderr and the command runs on:
+    a server or viewer that does not stop can say where it is (a README-order test failure
+    asks it before killing it)."""
+    # The process's own stderr (sys.__stderr__): sys.stderr may be replaced by a file object
+    # without a descriptor (pytest's capture, an embedding host), which faulthandler cannot use.
+    if hasattr(signal, "SIGUSR1") and sys.__stderr__ is not None:  # no SIGUSR1 on Windows
+        faulthandler.register(signal.SIGUSR1, file=sys.__stderr__, all_threads=True)
+
+
 def main() -> None:
     """Console entry point: turns library errors and file-system errors into one clear line and
     exit code 1 (no traceback; set WEARPOSE_DEBUG=1 to get one)."""
 
+    dump_stacks_on_sigusr1()
     if not os.environ.get("WEARPOSE_DEBUG"):
         warnings.showwarning = _show_warning
     try:
