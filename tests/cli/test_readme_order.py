@@ -237,10 +237,18 @@ def _run(cmd: str, cwd: Path, env: dict[str, str], log: list[str]) -> None:
     assert r.returncode == 0, f"README command failed in README order: {cmd}\n--- stdout\n{r.stdout[-3000:]}\n--- stderr\n{r.stderr[-3000:]}"
 
 
+def _as_in_a_terminal() -> None:
+    """In the child before exec: Ctrl-C's default action, as a command typed in a terminal has it.
+    A test run started as a background job of a non-interactive shell (``.ci/run &``) inherits
+    SIGINT ignored, and Python then installs no KeyboardInterrupt handler: `wearpose
+    view-recording` slept on through the test's Ctrl-C (its stacks, 2026-12-03)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(cmd: str, cwd: Path, env: dict[str, str], ready: str, log: list[str]) -> subprocess.Popen:
     proc = subprocess.Popen(["bash", "-c", "exec " + cmd if not cmd.startswith(". ") else cmd.replace(" && ", " && exec ", 1)],
                             cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=_as_in_a_terminal)
     t0, seen = time.perf_counter(), []
     while time.perf_counter() - t0 < COMMAND_TIMEOUT_S:
         line = proc.stdout.readline()

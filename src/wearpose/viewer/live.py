@@ -658,9 +658,6 @@ def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subj
                     body: str | None = None, token: str | None = None, allow_origins: Sequence[str] = ()) -> str:
     """Blocking: the live viewer (``wearpose view-live``) until Ctrl-C / SIGTERM, or until the
     server closes the connection (it says so and returns). Returns why it stopped."""
-    def _terminate(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt  # SIGTERM outside the event loop: the same clean stop as Ctrl-C
-
     _warn_if_exposed(host, port)
     v = LiveViewer(url, subjects=subjects, body=BodyModel(body), host=host, port=port, token=token,
                    allow_origins=allow_origins)
@@ -704,6 +701,11 @@ def open_recording_viewer(path: str | Path, *, model: ModelSource | None = None,
                            title=f"wearpose: {Path(path).name}", allow_origins=allow_origins)
 
 
+def _terminate(signum: int, frame: Any) -> None:
+    """SIGTERM (``kill``, a service manager) as Ctrl-C: the viewers' same clean stop."""
+    raise KeyboardInterrupt
+
+
 def run_recording_viewer(path: str | Path, *, model: ModelSource | None = None, host: str = "127.0.0.1",
                          port: int = 8080, body: str | None = None, allow_origins: Sequence[str] = (),
                          resample: bool | None = None) -> None:
@@ -712,6 +714,7 @@ def run_recording_viewer(path: str | Path, *, model: ModelSource | None = None, 
                               resample=resample)
     print(f"viewer on {v.url}; Ctrl-C to stop", flush=True)
     try:
+        signal.signal(signal.SIGTERM, _terminate)
         while True:
             time.sleep(1)
     except KeyboardInterrupt:
