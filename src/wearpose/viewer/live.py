@@ -654,6 +654,11 @@ class LiveViewer:
         self.server.stop()
 
 
+def _terminate(signum: int, frame: Any) -> None:
+    """SIGTERM (``kill``, a service manager) as Ctrl-C: the viewers' same clean stop."""
+    raise KeyboardInterrupt
+
+
 def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subjects: list[int] | None = None,
                     body: str | None = None, token: str | None = None, allow_origins: Sequence[str] = ()) -> str:
     """Blocking: the live viewer (``wearpose view-live``) until Ctrl-C / SIGTERM, or until the
@@ -699,11 +704,6 @@ def open_recording_viewer(path: str | Path, *, model: ModelSource | None = None,
     _warn_if_exposed(host, port)
     return RecordingViewer(rec, track, sensor_names=names, body=bm, host=host, port=port,
                            title=f"wearpose: {Path(path).name}", allow_origins=allow_origins)
-
-
-def _terminate(signum: int, frame: Any) -> None:
-    """SIGTERM (``kill``, a service manager) as Ctrl-C: the viewers' same clean stop."""
-    raise KeyboardInterrupt
 
 
 def run_recording_viewer(path: str | Path, *, model: ModelSource | None = None, host: str = "127.0.0.1",
