@@ -87,3 +87,22 @@ def test_tiny_run_on_one_source_records_it(tmp_path: Path, corpus_store: Path) -
             "--out", str(tmp_path / "run")])
     meta = load_checkpoint(tmp_path / "run" / "best.pt").meta
     assert meta["train_sources"] == ["cmu_daz"] and meta["train_clips"] == 2, meta
+
+
+def test_lambda_shape_reaches_the_config(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--lambda-shape`` (issue 24) sets EmposeConfig.lambda_shape of the run; unset keeps the preset's 1.0;
+    a negative weight is refused by the option."""
+    import wearpose.estimators.empose.train as empose_train
+
+    seen: list[float] = []
+
+    def fake_train(est: object, out: Path, **_: object) -> dict:
+        seen.append(est.config.lambda_shape)  # type: ignore[attr-defined]
+        return {"steps": 0}
+
+    monkeypatch.setattr(empose_train, "train_empose", fake_train)
+    for extra, want in (([], 1.0), (["--lambda-shape", "0.05"], 0.05)):
+        out = _train(["empose", "--config", "tiny", "--out", str(tmp_path / "r"), *extra])
+        assert seen[-1] == want and out["config"]["lambda_shape"] == want, (extra, seen, out["config"]["lambda_shape"])
+    res = runner.invoke(app, ["train", "empose", "--lambda-shape", "-1", "--out", str(tmp_path / "r")])
+    assert res.exit_code == 2 and "--lambda-shape" in res.output, res.output

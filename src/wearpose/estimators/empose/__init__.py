@@ -56,6 +56,9 @@ METHOD = MethodSpec(
             TrainOption("iterations", None, "Override N, the LGD iterations.", int),
             TrainOption("batch_size", None, "Override the batch size.", int, min=1),
             TrainOption("lr", None, "Override the learning rate.", float),
+            TrainOption("lambda_shape", None, "Override the shape loss weight (default 1: betas' squared error, "
+                                              "which outweighs the pose loss tenfold when wearers vary).", float,
+                        min=0.0),
             TrainOption("offsets", None, "Subject offsets in training data: random (default) or none "
                                          "(EM-POSE's 'no [R|t]' ablation).", str),
             TrainOption("ablation", None, "An EM-POSE Table 3 ablation of the LGD-RNN: noRt, no_t, "

@@ -31,7 +31,7 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     if opts["offsets"] not in (None, "random", "none"):
         raise OptionError("--offsets", f"expected random or none, got {opts['offsets']!r}")
     cfg = baseline_config(run.config, sensors, model).override(
-        **{k: opts[k] for k in ("hidden", "width", "iterations", "batch_size", "offsets", "lr")}, **run.config_overrides())
+        **{k: opts[k] for k in ("hidden", "width", "iterations", "batch_size", "offsets", "lr", "lambda_shape")}, **run.config_overrides())
     if ablation is not None:
         if model != "lgd":
             raise OptionError("--ablation", f"ablations are of the LGD-RNN; got --model {model}")
