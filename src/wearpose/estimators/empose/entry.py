@@ -30,8 +30,8 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
         raise OptionError("--model", f"unknown model {model!r}; expected lgd, resnet, birnn or twostage")
     if opts["offsets"] not in (None, "random", "none"):
         raise OptionError("--offsets", f"expected random or none, got {opts['offsets']!r}")
-    cfg = baseline_config(run.config, sensors, model).override(
-        **{k: opts[k] for k in ("hidden", "width", "iterations", "batch_size", "offsets", "lr", "lambda_shape")}, **run.config_overrides())
+    own = ("hidden", "width", "iterations", "batch_size", "offsets", "lr", "lambda_shape")
+    cfg = baseline_config(run.config, sensors, model).override(**{k: opts[k] for k in own}, **run.config_overrides())
     if ablation is not None:
         if model != "lgd":
             raise OptionError("--ablation", f"ablations are of the LGD-RNN; got --model {model}")
