@@ -709,7 +709,7 @@ def open_recording_viewer(path: str | Path, *, model: ModelSource | None = None,
 def run_recording_viewer(path: str | Path, *, model: ModelSource | None = None, host: str = "127.0.0.1",
                          port: int = 8080, body: str | None = None, allow_origins: Sequence[str] = (),
                          resample: bool | None = None) -> None:
-    """Blocking: :func:`open_recording_viewer` (``wearpose view-recording``) until Ctrl-C."""
+    """Blocking: :func:`open_recording_viewer` (``wearpose view-recording``) until Ctrl-C / SIGTERM."""
     v = open_recording_viewer(path, model=model, host=host, port=port, body=body, allow_origins=allow_origins,
                               resample=resample)
     print(f"viewer on {v.url}; Ctrl-C to stop", flush=True)
