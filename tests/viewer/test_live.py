@@ -311,3 +311,27 @@ def test_view_recording_shows_the_real_ximu3_segment_estimate(real_sensors, tmp_
         assert "sensors valid: " in viewer.timeline.info.content
     finally:
         viewer.close()
+
+
+def test_sigterm_as_interrupt_raises_inside_and_restores_the_previous_handler() -> None:
+    """The blocking viewers turn SIGTERM into Ctrl-C only while they run: a program that calls
+    one keeps its own SIGTERM handler afterwards."""
+    import os
+    import signal
+
+    from wearpose.viewer.live import sigterm_as_interrupt
+
+    seen: list[int] = []
+    mine = lambda signum, frame: seen.append(signum)  # noqa: E731 - a handler to find again
+    before = signal.signal(signal.SIGTERM, mine)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with sigterm_as_interrupt():
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(1.0)  # the handler runs at the next bytecode; never reached
+        assert signal.getsignal(signal.SIGTERM) is mine
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.05)
+        assert seen == [signal.SIGTERM]
+    finally:
+        signal.signal(signal.SIGTERM, before)

@@ -31,6 +31,7 @@ world with the recording's EM source pose offline when the recording has one
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import signal
 import threading
@@ -38,7 +39,7 @@ import time
 import warnings
 from collections import deque
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterator, Sequence
 
 import numpy as np
 import torch
@@ -659,6 +660,18 @@ def _terminate(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt
 
 
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """Inside: SIGTERM raises KeyboardInterrupt (:func:`_terminate`); on leaving, the handler that
+    was there before is back, so a program that calls a blocking viewer keeps its own. Main
+    thread only (Python's signal rule)."""
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subjects: list[int] | None = None,
                     body: str | None = None, token: str | None = None, allow_origins: Sequence[str] = ()) -> str:
     """Blocking: the live viewer (``wearpose view-live``) until Ctrl-C / SIGTERM, or until the
@@ -668,9 +681,10 @@ def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subj
                    allow_origins=allow_origins)
     why = "stopped"
     try:
-        signal.signal(signal.SIGTERM, _terminate)
-        print(f"viewer on {v.url} (poses from {url}); Ctrl-C to stop", flush=True)
-        why = asyncio.run(v.run(handle_signals=True, on_subscribed=lambda: print(f"subscribed to {url}", flush=True)))
+        with sigterm_as_interrupt():
+            print(f"viewer on {v.url} (poses from {url}); Ctrl-C to stop", flush=True)
+            why = asyncio.run(v.run(handle_signals=True,
+                                    on_subscribed=lambda: print(f"subscribed to {url}", flush=True)))
     except KeyboardInterrupt:
         pass
     finally:
@@ -714,9 +728,9 @@ def run_recording_viewer(path: str | Path, *, model: ModelSource | None = None, 
                               resample=resample)
     print(f"viewer on {v.url}; Ctrl-C to stop", flush=True)
     try:
-        signal.signal(signal.SIGTERM, _terminate)
-        while True:
-            time.sleep(1)
+        with sigterm_as_interrupt():
+            while True:
+                time.sleep(1)
     except KeyboardInterrupt:
         pass
     finally:
