@@ -287,7 +287,9 @@ class CameraFollow:
     first report can be viser's default camera ((3, 3, 3) looking at the origin) sent before the
     page applied ``initial_camera``: moving that one replaced the initial view with a high
     oblique one. Here the look-at is computed from the root alone (a stale report only delays a
-    frame), and a client is followed once it has reported the initial camera's look-at.
+    frame), and a client is followed once it has reported the initial camera (position and
+    look-at in one report: the page applies them one at a time, and a torn first report, the
+    initial look-at seen from viser's default position, kept the oblique orbit).
 
     Args:
         server: the ``viser.ViserServer``.
@@ -297,8 +299,10 @@ class CameraFollow:
     def __init__(self, server: Any, root0: np.ndarray) -> None:
         self.server = server
         self.look0 = np.asarray(server.initial_camera.look_at, np.float64)
+        self.pos0 = np.asarray(server.initial_camera.position, np.float64)
         self.root0 = np.asarray(root0, np.float64)
-        self.ready: set[int] = set()  # client ids that have shown the initial camera
+        self.orbit: dict[int, np.ndarray] = {}  # client id -> camera minus look-at, m (clients shown the initial camera)
+        self.sent: dict[int, deque] = {}  # client id -> the last (position, look-at) pairs sent to it
         self._lock = threading.Lock()
 
     def target(self, root: np.ndarray) -> np.ndarray:
@@ -307,22 +311,45 @@ class CameraFollow:
         return self.look0 + np.array([d[0], 0.0, d[2]])
 
     def follow(self, root: np.ndarray) -> None:
-        """Move every ready client's camera to look at :meth:`target` from its current orbit."""
+        """Move every ready client's camera to look at :meth:`target` from its orbit."""
         look = self.target(root)
         with self._lock:  # the player thread and GUI callbacks both draw frames
             for cid, client in self.server.get_clients().items():
                 # One report: viser replaces a client's camera state object on each report, so
-                # reading position and look_at through the handle could mix two reports and
-                # shift the orbit for good.
+                # reading position and look_at through the handle could mix two reports.
                 state = getattr(client.camera, "_state", None) or client.camera
                 pos, at = np.array(state.position, np.float64), np.array(state.look_at, np.float64)
-                if cid not in self.ready:
-                    if not np.allclose(at, self.look0, atol=1e-3):
-                        continue  # the page has not applied initial_camera yet: its report is viser's default
-                    self.ready.add(cid)
-                with client.atomic():  # both in one batch: a page drawing between them reports a torn orbit
-                    client.camera.position = look + (pos - at)  # viser moves look_at by the same offset
+                orbit = self._orbit(cid, pos, at)
+                if orbit is None:
+                    continue  # the page has not applied initial_camera yet: its report is viser's default
+                with client.atomic():  # both in one batch
+                    client.camera.position = look + orbit  # viser moves look_at by the same offset
                     client.camera.look_at = look
+                self.sent.setdefault(cid, deque(maxlen=64)).append((look + orbit, look))
+
+    def _orbit(self, cid: int, pos: np.ndarray, at: np.ndarray) -> np.ndarray | None:
+        """The orbit ``(3,)`` m to keep for client ``cid`` given its last report (``pos``, ``at``
+        ``(3,)`` m); None before the page has shown the initial camera.
+
+        The page applies a camera's position and look-at one after the other and may report in
+        between, so a report can be torn: one half of a pair we sent with the other half of
+        another. Both halves are gated: a first report of the initial look-at seen from viser's
+        default position (3, 3, 3) kept that oblique orbit for good, and a torn report during
+        the follow shifted the orbit by a frame's motion each time (the camera fell behind the
+        walking body). So the orbit is kept per client and replaced only by a report that is not
+        two halves of what was sent: the user's own orbiting (look-at as sent, a new position)."""
+        if cid not in self.orbit:
+            if not (np.allclose(at, self.look0, atol=1e-3) and np.allclose(pos, self.pos0, atol=1e-3)):
+                return None
+            self.orbit[cid] = pos - at
+            return self.orbit[cid]
+        if not np.allclose(pos - at, self.orbit[cid], atol=1e-3):
+            sent = self.sent.get(cid, ())
+            torn = (any(np.allclose(pos, p, atol=1e-3) for p, _ in sent)
+                    and any(np.allclose(at, a, atol=1e-3) for _, a in sent))
+            if not torn:
+                self.orbit[cid] = pos - at
+        return self.orbit[cid]
 
 
 def _kit_sites(kit: str | None, sensor_names: Sequence[str], body: BodyModel) -> tuple[tuple[str, ...], str | None]:
