@@ -370,7 +370,8 @@ def _fake_server(camera: _FakeCamera) -> Any:
 
     client = SimpleNamespace(camera=camera, atomic=contextlib.nullcontext)
     initial = SimpleNamespace(position=(0.5, 0.6, 6.0), look_at=(0.5, -0.3, 0.0))
-    return SimpleNamespace(initial_camera=initial, get_clients=lambda: {7: client})
+    clients = {7: client}
+    return SimpleNamespace(initial_camera=initial, clients=clients, get_clients=lambda: clients)
 
 
 def test_camera_follow_keeps_the_orbit_through_torn_reports_and_takes_the_users() -> None:
@@ -381,7 +382,8 @@ def test_camera_follow_keeps_the_orbit_through_torn_reports_and_takes_the_users(
     from wearpose.viewer.live import CameraFollow
 
     cam = _FakeCamera((3.0, 3.0, 3.0), (0.5, -0.3, 0.0))  # torn first report: default position, initial look-at
-    follow = CameraFollow(_fake_server(cam), np.zeros(3))
+    server = _fake_server(cam)
+    follow = CameraFollow(server, np.zeros(3))
     orbit0 = np.array([0.0, 0.9, 6.0])
     follow.follow(np.array([0.1, 0.0, 0.0]))
     assert np.allclose(cam.position, (3.0, 3.0, 3.0)), "followed before the page showed the initial camera"
@@ -395,3 +397,6 @@ def test_camera_follow_keeps_the_orbit_through_torn_reports_and_takes_the_users(
     cam.report((2.0, 1.5, 4.0), (0.9, -0.3, 0.0))  # the user orbits about the look-at
     follow.follow(np.array([0.5, 0.0, 0.0]))
     assert np.allclose(cam.look_at, (1.0, -0.3, 0.0)) and np.allclose(cam.position - cam.look_at, (1.1, 1.8, 4.0))
+    server.clients.clear()  # the page closed: what was kept for it goes
+    follow.follow(np.array([0.6, 0.0, 0.0]))
+    assert follow.orbit == {} and follow.sent == {}

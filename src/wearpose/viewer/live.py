@@ -314,7 +314,11 @@ class CameraFollow:
         """Move every ready client's camera to look at :meth:`target` from its orbit."""
         look = self.target(root)
         with self._lock:  # the player thread and GUI callbacks both draw frames
-            for cid, client in self.server.get_clients().items():
+            clients = self.server.get_clients()
+            for gone in set(self.orbit) - set(clients):  # disconnected: new connections get new ids
+                self.orbit.pop(gone)
+                self.sent.pop(gone, None)
+            for cid, client in clients.items():
                 # One report: viser replaces a client's camera state object on each report, so
                 # reading position and look_at through the handle could mix two reports.
                 state = getattr(client.camera, "_state", None) or client.camera
@@ -341,15 +345,20 @@ class CameraFollow:
         if cid not in self.orbit:
             if not (np.allclose(at, self.look0, atol=1e-3) and np.allclose(pos, self.pos0, atol=1e-3)):
                 return None
-            self.orbit[cid] = pos - at
+        elif np.allclose(pos - at, self.orbit[cid], atol=1e-3) or self._torn(cid, pos, at):
             return self.orbit[cid]
-        if not np.allclose(pos - at, self.orbit[cid], atol=1e-3):
-            sent = self.sent.get(cid, ())
-            torn = (any(np.allclose(pos, p, atol=1e-3) for p, _ in sent)
-                    and any(np.allclose(at, a, atol=1e-3) for _, a in sent))
-            if not torn:
-                self.orbit[cid] = pos - at
+        self.orbit[cid] = pos - at
         return self.orbit[cid]
+
+    def _torn(self, cid: int, pos: np.ndarray, at: np.ndarray) -> bool:
+        """Whether ``pos`` is a position and ``at`` a look-at sent to client ``cid`` (within 1 mm;
+        one vectorised test over the kept pairs: this runs on the drawing path while a user orbits)."""
+        sent = self.sent.get(cid)
+        if not sent:
+            return False
+        pairs = np.asarray(sent)  # (n, 2, 3): position, look-at
+        near = lambda x, rows: bool(np.isclose(x, rows, atol=1e-3).all(-1).any())  # noqa: E731
+        return near(pos, pairs[:, 0]) and near(at, pairs[:, 1])
 
 
 def _kit_sites(kit: str | None, sensor_names: Sequence[str], body: BodyModel) -> tuple[tuple[str, ...], str | None]:
