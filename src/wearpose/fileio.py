@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import tokenize
 import zipfile
 from pathlib import Path
 from typing import Any, Callable
@@ -60,6 +61,15 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     return _atomic(path, ".tmp", lambda tmp: Path(tmp).write_bytes(data))
 
 
+#: What ``np.load`` raises reading a damaged or foreign ``.npz`` (for loaders that name the
+#: errors they expect rather than catch all): zip and I/O errors, numpy's ``ValueError`` for a
+#: bad ``.npy`` member, and ``tokenize.TokenError``, which numpy's header filter
+#: (``numpy.lib.format``, reading a damaged member header) lets through unconverted.
+NPZ_READ_ERRORS: tuple[type[BaseException], ...] = (
+    zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, NotImplementedError, zipfile.LargeZipFile,
+    tokenize.TokenError)
+
+
 def npz_problem(path: str | Path, exc: BaseException) -> str:
     """Why ``np.load(path)`` could not read ``path`` as an ``.npz``, in a user's words: another
     kind of file, a damaged/truncated archive (e.g. an interrupted copy), or numpy's own reason.
@@ -73,6 +83,8 @@ def npz_problem(path: str | Path, exc: BaseException) -> str:
         return "not an npz (zip) archive: the file is of another type or its start is damaged"
     if isinstance(exc, (zipfile.BadZipFile, EOFError)):
         return f"a damaged or truncated npz (zip) archive, e.g. an interrupted copy ({exc})"
+    if isinstance(exc, tokenize.TokenError):
+        return f"a damaged array header inside the npz (numpy cannot parse it: {exc})"
     return f"not a readable npz file ({type(exc).__name__}: {exc})"
 
 

@@ -239,3 +239,23 @@ def test_fuzzing_finds_what_the_net_hides(monkeypatch: pytest.MonkeyPatch) -> No
     monkeypatch.setattr(ff, "check_recording", crash)
     with pytest.raises(AssertionError, match="safety net"):
         _try(GOOD)
+
+
+def test_a_member_header_numpy_cannot_tokenize_is_named() -> None:
+    """Found by test_corrupted_and_truncated_zip (one byte overwritten inside a member's header):
+    numpy's header filter lets ``tokenize.TokenError`` through (an unclosed bracket); the loader
+    names it as a damaged header, not through the safety net."""
+    head = ("{'descr': '<f8', 'fortran_order': False, 'shape': (40, 3, ".ljust(118) + "\n").encode("latin1")
+    member = b"\x93NUMPY\x01\x00" + len(head).to_bytes(2, "little") + head + bytes(960)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        for k in KEYS:
+            b = io.BytesIO()
+            np.save(b, BASE[k])
+            z.writestr(k + ".npy", member if k == DATA_KEYS[0] else b.getvalue())
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "f.npz"
+        p.write_bytes(buf.getvalue())
+        with pytest.raises(InputFileError, match="a damaged array header inside the npz") as err:
+            load_recording(p)
+    assert err.value.path == p

@@ -22,14 +22,13 @@ from __future__ import annotations
 
 import json
 import math
-import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from wearpose.fileio import atomic_savez, npz_declared_size_problem, npz_problem
+from wearpose.fileio import NPZ_READ_ERRORS, atomic_savez, npz_declared_size_problem, npz_problem
 from wearpose.errors import InputFileError, ShapeError
 from wearpose.geometry import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quat
 from wearpose.recording.checks import check_recording
@@ -152,7 +151,7 @@ def _load(path: Path, check_conventions: bool) -> Recording:
                 d[k] = npz[k]
     except InputFileError:
         raise
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, NotImplementedError, zipfile.LargeZipFile) as exc:
+    except NPZ_READ_ERRORS as exc:
         raise InputFileError(path, npz_problem(path, exc), _EXPECTED_FILE) from exc
 
     def need(key: str, expected: str) -> np.ndarray:
