@@ -37,16 +37,19 @@ import torch
 COMPARE = "wearpose.estimators.empose.evaluate:evaluate_models"
 
 
-def _models(name: str, threshold: float, steps: list[int]) -> dict[str, Any]:
+def _models(name: str, threshold: float, steps: list[int], gn_steps: list[int]) -> dict[str, Any]:
+    """The learned model, then one row per L-BFGS iteration count (``refine K``) and per
+    Gauss-Newton iteration count (``gn K``), the same gate for all."""
     from wearpose.estimators.empose.baselines import load_any
     from wearpose.weights import weight_path
 
     out = {}
-    for k in [0, *steps]:
+    for solver, k in [("lbfgs", 0), *(("lbfgs", k) for k in steps), *(("gn", k) for k in gn_steps)]:
         est = load_any(weight_path(name))
         est.set_refine_threshold(threshold)
         est.set_refine_steps(k)
-        out["learned" if k == 0 else f"refine {k}"] = est
+        est.set_refine_solver(solver)
+        out["learned" if k == 0 else (f"refine {k}" if solver == "lbfgs" else f"gn {k}")] = est
     return out
 
 
@@ -120,7 +123,8 @@ def _by_class(res: dict[str, Any]) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", default="empose12_cpu")
-    ap.add_argument("--steps", type=int, nargs="+", default=[5, 20])
+    ap.add_argument("--steps", type=int, nargs="*", default=[5, 20], help="L-BFGS iterations, one row each")
+    ap.add_argument("--gn-steps", type=int, nargs="*", default=[2, 5], help="Gauss-Newton iterations, one row each")
     ap.add_argument("--percentile", type=float, default=95.0)
     ap.add_argument("--val-clips", type=int, default=20)
     ap.add_argument("--test-clips", type=int, default=10)
@@ -142,12 +146,12 @@ def main(argv: list[str] | None = None) -> int:
     unseen = unseen_motion_store(a.per_family)
     results = {}
     for key, store, clips in (("test", corpus, a.test_clips), ("unseen_motion", unseen, None)):
-        models = _models(a.model, cal["threshold"], a.steps)
+        models = _models(a.model, cal["threshold"], a.steps, a.gn_steps)
         results[key] = compare_models(COMPARE, models, "test", clips, store=store)
         for m in results[key]["models"].values():
             m["checkpoint"] = str(weight_path(a.model))
         print(key, {n: round(m["mpjpe_mm"], 2) for n, m in results[key]["models"].items()}, flush=True)
-    timing = _timing(_models(a.model, cal["threshold"], a.steps), unseen, a.timing_clips)
+    timing = _timing(_models(a.model, cal["threshold"], a.steps, a.gn_steps), unseen, a.timing_clips)
     command = "python benchmarks/" + " ".join(shlex.quote(x) for x in [Path(__file__).name, *sys.argv[1:]])
     refined = results["unseen_motion"]["models"]
     weight = next(iter(refined.values()))["config"]["refine_weight"]
@@ -156,8 +160,9 @@ def main(argv: list[str] | None = None) -> int:
           f"Gate: L_r > **{cal['threshold']:.4g}** (m² + squared Frobenius, summed over the 12 sensors), the "
           f"{a.percentile:g}th percentile of the learned estimate's L_r over {cal['frames']} frames of the first "
           f"{cal['clips']} corpus *validation* clips (median {cal['rec_median']:.4g}, 99th percentile "
-          f"{cal['rec_p99']:.4g}); nothing was tuned on the test clips. Refinement: K L-BFGS iterations on L_r + "
-          f"{weight:g} ||u - u_learned||² (6D pose of the 20 estimated joints; shape held), gated frames only.", "",
+          f"{cal['rec_p99']:.4g}); nothing was tuned on the test clips. Refinement: K iterations on L_r + "
+          f"{weight:g} ||u - u_learned||² (6D pose of the 20 estimated joints; shape held), gated frames only: "
+          "`refine K` L-BFGS, `gn K` Levenberg-Marquardt Gauss-Newton (`refine_solver=gn`).", "",
           f"## Corpus test split, first {a.test_clips} clips (in-lab)", "", *_table(results["test"]), "",
           f"## Unseen motion ({a.per_family} clips per held-out procedural family)", "",
           *_table(results["unseen_motion"]), "", "By family (frame-weighted means of each clip's figures):", "",

@@ -13,7 +13,9 @@ from wearpose.errors import ConfigError
 from wearpose.estimators import iter_frames
 from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
 from wearpose.estimators.empose.data import recording_from_clip, simulate_clip
-from wearpose.estimators.empose.refine import calibrate_threshold, lbfgs, refine_frames
+from wearpose.estimators.empose.model import encode_pose
+from wearpose.estimators.empose.refine import (POSE_DIM, calibrate_threshold, gauss_newton, lbfgs, refine_frames,
+                                             residual_jacobian)
 from wearpose.evaluate.latency import apply_settings
 from wearpose.geometry import axis_angle_to_matrix
 
@@ -85,12 +87,15 @@ def test_refinement_lowers_rec_on_a_perturbed_frame_and_leaves_the_others_untouc
     assert torch.allclose(again["rec"], out.rec[4:5], rtol=1e-4, atol=1e-7)
 
 
-def test_estimate_with_refinement_off_is_unchanged_and_on_keeps_ungated_frames_bitwise(body: BodyModel) -> None:
-    """refine_steps = 0 gives the model's output exactly; with refinement on, frames under the
-    gate equal it bit for bit, the gated ones have L_r no higher, and the extras have the
-    documented shapes and dtypes; the online step gives the same as the offline estimate."""
+@pytest.mark.parametrize("solver", ["lbfgs", "gn"])
+def test_estimate_with_refinement_off_is_unchanged_and_on_keeps_ungated_frames_bitwise(body: BodyModel,
+                                                                                       solver: str) -> None:
+    """refine_steps = 0 gives the model's output exactly; with refinement on (either solver),
+    frames under the gate equal it bit for bit, the gated ones have L_r no higher, and the extras
+    have the documented shapes and dtypes; the online step gives the same as the offline estimate."""
     torch.manual_seed(0)
     est = EmposeEstimator(tiny_cfg(), body=body)
+    est.set_refine_solver(solver)
     clip = _clip(body, T=16, noise="default")
     rec = recording_from_clip(clip, est.config)
     base = est.estimate(rec)
@@ -123,7 +128,9 @@ def test_estimate_with_refinement_off_is_unchanged_and_on_keeps_ungated_frames_b
     est.set_offsets(clip["off_R"], clip["off_t"])
     frames = [est.step(f) for f in iter_frames(rec, est.sensor_names)]
     assert [f.extras["refined"] for f in frames] == gated.tolist()
-    assert torch.allclose(torch.stack([f.local_rot for f in frames]), ref.local_rot, atol=1e-4)
+    # Gauss-Newton takes these frames' L_r from about 17 to 0.003-0.09 in 3 float32 solves, where a
+    # batched and a single-frame solve differ in summation order: agreement to 1e-3, not 1e-4.
+    assert torch.allclose(torch.stack([f.local_rot for f in frames]), ref.local_rot, atol=1e-4 if solver == "lbfgs" else 1e-3)
 
 
 def test_settings_are_checked_and_reachable_through_set(body: BodyModel) -> None:
@@ -137,7 +144,10 @@ def test_settings_are_checked_and_reachable_through_set(body: BodyModel) -> None
     est._set_config(refine_threshold=None)
     with pytest.raises(ConfigError, match="refine_threshold"):
         est.estimate(rec)  # on without a calibrated gate
-    for bad in (dict(refine_steps=-1), dict(refine_steps=True), dict(refine_threshold=-1.0), dict(refine_weight=-0.5)):
+    apply_settings(est, {"refine_solver": "gn"})
+    assert est.config.refine_solver == "gn"
+    for bad in (dict(refine_steps=-1), dict(refine_steps=True), dict(refine_threshold=-1.0), dict(refine_weight=-0.5),
+                dict(refine_solver="newton")):
         with pytest.raises(ConfigError, match="refine_"):
             EmposeConfig.preset("tiny", 12).override(**bad)
 
@@ -162,3 +172,73 @@ def test_calibrate_threshold_is_the_percentile_of_val_rec_and_leaves_the_setting
     assert cal["threshold"] == pytest.approx(float(torch.quantile(x, 0.9)))
     with pytest.raises(ConfigError, match="percentile"):
         calibrate_threshold(est, store, percentile=100.0)
+
+
+def _perturbed(body: BodyModel, dtype: torch.dtype = torch.float32) -> tuple:
+    """A synthetic clip's noise-free measurements and its true 6D pose, every frame's knees and
+    elbows rotated 0.5 rad away from the truth (the start of a refinement)."""
+    clip = _clip(body, T=5)
+    T = clip["pose"].shape[0]
+    bad = axis_angle_to_matrix(torch.tensor([0.5, 0.0, 0.3]))
+    pose = clip["pose"].clone()
+    for j in (4, 5, 18, 19):
+        pose[:, j] = bad @ pose[:, j]
+    betas = clip["betas"].reshape(1, 10).expand(T, 10).contiguous()
+    c = lambda t: t.to(dtype)  # noqa: E731
+    return (c(encode_pose(pose, "rot6d")), c(encode_pose(clip["pose"], "rot6d")), c(betas), c(clip["position"]),
+            c(clip["orientation"]), c(clip["off_R"]), c(clip["off_t"]), clip)
+
+
+def test_residual_jacobian_equals_autograd_in_float64() -> None:
+    """The Jacobian read off the closed-form backward equals autograd's through the kernel's
+    forward (float64, 1e-8), with unequal L_r weights; and ||rho||^2 is L_r."""
+    body = BodyModel(dtype=torch.float64)
+    est = EmposeEstimator(tiny_cfg(), body=body)
+    kernel = est.sensors.lean()
+    u, _, b, mp, mR, oR, ot, _ = _perturbed(body, torch.float64)
+    u, b, mp, mR = u[:2], b[:2], mp[:2], mR[:2]
+    w = (1.0, 0.3)
+    ctx = kernel.forward(torch.cat([u, b], -1), mp, mR, oR, ot)
+    rho, J = residual_jacobian(kernel, ctx, w)
+    S = mp.shape[1]
+    assert rho.shape == (2, 12 * S) and J.shape == (2, 12 * S, POSE_DIM)
+    wrec = kernel.forward(torch.cat([u, b], -1), mp, mR, oR, ot, w)["rec"]
+    assert torch.allclose((rho ** 2).sum(-1), wrec, rtol=1e-10)
+
+    def res(x: torch.Tensor) -> torch.Tensor:
+        c = kernel.forward(torch.cat([x, b], -1), mp, mR, oR, ot)
+        return torch.cat([w[0] ** 0.5 * (c["p_hat"] - mp).reshape(2, -1),
+                          w[1] ** 0.5 * (c["R_hat"] - mR).reshape(2, -1)], -1)
+
+    Jad = torch.autograd.functional.jacobian(res, u)  # (2, R, 2, 120): frames are independent
+    for n in range(2):
+        assert torch.allclose(J[n], Jad[n, :, n], atol=1e-8)
+        assert float(Jad[n, :, 1 - n].abs().max()) == 0.0
+
+
+def test_gauss_newton_is_monotone_and_beats_lbfgs_at_equal_iterations(body: BodyModel) -> None:
+    """Noise-free measurements, knees and elbows 0.5 rad off in every frame: f never rises with
+    more iterations, 5 Gauss-Newton iterations bring L_r below 1 % of its start on every frame
+    and below what 5 L-BFGS iterations reach, and the joints land within 1 cm of the truth."""
+    est = EmposeEstimator(tiny_cfg(), body=body)
+    kernel = est.sensors.lean()
+    u0, u_true, b, mp, mR, oR, ot, clip = _perturbed(body)
+    f0 = kernel.forward(torch.cat([u0, b], -1), mp, mR, oR, ot)["rec"]
+    prev = f0
+    for k in (1, 2, 3, 5):
+        u, f = gauss_newton(kernel, u0, b, mp, mR, oR, ot, steps=k, weight=1e-4)
+        assert bool((f <= prev + 1e-7).all())
+        prev = f
+    rec_gn = kernel.forward(torch.cat([u, b], -1), mp, mR, oR, ot)["rec"]
+    assert bool((rec_gn < 0.01 * f0).all())
+
+    def fg(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        ctx = kernel.forward(torch.cat([x, b], -1), mp, mR, oR, ot)
+        return ctx["rec"] + 1e-4 * ((x - u0) ** 2).sum(-1), kernel.backward(ctx)[:, :POSE_DIM] + 2e-4 * (x - u0)
+
+    u_lb, _ = lbfgs(fg, u0, 5)
+    rec_lb = kernel.forward(torch.cat([u_lb, b], -1), mp, mR, oR, ot)["rec"]
+    assert bool((rec_gn < rec_lb).all())
+    joints = lambda x: kernel.forward(torch.cat([x, b], -1), mp, mR, oR, ot)["joints"]  # noqa: E731
+    err = (joints(u) - joints(u_true)).norm(dim=-1)
+    assert float(err.max()) < 0.01, float(err.max())

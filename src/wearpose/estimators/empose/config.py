@@ -62,8 +62,10 @@ class EmposeConfig(SimulatedTrainConfig):
     updates (0 = off, the trained model as it is), on the frames whose L_r exceeds
     ``refine_threshold`` (m^2 + squared Frobenius, summed over sensors; calibrated on validation
     clips, :func:`~wearpose.estimators.empose.refine.calibrate_threshold`; None = not
-    calibrated); ``refine_weight`` the prior's weight (L_r per squared 6D unit). Training
-    ignores them.
+    calibrated); ``refine_weight`` the prior's weight (L_r per squared 6D unit);
+    ``refine_solver`` ``"lbfgs"`` (default) or ``"gn"`` (Levenberg-Marquardt Gauss-Newton on the
+    residuals, :func:`~wearpose.estimators.empose.refine.gauss_newton`: ``refine_steps`` is then
+    its iterations). Training ignores them.
     Per-recording shape fit at inference (:mod:`wearpose.estimators.empose.shapefit`; issue
     24): ``shape_fit_frames`` frames with every sensor valid on which one body shape is fitted
     to L_r jointly with their poses (0 = off: the learned shape), ``shape_fit_steps`` L-BFGS
@@ -101,6 +103,7 @@ class EmposeConfig(SimulatedTrainConfig):
     refine_steps: int = 0
     refine_threshold: float | None = None
     refine_weight: float = 0.01
+    refine_solver: str = "lbfgs"
     shape_fit_frames: int = 0
     shape_fit_steps: int = 80
     shape_fit_prior: float = 1e-3
@@ -130,6 +133,8 @@ class EmposeConfig(SimulatedTrainConfig):
                               f"got {self.refine_threshold!r}")
         if not self.refine_weight >= 0.0:
             raise ConfigError(f"EmposeConfig.refine_weight: expected a weight >= 0, got {self.refine_weight!r}")
+        if self.refine_solver not in ("lbfgs", "gn"):
+            raise ConfigError(f"EmposeConfig.refine_solver: expected 'lbfgs' or 'gn', got {self.refine_solver!r}")
         for key in ("shape_fit_frames", "shape_fit_steps"):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:

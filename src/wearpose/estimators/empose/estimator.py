@@ -284,7 +284,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
             return Refined(local_rot, rec, torch.zeros_like(rec, dtype=torch.bool))
         return refine_frames(self.sensors.lean(), local_rot, betas, rec, p, R, offR, offt, steps=cfg.refine_steps,
                              threshold=float(cfg.refine_threshold), weight=cfg.refine_weight,
-                             rec_weights=self.model.rec_weights)
+                             rec_weights=self.model.rec_weights, solver=cfg.refine_solver)
 
     @torch.no_grad()
     def to_world(self, track: PoseTrack, source_R: torch.Tensor, source_p: torch.Tensor) -> PoseTrack:
@@ -354,6 +354,11 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
     def set_refine_weight(self, w: float) -> None:
         """The weight of the refinement's pose prior (pull to the learned estimate)."""
         self._set_config(refine_weight=float(w))
+
+    def set_refine_solver(self, solver: str) -> None:
+        """The refinement's solver: ``"lbfgs"`` or ``"gn"`` (Levenberg-Marquardt Gauss-Newton,
+        :func:`~wearpose.estimators.empose.refine.gauss_newton`), e.g. ``--set refine_solver=gn``."""
+        self._set_config(refine_solver=solver)
 
     def set_shape_fit_frames(self, n: int) -> None:
         """Fit one body shape per recording on ``n`` frames from now on (0 = off;

@@ -145,10 +145,122 @@ def lbfgs(fg: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]], x0: t
     return x, f
 
 
+def residual_jacobian(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tuple[float, float] = (1.0, 1.0)
+                      ) -> tuple[torch.Tensor, torch.Tensor]:
+    """The residual vector of L_r at a kernel forward and its Jacobian in the 6D pose.
+
+    L_r = ||rho||^2 with ``rho = [sqrt(wp) (p_hat - p), sqrt(wr) (R_hat - R)]`` over the ``S``
+    sensors (``R = 12 S`` entries). The Jacobian comes from the kernel's closed-form backward,
+    which is linear in the residuals it reads from ``ctx``: with the residuals replaced by the
+    ``R`` unit vectors (halved, since it returns ``2 J^T r``) it returns the rows of ``J^T``
+    exactly, in one batched call of ``N * R`` rows (no autograd, no finite differences).
+
+    Args:
+        kernel: :class:`~wearpose.estimators.empose.fastgrad.LeanSensorGrad`.
+        ctx: ``kernel.forward(...)`` at the point, called with ``weights=(1, 1)``.
+        rec_weights: L_r's (position, rotation) weights.
+
+    Returns:
+        rho ``(N, R)`` and J ``(N, R, 120)`` (d rho / d u, u the 6D pose of the 20 joints).
+    """
+    rp, rR = ctx["_"][-4], ctx["_"][-3]  # (N, S, 3), (N, S, 3, 3): the unweighted residuals
+    N, S = rp.shape[:2]
+    wp, wr = (float(w) ** 0.5 for w in rec_weights)
+    rho = torch.cat([wp * rp.reshape(N, -1), wr * rR.reshape(N, -1)], -1)  # (N, 12 S)
+    R = rho.shape[1]
+    eye = torch.eye(R, dtype=rp.dtype, device=rp.device) * 0.5
+    scale = torch.cat([torch.full((3 * S,), wp), torch.full((9 * S,), wr)]).to(rp)
+    basis = (eye * scale).expand(N, R, R).reshape(N * R, R)  # row k: unit k of rho, in the kernel's units
+    rep = lambda t: t.repeat_interleave(R, 0)  # noqa: E731
+    fields = list(ctx["_"])
+    for i, t in enumerate(fields[:-4]):  # the forward's saved tensors, one copy per unit vector
+        fields[i] = rep(t)
+    off_R, off_t = fields[-2], fields[-1]
+    fields[-2] = rep(off_R) if off_R.dim() == 4 else off_R
+    fields[-1] = rep(off_t) if off_t.dim() == 3 else off_t
+    fields[-4] = basis[:, :3 * S].reshape(N * R, S, 3)
+    fields[-3] = basis[:, 3 * S:].reshape(N * R, S, 3, 3)
+    JT = kernel.backward({"_": tuple(fields)})[:, :POSE_DIM]  # (N * R, 120)
+    return rho, JT.view(N, R, POSE_DIM)
+
+
+#: Frames per call of the Jacobian (its batch is 12 S rows per frame: bounded memory).
+JACOBIAN_CHUNK = 32
+
+
+def _jacobian_chunked(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tuple[float, float]
+                      ) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`residual_jacobian` over ``JACOBIAN_CHUNK`` frames at a time (the same values)."""
+    fields = ctx["_"]
+    N = fields[0].shape[0]
+    if N <= JACOBIAN_CHUNK:
+        return residual_jacobian(kernel, ctx, rec_weights)
+    out = []
+    for a in range(0, N, JACOBIAN_CHUNK):
+        sl = lambda t: t[a:a + JACOBIAN_CHUNK] if t.shape[0] == N and t.dim() >= 2 else t  # noqa: E731
+        part = [sl(t) for t in fields[:-2]]
+        oR, ot = fields[-2], fields[-1]
+        part += [oR[a:a + JACOBIAN_CHUNK] if oR.dim() == 4 else oR, ot[a:a + JACOBIAN_CHUNK] if ot.dim() == 3 else ot]
+        out.append(residual_jacobian(kernel, {"_": tuple(part)}, rec_weights))
+    return torch.cat([o[0] for o in out]), torch.cat([o[1] for o in out])
+
+
+def gauss_newton(kernel: Any, u0: torch.Tensor, b: torch.Tensor, meas_p: torch.Tensor, meas_R: torch.Tensor,
+                 off_R: torch.Tensor, off_t: torch.Tensor, *, steps: int, weight: float,
+                 rec_weights: tuple[float, float] = (1.0, 1.0), damping: float = 1e-3
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Batched Levenberg-Marquardt on ``f(u) = ||rho(u)||^2 + w ||u - u0||^2``, one problem per frame.
+
+    Each iteration solves ``(J^T J + (w + lam) I) d = -(J^T rho + w (u - u0))`` (120 x 120 per
+    frame, Cholesky) and keeps the step where f decreases, else multiplies that frame's ``lam``
+    by 10 (and divides it by 3 after a kept step). The 6D parametrisation has 3 directions per
+    joint that do not change the rotation (scale and skew of the two columns); ``w + lam > 0``
+    keeps the system definite there. Written here rather than taken from a library: the problems
+    are many small dense ones on top of the closed-form kernel (pypose's and theseus' LM build
+    one dense system over all variables, i.e. over all frames at once).
+
+    Args: u0 ``(N, 120)`` start and prior centre; b ``(N, 10)`` betas (held); measurements and
+    offsets as :func:`refine_frames`.
+
+    Returns:
+        u ``(N, 120)`` and f ``(N,)`` at it; f never exceeds f(u0).
+    """
+    def ev(u: torch.Tensor) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        ctx = kernel.forward(torch.cat([u, b], -1), meas_p, meas_R, off_R, off_t)
+        rp, rR = ctx["_"][-4], ctx["_"][-3]
+        du = u - u0
+        f = (rec_weights[0] * (rp ** 2).sum((-1, -2)) + rec_weights[1] * (rR ** 2).sum((-1, -2, -3))
+             + weight * (du * du).sum(-1))
+        return f, ctx
+
+    u = u0.clone()
+    f, ctx = ev(u)
+    lam = torch.full_like(f, damping)
+    eye = torch.eye(POSE_DIM, dtype=u.dtype, device=u.device)
+    for _ in range(steps):
+        rho, J = _jacobian_chunked(kernel, ctx, rec_weights)
+        JT = J.transpose(1, 2)
+        g = (JT @ rho.unsqueeze(-1)).squeeze(-1) + weight * (u - u0)
+        A = JT @ J + (weight + lam)[:, None, None] * eye
+        L, info = torch.linalg.cholesky_ex(A)
+        d = -torch.cholesky_solve(g.unsqueeze(-1), L).squeeze(-1)
+        d = torch.where((info == 0)[:, None] & torch.isfinite(d), d, torch.zeros_like(d))
+        fn, ctxn = ev(u + d)
+        ok = fn < f
+        u = torch.where(ok[:, None], u + d, u)
+        f = torch.where(ok, fn, f)
+        lam = torch.where(ok, (lam / 3.0).clamp_min(1e-9), lam * 10.0)
+        if bool(ok.all()):
+            ctx = ctxn
+        else:
+            f, ctx = ev(u)
+    return u, f
+
+
 def refine_frames(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, rec: torch.Tensor,
                   meas_p: torch.Tensor, meas_R: torch.Tensor, off_R: torch.Tensor, off_t: torch.Tensor, *,
                   steps: int, threshold: float, weight: float,
-                  rec_weights: tuple[float, float] = (1.0, 1.0)) -> Refined:
+                  rec_weights: tuple[float, float] = (1.0, 1.0), solver: str = "lbfgs") -> Refined:
     """Refine the frames whose L_r exceeds ``threshold`` (module doc).
 
     Args:
@@ -180,7 +292,10 @@ def refine_frames(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, rec
         f = ctx["rec"] + weight * (du * du).sum(-1)
         return f, kernel.backward(ctx)[:, :POSE_DIM] + 2.0 * weight * du
 
-    u, _ = lbfgs(fg, u0, steps)
+    if solver == "gn":
+        u, _ = gauss_newton(kernel, u0, b, mp, mR, oR, ot, steps=steps, weight=weight, rec_weights=rec_weights)
+    else:
+        u, _ = lbfgs(fg, u0, steps)
     ctx = kernel.forward(torch.cat([u, b], -1), mp, mR, oR, ot, rec_weights)
     out_rot, out_rec = local_rot.clone(), rec.clone()
     out_rot[idx] = ctx["local_rot"].to(local_rot.dtype)
