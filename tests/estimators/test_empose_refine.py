@@ -13,6 +13,7 @@ from wearpose.errors import ConfigError
 from wearpose.estimators import iter_frames
 from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
 from wearpose.estimators.empose.data import recording_from_clip, simulate_clip
+from wearpose.estimators.empose import refine
 from wearpose.estimators.empose.model import encode_pose
 from wearpose.estimators.empose.refine import (POSE_DIM, calibrate_threshold, gauss_newton, lbfgs, refine_frames,
                                              residual_jacobian)
@@ -189,9 +190,9 @@ def _perturbed(body: BodyModel, dtype: torch.dtype = torch.float32) -> tuple:
             c(clip["orientation"]), c(clip["off_R"]), c(clip["off_t"]), clip)
 
 
-def test_residual_jacobian_equals_autograd_in_float64() -> None:
+def test_residual_jacobian_equals_autograd_in_float64(monkeypatch: pytest.MonkeyPatch) -> None:
     """The Jacobian read off the closed-form backward equals autograd's through the kernel's
-    forward (float64, 1e-8), with unequal L_r weights; and ||rho||^2 is L_r."""
+    forward (float64, 1e-8), with unequal L_r weights, also in chunks; and ||rho||^2 is L_r."""
     body = BodyModel(dtype=torch.float64)
     est = EmposeEstimator(tiny_cfg(), body=body)
     kernel = est.sensors.lean()
@@ -214,6 +215,9 @@ def test_residual_jacobian_equals_autograd_in_float64() -> None:
     for n in range(2):
         assert torch.allclose(J[n], Jad[n, :, n], atol=1e-8)
         assert float(Jad[n, :, 1 - n].abs().max()) == 0.0
+    monkeypatch.setattr(refine, "JACOBIAN_CHUNK", 1)  # the chunked path (one frame per call): the same values
+    rho_c, J_c = refine._jacobian_chunked(kernel, ctx, w)
+    assert torch.allclose(rho_c, rho, atol=1e-12) and torch.allclose(J_c, J, atol=1e-12)
 
 
 def test_gauss_newton_is_monotone_and_beats_lbfgs_at_equal_iterations(body: BodyModel) -> None:
@@ -242,3 +246,46 @@ def test_gauss_newton_is_monotone_and_beats_lbfgs_at_equal_iterations(body: Body
     joints = lambda x: kernel.forward(torch.cat([x, b], -1), mp, mR, oR, ot)["joints"]  # noqa: E731
     err = (joints(u) - joints(u_true)).norm(dim=-1)
     assert float(err.max()) < 0.01, float(err.max())
+
+
+def test_miscalibrate_moves_each_offset_by_exactly_the_stated_error(body: BodyModel) -> None:
+    """Every sensor's rotation offset turns by the stated angle and its translation moves by the
+    stated distance; the measurements and the rest of the subject stay; the same generator seed
+    gives the same error."""
+    import math
+
+    import numpy as np
+
+    from wearpose.estimators.empose.evaluate import miscalibrate
+
+    est = EmposeEstimator(tiny_cfg(), body=body)
+    rec = recording_from_clip(_clip(body), est.config)
+    out = miscalibrate(rec, 2.0, 5.0, torch.Generator().manual_seed(1))
+    a, b = rec.subject["offsets"], out.subject["offsets"]
+    R0, R1 = (torch.tensor(np.asarray(x["rotation"], dtype=np.float64)) for x in (a, b))
+    cos = ((R0.transpose(-1, -2) @ R1).diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2
+    assert torch.allclose(torch.rad2deg(torch.acos(cos.clamp(-1, 1))), torch.full_like(cos, 2.0), atol=1e-3)
+    dt = (torch.tensor(np.asarray(b["translation_mean_m"], dtype=np.float64))
+          - torch.tensor(np.asarray(a["translation_mean_m"], dtype=np.float64)))
+    assert torch.allclose(dt.norm(dim=-1) * 1000, torch.full((dt.shape[0],), 5.0, dtype=torch.float64), atol=1e-6)
+    assert all(np.array_equal(x.position, y.position) and np.array_equal(x.orientation, y.orientation)
+               for x, y in zip(out.sensors, rec.sensors, strict=True))  # the measurements stay
+    assert rec.subject["offsets"] is a  # the input recording is not changed
+    again = miscalibrate(rec, 2.0, 5.0, torch.Generator().manual_seed(1)).subject["offsets"]
+    assert again["rotation"] == b["rotation"] and not math.isnan(float(dt.sum()))
+
+
+def test_evaluation_with_calibration_error_gives_the_models_the_wrong_offsets(tmp_path: Path, body: BodyModel) -> None:
+    """(0, 0) is the plain evaluation; a calibration error changes what the model reads, and is
+    recorded in the result."""
+    from wearpose.estimators.empose.evaluate import evaluate_models
+
+    torch.manual_seed(0)
+    est = EmposeEstimator(tiny_cfg(), body=body)
+    store = FakeStore(tmp_path, {"test": 1})
+    plain = evaluate_models({"m": est}, "test", store=store, noise="none")
+    zero = evaluate_models({"m": est}, "test", store=store, noise="none", calibration_error=(0.0, 0.0))
+    off = evaluate_models({"m": est}, "test", store=store, noise="none", calibration_error=(5.0, 10.0))
+    assert zero["models"]["m"]["mpjpe_mm"] == plain["models"]["m"]["mpjpe_mm"]
+    assert off["models"]["m"]["mpjpe_mm"] != plain["models"]["m"]["mpjpe_mm"]
+    assert off["calibration_error"] == {"deg": 5.0, "mm": 10.0}

@@ -2,7 +2,7 @@
 
 Input: EM 6-DoF sensors of kit ``em12`` / ``em6`` relative to the EM source (DESIGN, EM
 canonical form) at the trained rate, plus the subject's sensor offsets ``O_p`` in
-``recording.subject["offsets"]`` (``{"sensors": [...], "R": (S, 3, 3), "t": (S, 3)}``; EM-POSE
+``recording.subject["offsets"]`` (``{"sensors": [...], "rotation": (S, 3, 3), "translation_mean_m": (S, 3)}``; EM-POSE
 assumes calibrated offsets, Sec. 5.3). Missing offsets fall back to identity with a warning.
 
 Masked input: a dropped sensor sample is held at its last valid value, and frames where any

@@ -118,6 +118,32 @@ def simulate_eval_clip(motion: Any, est: Any, clip_id: str, seed: int, *, noise:
     return simulate_clip(motion, est.config, est.body, clip_seed(clip_id, seed, "eval"), noise=noise, offsets=sub)
 
 
+def miscalibrate(recording: Any, error_deg: float, error_mm: float, generator: torch.Generator) -> Any:
+    """A copy of ``recording`` whose ``subject["offsets"]`` are off the simulated ones by what a
+    calibration gets wrong: per sensor, the rotation offset composed with a rotation of
+    ``error_deg`` degrees about a random axis, and the translation moved ``error_mm`` mm in a
+    random direction (site frame). The measurements are untouched: the estimator is given
+    offsets that do not quite match the sensors it reads, as with real sensors.
+
+    Args:
+        recording: a :class:`~wearpose.recording.Recording` with ``subject["offsets"]``
+            (``rotation`` (S, 3, 3), ``translation_mean_m`` (S, 3)).
+        error_deg, error_mm: sizes of the two errors (each sensor gets exactly these sizes).
+        generator: the random axes and directions.
+    """
+    from wearpose.geometry import axis_angle_to_matrix
+
+    off = dict(recording.subject["offsets"])
+    R = torch.as_tensor(np.asarray(off["rotation"], dtype=np.float64))
+    t = torch.as_tensor(np.asarray(off["translation_mean_m"], dtype=np.float64))
+    S = R.shape[0]
+    unit = lambda: torch.nn.functional.normalize(torch.randn(S, 3, generator=generator, dtype=torch.float64), dim=-1)  # noqa: E731
+    dR = axis_angle_to_matrix(unit() * math.radians(error_deg))
+    off["rotation"] = (R @ dR).tolist()
+    off["translation_mean_m"] = (t + unit() * (error_mm / 1000.0)).tolist()
+    return dataclasses.replace(recording, subject={**recording.subject, "offsets": off})
+
+
 def _stats(xs: list[torch.Tensor], k: float) -> tuple[float, float]:
     x = torch.cat(xs) * k if xs else torch.zeros(0)
     return (float(x.mean()), float(x.std())) if x.numel() else (math.nan, math.nan)
@@ -172,7 +198,7 @@ def _provenance(store: Any) -> dict[str, Any] | None:
 def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: int | None = None, *,
                     noise: str = "default", seed: int = 0, store: Any = None, progress: Any = None,
                     offsets: str = "random", spread: float = UNSEEN_SPREAD, clips: Sequence[str] | None = None,
-                    bodies: str = "corpus") -> dict[str, Any]:
+                    bodies: str = "corpus", calibration_error: tuple[float, float] = (0.0, 0.0)) -> dict[str, Any]:
     """Evaluate several checkpoints on the same simulated recordings (module doc).
 
     Args:
@@ -189,6 +215,9 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
             distribution scaled by ``spread``).
         clips: explicit clip ids of ``split`` (instead of the first ``limit``).
         bodies: the wearers, :data:`wearpose.estimators.bodies.BODIES` (module doc).
+        calibration_error: ``(degrees, mm)``: the offsets the models are given are off the
+            simulated ones by this much per sensor (:func:`miscalibrate`, seeded per clip in the
+            ``"calibration"`` namespace); ``(0, 0)`` gives them the simulated offsets.
 
     Returns:
         ``{"split", "clips", "frames", "noise", "seed", "kit", "joints", "bodies", "betas" (clip
@@ -225,6 +254,9 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         # One simulation per clip for all models (same subject, same noise draw).
         r = simulate_eval_clip(store.load(cid), first, cid, seed, noise=noise, offsets=offsets, spread=spread)
         rec = recording_from_clip(r, first.config)
+        if any(calibration_error):
+            g = torch.Generator().manual_seed(clip_seed(cid, seed, "calibration"))
+            rec = miscalibrate(rec, *calibration_error, g)
         for name, est in ests.items():
             t0 = time.perf_counter()
             track = est.estimate(rec)
@@ -266,7 +298,8 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
     return {"split": split, "clips": len(ids), "frames": frames, "noise": noise, "seed": seed, "kit": first.kit_name,
             "rate_hz": first.fps, "body_asset": first.body_asset_id, "joints": "15 major (DIP/EM-POSE)",
             "offsets": offsets, "spread": spread if offsets == "unseen" else None, "subjects": subjects,
-            "bodies": bodies, "betas": clip_bodies(store, ids), "store": _provenance(store), "models": models}
+            "bodies": bodies, "betas": clip_bodies(store, ids), "store": _provenance(store),
+            "calibration_error": {"deg": calibration_error[0], "mm": calibration_error[1]}, "models": models}
 
 
 def table2_markdown(result: Mapping[str, Any], digits: int = 1) -> str:

@@ -145,15 +145,27 @@ def lbfgs(fg: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]], x0: t
     return x, f
 
 
+def _skew(v: torch.Tensor) -> torch.Tensor:
+    """``[v]x`` ``(..., 3, 3)`` of vectors ``(..., 3)``: ``[v]x w = v x w``."""
+    z = torch.zeros_like(v[..., 0])
+    x, y, w = v.unbind(-1)
+    return torch.stack([torch.stack([z, -w, y], -1), torch.stack([w, z, -x], -1), torch.stack([-y, x, z], -1)], -2)
+
+
 def residual_jacobian(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tuple[float, float] = (1.0, 1.0)
                       ) -> tuple[torch.Tensor, torch.Tensor]:
     """The residual vector of L_r at a kernel forward and its Jacobian in the 6D pose.
 
     L_r = ||rho||^2 with ``rho = [sqrt(wp) (p_hat - p), sqrt(wr) (R_hat - R)]`` over the ``S``
-    sensors (``R = 12 S`` entries). The Jacobian comes from the kernel's closed-form backward,
-    which is linear in the residuals it reads from ``ctx``: with the residuals replaced by the
-    ``R`` unit vectors (halved, since it returns ``2 J^T r``) it returns the rows of ``J^T``
-    exactly, in one batched call of ``N * R`` rows (no autograd, no finite differences).
+    sensors (``12 S`` entries: positions, then the rotations' entries row by row). The Jacobian
+    comes from the kernel's closed-form backward, which is linear in the residuals it reads
+    from ``ctx`` (it returns ``2 J^T r``), so it is exact (no autograd, no finite differences),
+    in one batched call of ``6 S`` rows per frame:
+
+    - positions: the ``3 S`` unit vectors (halved) give the rows of ``d p_hat / d u``;
+    - rotations: a rotation's change is ``dR = [w]x R`` with ``w`` its angular change (3 numbers,
+      not 9), and ``w_k = <[e_k]x R, dR> / 2``, so the residual ``[e_k]x R / 4`` gives the row
+      of ``w_k``; the 9 entries follow as ``d R[:, c] = -[R[:, c]]x w`` per column ``c``.
 
     Args:
         kernel: :class:`~wearpose.estimators.empose.fastgrad.LeanSensorGrad`.
@@ -161,27 +173,39 @@ def residual_jacobian(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tu
         rec_weights: L_r's (position, rotation) weights.
 
     Returns:
-        rho ``(N, R)`` and J ``(N, R, 120)`` (d rho / d u, u the 6D pose of the 20 joints).
+        rho ``(N, 12 S)`` and J ``(N, 12 S, 120)`` (d rho / d u, u the 6D pose of the 20 joints).
     """
     rp, rR = ctx["_"][-4], ctx["_"][-3]  # (N, S, 3), (N, S, 3, 3): the unweighted residuals
+    R_hat = ctx["R_hat"]  # (N, S, 3, 3)
     N, S = rp.shape[:2]
+    dt, dev = rp.dtype, rp.device
     wp, wr = (float(w) ** 0.5 for w in rec_weights)
     rho = torch.cat([wp * rp.reshape(N, -1), wr * rR.reshape(N, -1)], -1)  # (N, 12 S)
-    R = rho.shape[1]
-    eye = torch.eye(R, dtype=rp.dtype, device=rp.device) * 0.5
-    scale = torch.cat([torch.full((3 * S,), wp), torch.full((9 * S,), wr)]).to(rp)
-    basis = (eye * scale).expand(N, R, R).reshape(N * R, R)  # row k: unit k of rho, in the kernel's units
-    rep = lambda t: t.repeat_interleave(R, 0)  # noqa: E731
+    rows = 6 * S
+    gp = torch.zeros(N, rows, S, 3, dtype=dt, device=dev)
+    gR = torch.zeros(N, rows, S, 3, 3, dtype=dt, device=dev)
+    s_idx = torch.arange(S, device=dev).repeat_interleave(3)
+    k_idx = torch.arange(3, device=dev).repeat(S)
+    r_idx = torch.arange(3 * S, device=dev)
+    gp[:, r_idx, s_idx, k_idx] = 0.5
+    E = _skew(torch.eye(3, dtype=dt, device=dev))  # (3, 3, 3): [e_k]x
+    gR[:, 3 * S + r_idx, s_idx] = 0.25 * (E[k_idx] @ R_hat[:, s_idx])  # (N, 3 S, 3, 3)
     fields = list(ctx["_"])
-    for i, t in enumerate(fields[:-4]):  # the forward's saved tensors, one copy per unit vector
+    rep = lambda t: t.repeat_interleave(rows, 0)  # noqa: E731
+    for i, t in enumerate(fields[:-4]):  # the forward's saved tensors, one copy per row
         fields[i] = rep(t)
     off_R, off_t = fields[-2], fields[-1]
     fields[-2] = rep(off_R) if off_R.dim() == 4 else off_R
     fields[-1] = rep(off_t) if off_t.dim() == 3 else off_t
-    fields[-4] = basis[:, :3 * S].reshape(N * R, S, 3)
-    fields[-3] = basis[:, 3 * S:].reshape(N * R, S, 3, 3)
-    JT = kernel.backward({"_": tuple(fields)})[:, :POSE_DIM]  # (N * R, 120)
-    return rho, JT.view(N, R, POSE_DIM)
+    fields[-4] = gp.reshape(N * rows, S, 3)
+    fields[-3] = gR.reshape(N * rows, S, 3, 3)
+    G = kernel.backward({"_": tuple(fields)})[:, :POSE_DIM].view(N, rows, POSE_DIM)
+    Jp = G[:, :3 * S]  # (N, 3 S, 120)
+    Jw = G[:, 3 * S:].reshape(N, S, 3, POSE_DIM)  # angular change of each sensor's rotation
+    # d R[:, c] = -[R[:, c]]x w: (N, S, c, i, j) @ (N, S, j, 120) -> rows ordered (s, i, c).
+    cols = _skew(R_hat.transpose(-1, -2))  # (N, S, 3 (c), 3, 3): [R[:, c]]x
+    JR = -(cols @ Jw.unsqueeze(2)).permute(0, 1, 3, 2, 4).reshape(N, 9 * S, POSE_DIM)
+    return rho, torch.cat([wp * Jp, wr * JR], 1)
 
 
 #: Frames per call of the Jacobian (its batch is 12 S rows per frame: bounded memory).
@@ -201,7 +225,8 @@ def _jacobian_chunked(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tu
         part = [sl(t) for t in fields[:-2]]
         oR, ot = fields[-2], fields[-1]
         part += [oR[a:a + JACOBIAN_CHUNK] if oR.dim() == 4 else oR, ot[a:a + JACOBIAN_CHUNK] if ot.dim() == 3 else ot]
-        out.append(residual_jacobian(kernel, {"_": tuple(part)}, rec_weights))
+        out.append(residual_jacobian(kernel, {"_": tuple(part), "R_hat": ctx["R_hat"][a:a + JACOBIAN_CHUNK]},
+                                     rec_weights))
     return torch.cat([o[0] for o in out]), torch.cat([o[1] for o in out])
 
 
