@@ -168,7 +168,9 @@ class LeanSensorGrad:
 
         Returns:
             a context dict; ``rec`` ``(N,)`` = L_r, ``local_rot`` ``(N, 24, 3, 3)``, ``betas``
-            ``(N, 10)``, ``joints`` ``(N, 24, 3)`` m are its public entries.
+            ``(N, 10)``, ``joints`` ``(N, 24, 3)`` m, ``p_hat`` ``(N, S, 3)`` m and ``R_hat``
+            ``(N, S, 3, 3)`` (the virtual sensors relative to the source), ``R_src`` ``(N, 3, 3)``
+            (the source site's frame) are its public entries.
         """
         N = omega.shape[0]
         P = len(_PRED)
@@ -232,7 +234,7 @@ class LeanSensorGrad:
             rp, rR = rp * wp, rR * wr
         else:
             rec = (rp ** 2).sum((-1, -2)) + (rR ** 2).sum((-1, -2, -3))
-        return {"rec": rec, "local_rot": Lr, "betas": beta, "joints": J, "p_hat": p_rel, "R_hat": R_rel,
+        return {"rec": rec, "local_rot": Lr, "betas": beta, "joints": J, "p_hat": p_rel, "R_hat": R_rel, "R_src": Rsrc[:, 0],
                 "_": (x, y, n1, n2, d, a2, Lr, Jr, vs, G, Gpar, J, M, verts, e1, e2, n, nn_, e, s, tan, ne, Rss, dp, Rv, Rsrc,
                       rp, rR, off_R, off_t)}
 

@@ -15,14 +15,15 @@ pull the pose towards the measurements, starting from the learned estimate ``u_0
   refining it per frame would let the pose's error leak into the shape);
 - ``w * ||u - u_0||^2``: the pose prior, a Gaussian around the learned estimate (the network
   is the model's pose prior; the chordal distance of the first two rotation columns keeps
-  joints L_r cannot see, such as the root, which L_r is blind to because the measurements are
-  relative to the EM source riding on the pelvis, where the network put them). ``w`` is
+  joints the sensors pin only weakly near where the network put them). ``w`` is
   ``EmposeConfig.refine_weight`` (units of L_r per squared 6D unit);
 - L_r and its gradient: the closed-form kernel of :mod:`~wearpose.estimators.empose.fastgrad`
   (no autograd), batched over the gated frames; the L-BFGS is batched too (one independent
   problem per frame, two-loop recursion with ``MEMORY`` pairs, backtracking Armijo line search
   with at most ``MAX_HALVINGS`` halvings). Every accepted step lowers f, so L_r after <= L_r
   before on every refined frame (f starts at L_r and the prior term is >= 0);
+- the root: L_r cannot see it (measurements are relative to the source, which turns with the
+  root), so after the solve it is set from the source's own skin site (:func:`root_from_source`);
 - the gate: frames whose learned L_r exceeds ``EmposeConfig.refine_threshold``, a level
   calibrated as a high percentile of L_r on validation clips of the training distribution
   (:func:`calibrate_threshold`). The other frames are returned untouched, bit for bit.
@@ -323,9 +324,29 @@ def refine_frames(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, rec
         u, _ = lbfgs(fg, u0, steps)
     ctx = kernel.forward(torch.cat([u, b], -1), mp, mR, oR, ot, rec_weights)
     out_rot, out_rec = local_rot.clone(), rec.clone()
-    out_rot[idx] = ctx["local_rot"].to(local_rot.dtype)
+    out_rot[idx] = root_from_source(ctx).to(local_rot.dtype)
     out_rec[idx] = ctx["rec"].to(rec.dtype)
     return Refined(out_rot, out_rec, gated)
+
+
+def root_from_source(ctx: dict[str, torch.Tensor]) -> torch.Tensor:
+    """The kernel forward's local rotations with the root turned so that the EM source's own skin
+    site frame is the identity: ``(N, 24, 3, 3)``.
+
+    The estimate's root orientation is relative to the EM source, and the source is worn on the
+    body too (the simulator's source pose is its skin site's frame, no offset): so the root
+    follows from the rest of the pose, ``R_root Q_0 = I`` with ``Q_0`` the site's frame under an
+    identity root. L_r cannot see the root (every measurement is relative to the source, and
+    turning the root turns the source with it, so L_r is unchanged bit for bit up to rounding),
+    which leaves the refined root at the learned guess; this replaces the guess with what the
+    source says. ``Q = R_root Q_0`` at the forward's root, so the new root is
+    ``Q_0^T = Q^T R_root``. A source mounted with a rotation offset ``O`` on its site would need
+    ``(Q_0 O)^T``; the recording format carries none (the simulator has none).
+    """
+    R = ctx["local_rot"].clone()
+    Q = ctx["R_src"]  # (N, 3, 3): the source site's frame at the forward's root
+    R[:, 0] = Q.transpose(-1, -2) @ R[:, 0]
+    return R
 
 
 def calibrate_threshold(est: Any, store: Any, *, split: str = "val", clips: int = 20, percentile: float = 95.0,
