@@ -37,9 +37,10 @@ import torch
 COMPARE = "wearpose.estimators.empose.evaluate:evaluate_models"
 
 
-def _models(name: str, threshold: float, steps: list[int], gn_steps: list[int]) -> dict[str, Any]:
+def _models(name: str, threshold: float, steps: list[int], gn_steps: list[int], weight: float | None = None
+            ) -> dict[str, Any]:
     """The learned model, then one row per L-BFGS iteration count (``refine K``) and per
-    Gauss-Newton iteration count (``gn K``), the same gate for all."""
+    Gauss-Newton iteration count (``gn K``), the same gate and prior weight for all."""
     from wearpose.estimators.empose.baselines import load_any
     from wearpose.weights import weight_path
 
@@ -49,6 +50,8 @@ def _models(name: str, threshold: float, steps: list[int], gn_steps: list[int]) 
         est.set_refine_threshold(threshold)
         est.set_refine_steps(k)
         est.set_refine_solver(solver)
+        if weight is not None:
+            est.set_refine_weight(weight)
         out["learned" if k == 0 else (f"refine {k}" if solver == "lbfgs" else f"gn {k}")] = est
     return out
 
@@ -125,6 +128,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--model", default="empose12_cpu")
     ap.add_argument("--steps", type=int, nargs="*", default=[5, 20], help="L-BFGS iterations, one row each")
     ap.add_argument("--gn-steps", type=int, nargs="*", default=[2, 5], help="Gauss-Newton iterations, one row each")
+    ap.add_argument("--gate", choices=("none", "val"), default="none",
+                    help="none: refine every frame (the default setting, threshold 0); val: frames over the "
+                         "--percentile of the learned L_r on validation clips")
+    ap.add_argument("--weight", type=float, default=None, help="the prior weight (default: the config's)")
     ap.add_argument("--percentile", type=float, default=95.0)
     ap.add_argument("--val-clips", type=int, default=20)
     ap.add_argument("--test-clips", type=int, default=10)
@@ -144,29 +151,34 @@ def main(argv: list[str] | None = None) -> int:
 
     corpus = CorpusStore()
     cal = calibrate_threshold(load_any(weight_path(a.model)), corpus, clips=a.val_clips, percentile=a.percentile)
-    print(f"gate: L_r > {cal['threshold']:.4g} ({a.percentile:g}th percentile over {cal['frames']} val frames)",
-          flush=True)
+    print(f"gate: L_r > {cal['threshold']:.4g} ({a.percentile:g}th percentile over {cal['frames']} val frames)"
+          f"{'' if a.gate == 'val' else ', not used (--gate none: every frame)'}", flush=True)
+    threshold = cal["threshold"] if a.gate == "val" else 0.0
     unseen = unseen_motion_store(a.per_family)
     results = {}
     for key, store, clips in (("test", corpus, a.test_clips), ("unseen_motion", unseen, None)):
-        models = _models(a.model, cal["threshold"], a.steps, a.gn_steps)
+        models = _models(a.model, threshold, a.steps, a.gn_steps, a.weight)
         results[key] = compare_models(COMPARE, models, "test", clips, store=store,
                                       calibration_error=tuple(a.calibration_error))
         for m in results[key]["models"].values():
             m["checkpoint"] = str(weight_path(a.model))
         print(key, {n: round(m["mpjpe_mm"], 2) for n, m in results[key]["models"].items()}, flush=True)
-    timing = _timing(_models(a.model, cal["threshold"], a.steps, a.gn_steps), unseen, a.timing_clips)
+    timing = _timing(_models(a.model, threshold, a.steps, a.gn_steps, a.weight), unseen, a.timing_clips)
     command = "python benchmarks/" + " ".join(shlex.quote(x) for x in [Path(__file__).name, *sys.argv[1:]])
     refined = results["unseen_motion"]["models"]
     weight = next(iter(refined.values()))["config"]["refine_weight"]
     md = [f"# EM-POSE measurement-consistency refinement ({a.model})", "",
           f"Produced by `{command}` (`wearpose.estimators.empose.refine`).", "",
-          f"Gate: L_r > **{cal['threshold']:.4g}** (m² + squared Frobenius, summed over the 12 sensors), the "
-          f"{a.percentile:g}th percentile of the learned estimate's L_r over {cal['frames']} frames of the first "
-          f"{cal['clips']} corpus *validation* clips (median {cal['rec_median']:.4g}, 99th percentile "
-          f"{cal['rec_p99']:.4g}); nothing was tuned on the test clips. Refinement: K iterations on L_r + "
-          f"{weight:g} ||u - u_learned||² (6D pose of the 20 estimated joints; shape held), gated frames only: "
-          "`refine K` L-BFGS, `gn K` Levenberg-Marquardt Gauss-Newton (`refine_solver=gn`).", "",
+          (f"Gate: L_r > **{cal['threshold']:.4g}** (m² + squared Frobenius, summed over the 12 sensors), the "
+           f"{a.percentile:g}th percentile of the learned estimate's L_r over {cal['frames']} frames of the first "
+           f"{cal['clips']} corpus *validation* clips (median {cal['rec_median']:.4g}, 99th percentile "
+           f"{cal['rec_p99']:.4g}); nothing was tuned on the test clips. " if a.gate == "val" else
+           f"No gate: every frame is refined (threshold 0; the validation clips' learned L_r has median "
+           f"{cal['rec_median']:.4g} and 95th percentile {cal['threshold']:.4g}). ")
+          + "Refinement: K iterations on L_r + "
+          f"{weight:g} ||u - u_learned||² (6D pose of the 20 estimated joints; shape held), refined frames only, "
+          "then the root from the EM source's skin site: `refine K` L-BFGS, `gn K` Levenberg-Marquardt "
+          "Gauss-Newton (`refine_solver=gn`).", "",
           f"## Corpus test split, first {a.test_clips} clips (in-lab)", "", *_table(results["test"]), "",
           f"## Unseen motion ({a.per_family} clips per held-out procedural family)", "",
           *_table(results["unseen_motion"]), "", "By family (frame-weighted means of each clip's figures):", "",

@@ -248,8 +248,8 @@ def test_heldout_bodies_in_a_single_model_protocol(tmp_path: Path) -> None:
 
 def test_set_turns_on_the_empose_refinement(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """--set reaches every EM-POSE model: the refined fraction appears (all frames with a zero
-    gate), the checkpoint path is still recorded; a missing threshold or a setting the
-    estimator lacks is refused naming --set."""
+    gate, also the default one), the checkpoint path is still recorded; a setting the estimator
+    lacks is refused naming --set."""
     torch.manual_seed(0)
     ck = tmp_path / "tiny12" / "best.pt"
     EmposeEstimator(EmposeConfig.preset("tiny", 12)).save(ck)
@@ -263,5 +263,6 @@ def test_set_turns_on_the_empose_refinement(tmp_path: Path, monkeypatch: pytest.
     assert plain["models"]["tiny12"]["mpjpe_mm"] != m["mpjpe_mm"]
     res = runner.invoke(app, ["evaluate", str(ck), "--set", "mc_samples=3"])
     assert res.exit_code == 2 and "--set" in res.output
-    res = runner.invoke(app, ["evaluate", str(ck), "--set", "refine_steps=2"])
-    assert res.exit_code != 0 and "refine_threshold" in (res.output + str(res.exception))
+    res = runner.invoke(app, ["evaluate", str(ck), "--json", "--set", "refine_steps=2"])  # the default gate: every frame
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout[res.stdout.index("{"):])["models"]["tiny12"]["refined_fraction"] == 1.0

@@ -217,8 +217,8 @@ def evaluate(
                                               "per clip from the held-out shape stream, seeded per clip, the clip "
                                               "re-fitted to it; the same body for every model)."),
     settings: Optional[list[str]] = typer.Option(None, "--set", help="KEY=VALUE: an EM-POSE setting changed after "
-                                                 "loading, for every model (repeatable), e.g. --set refine_steps=5 "
-                                                 "--set refine_threshold=0.06 (docs/empose.md)."),
+                                                 "loading, for every model (repeatable), e.g. --set refine_steps=3 "
+                                                 "(the refinement, every frame) (docs/empose.md)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON (progress goes to stderr)."),
 ) -> None:
     """Evaluate checkpoints on simulated held-out recordings with the paper's metrics.
@@ -239,7 +239,7 @@ def evaluate(
     Unseen motion: wearpose evaluate birae6_cpu --protocol unseen-motion --out results/unseen_birae6
     Unseen lab: wearpose evaluate empose12_cpu --source cmu_daz
     Held-out wearers: wearpose evaluate empose12_cpu --bodies heldout
-    Refinement: wearpose evaluate empose12_cpu --set refine_steps=5 --set refine_threshold=0.06
+    Refinement: wearpose evaluate empose12_cpu --set refine_steps=3
     """
     import torch  # start-up: torch loads torch, +1.3 s to wearpose --help
 

@@ -23,6 +23,14 @@ from wearpose.errors import ConfigError
 from wearpose.estimators.trainconfig import SimulatedTrainConfig
 
 
+#: Settings of the estimator at inference, not of the trained network: a checkpoint's values are
+#: not restored when it is loaded (:meth:`~wearpose.estimators.empose.EmposeEstimator.from_checkpoint`), so every
+#: checkpoint gets today's defaults and ``--set`` / ``set_*`` change them (a checkpoint trained
+#: before a default changed kept the old one, e.g. the refinement's solver and weight).
+INFERENCE_FIELDS = ("refine_steps", "refine_threshold", "refine_weight", "refine_solver", "shape_fit_frames",
+                    "shape_fit_steps", "shape_fit_prior")
+
+
 @dataclass(frozen=True, kw_only=True)
 class EmposeConfig(SimulatedTrainConfig):
     """LGD-RNN and training settings.
@@ -60,12 +68,13 @@ class EmposeConfig(SimulatedTrainConfig):
     Measurement-consistency refinement at inference (:mod:`wearpose.estimators.empose.refine`;
     issue 24): ``refine_steps`` L-BFGS iterations on L_r plus the pose prior after the learned
     updates (0 = off, the trained model as it is), on the frames whose L_r exceeds
-    ``refine_threshold`` (m^2 + squared Frobenius, summed over sensors; calibrated on validation
-    clips, :func:`~wearpose.estimators.empose.refine.calibrate_threshold`; None = not
-    calibrated); ``refine_weight`` the prior's weight (L_r per squared 6D unit);
-    ``refine_solver`` ``"lbfgs"`` (default) or ``"gn"`` (Levenberg-Marquardt Gauss-Newton on the
-    residuals, :func:`~wearpose.estimators.empose.refine.gauss_newton`: ``refine_steps`` is then
-    its iterations). Training ignores them.
+    ``refine_threshold`` (m^2 + squared Frobenius, summed over sensors; 0 = every frame, the
+    default; a gate calibrated on validation clips,
+    :func:`~wearpose.estimators.empose.refine.calibrate_threshold`; None = not calibrated, which
+    refuses ``refine_steps > 0``); ``refine_weight`` the prior's weight (L_r per squared 6D unit;
+    1e-4: docs/empose.md); ``refine_solver`` ``"gn"`` (Levenberg-Marquardt Gauss-Newton on the
+    residuals, :func:`~wearpose.estimators.empose.refine.gauss_newton`, default) or ``"lbfgs"``.
+    Training ignores them, and a checkpoint does not restore them (:data:`INFERENCE_FIELDS`).
     Per-recording shape fit at inference (:mod:`wearpose.estimators.empose.shapefit`; issue
     24): ``shape_fit_frames`` frames with every sensor valid on which one body shape is fitted
     to L_r jointly with their poses (0 = off: the learned shape), ``shape_fit_steps`` L-BFGS
@@ -101,9 +110,9 @@ class EmposeConfig(SimulatedTrainConfig):
     ik: str = "lgd"
     mapper_input: str = "raw"
     refine_steps: int = 0
-    refine_threshold: float | None = None
-    refine_weight: float = 0.01
-    refine_solver: str = "lbfgs"
+    refine_threshold: float | None = 0.0
+    refine_weight: float = 1e-4
+    refine_solver: str = "gn"
     shape_fit_frames: int = 0
     shape_fit_steps: int = 80
     shape_fit_prior: float = 1e-3

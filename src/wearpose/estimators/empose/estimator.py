@@ -26,7 +26,7 @@ import torch
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFrame
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
-from wearpose.estimators.empose.config import EmposeConfig
+from wearpose.estimators.empose.config import INFERENCE_FIELDS, EmposeConfig
 from wearpose.estimators.empose.model import LGDRNN, PRED_JOINTS, VirtualSensors, module_version, sensor_features
 from wearpose.estimators.empose.refine import Refined, refine_frames, require_threshold
 from wearpose.estimators.empose.shapefit import ShapeFit, fit_frames, fit_shape
@@ -99,7 +99,8 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
     def from_checkpoint(cls, ckpt: Checkpoint, *, kit: str | None = None, body: Any = None,
                         device: str | torch.device = "cpu", path: str | Path = "<checkpoint>") -> EmposeEstimator:
         body = cls.check_checkpoint(ckpt, kit=kit, body=body, path=path)
-        est = cls(EmposeConfig.from_dict(ckpt.config), body=body, device=device)
+        trained = {k: v for k, v in ckpt.config.items() if k not in INFERENCE_FIELDS}  # today's inference defaults
+        est = cls(EmposeConfig.from_dict(trained), body=body, device=device)
         want = ckpt.meta.get("sites")
         if want and want != est.sites:
             diff = {k: f"{want.get(k)} -> {est.sites.get(k)}" for k in sorted(set(want) | set(est.sites))
