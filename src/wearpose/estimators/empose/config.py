@@ -72,7 +72,7 @@ class EmposeConfig(SimulatedTrainConfig):
     default; a gate calibrated on validation clips,
     :func:`~wearpose.estimators.empose.refine.calibrate_threshold`; None = not calibrated, which
     refuses ``refine_steps > 0``); ``refine_weight`` the prior's weight (L_r per squared 6D unit;
-    1e-4: docs/empose.md); ``refine_solver`` ``"gn"`` (Levenberg-Marquardt Gauss-Newton on the
+    1e-3: docs/empose.md); ``refine_solver`` ``"gn"`` (Levenberg-Marquardt Gauss-Newton on the
     residuals, :func:`~wearpose.estimators.empose.refine.gauss_newton`, default) or ``"lbfgs"``.
     Training ignores them, and a checkpoint does not restore them (:data:`INFERENCE_FIELDS`).
     Per-recording shape fit at inference (:mod:`wearpose.estimators.empose.shapefit`; issue
@@ -111,7 +111,7 @@ class EmposeConfig(SimulatedTrainConfig):
     mapper_input: str = "raw"
     refine_steps: int = 0
     refine_threshold: float | None = 0.0
-    refine_weight: float = 1e-4
+    refine_weight: float = 1e-3
     refine_solver: str = "gn"
     shape_fit_frames: int = 0
     shape_fit_steps: int = 80
