@@ -47,6 +47,7 @@ from wearpose.estimators.bodies import wearers
 from wearpose.estimators.seeding import clip_seed
 from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
 from wearpose.evaluate.metrics import shape_errors
+from wearpose.geometry import axis_angle_to_matrix
 import dataclasses
 import inspect
 import numpy as np
@@ -131,8 +132,6 @@ def miscalibrate(recording: Any, error_deg: float, error_mm: float, generator: t
         error_deg, error_mm: sizes of the two errors (each sensor gets exactly these sizes).
         generator: the random axes and directions.
     """
-    from wearpose.geometry import axis_angle_to_matrix
-
     off = dict(recording.subject["offsets"])
     R = torch.as_tensor(np.asarray(off["rotation"], dtype=np.float64))
     t = torch.as_tensor(np.asarray(off["translation_mean_m"], dtype=np.float64))
