@@ -339,3 +339,25 @@ def test_a_checkpoint_does_not_restore_inference_settings(tmp_path: Path, body: 
         assert getattr(back.config, key) == getattr(fresh, key), key
     assert (back.config.hidden, back.config.iterations, back.config.sensors) == (cfg.hidden, cfg.iterations, cfg.sensors)
     assert (fresh.refine_steps, fresh.refine_solver, fresh.refine_threshold) == (0, "gn", 0.0)  # off; on = every frame
+
+
+def test_refinement_without_offsets_is_refused_naming_the_fix(body: BodyModel) -> None:
+    """Identity offsets would make the refinement explain the mounting with the joints: a
+    recording (or an online stream) without offsets is refused with the calibration to run; with
+    the refinement off it still runs (with the documented warning)."""
+    import dataclasses
+
+    est = EmposeEstimator(tiny_cfg(), body=body)
+    rec = recording_from_clip(_clip(body, T=6), est.config)
+    bare = dataclasses.replace(rec, subject={k: v for k, v in rec.subject.items() if k != "offsets"})
+    with pytest.warns(UserWarning, match="no subject offsets"):
+        est.estimate(bare)
+    est.set_refine_steps(3)
+    with pytest.raises(ConfigError, match="empose-offsets"):
+        est.estimate(bare)
+    est.reset()
+    with pytest.raises(ConfigError, match="set_offsets"):
+        est.step(next(iter(iter_frames(rec, est.sensor_names))))
+    est.reset()
+    est.set_offsets(torch.eye(3).expand(len(est.sensor_names), 3, 3), torch.zeros(len(est.sensor_names), 3))
+    assert est.step(next(iter(iter_frames(rec, est.sensor_names)))).extras["refined"]  # given offsets: it runs

@@ -156,6 +156,15 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         off = (recording.subject or {}).get("offsets") if recording is not None else None
         if off and not all(k in off for k in ("rotation", "translation_mean_m")):
             raise ShapeError(f"subject['offsets'] needs 'rotation' (S, 3, 3) and 'translation_mean_m' (S, 3); got keys {sorted(off)}")
+        if not off and self.config.refine_steps > 0:
+            # The refinement fits the pose to the sensors through their offsets: with identity ones
+            # it would bend the joints to explain the mounting, not refine the pose.
+            where, fix = ((getattr(recording, "origin", None) or "recording", "calibrate them (wearpose calibrate "
+                           "RECORDING --method empose-offsets, docs/calibration.md)") if recording is not None else
+                          ("online step", "give them with set_offsets(R, t) before the first step"))
+            raise ConfigError(f"{where}: EM-POSE refine_steps={self.config.refine_steps} needs the sensors' offsets "
+                              f"(subject['offsets']) and has none; {fix}, or turn the refinement off "
+                              "(--set refine_steps=0)")
         if not off:
             warnings.warn("EM-POSE: recording has no subject offsets (subject['offsets']); using identity "
                           "offsets (the 'no [R|t]' setting), expect a large error", stacklevel=3)
