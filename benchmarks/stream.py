@@ -107,9 +107,12 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
-def start_server(model: str, stride: str, workers: int, threads: int, warmup: int) -> tuple[subprocess.Popen, str]:
+def start_server(model: str, stride: str, workers: int, threads: int, warmup: int,
+                 settings: list[str] | None = None) -> tuple[subprocess.Popen, str]:
     cmd = [sys.executable, "-m", "wearpose.cli", "serve", "--model", model, "--port", "0", "--stride", stride,
            "--workers", str(workers), "--threads", str(threads), "--warmup", str(warmup), "--log-level", "ERROR"]
+    for kv in settings or []:
+        cmd += ["--set", kv]
     env = {**os.environ, "OMP_NUM_THREADS": str(threads), "MKL_NUM_THREADS": str(threads)}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, cwd=ROOT, env=env)
     line = proc.stdout.readline()
@@ -122,7 +125,7 @@ def start_server(model: str, stride: str, workers: int, threads: int, warmup: in
 def run_scenario(name: str, rec: Any, model: str, args: argparse.Namespace, stride: str) -> dict[str, Any]:
     gc.collect()
     gc.freeze()  # the recording and modules: out of the client's collections during the run
-    proc, url = start_server(model, stride, args.workers, args.threads, args.warmup)
+    proc, url = start_server(model, stride, args.workers, args.threads, args.warmup, args.set)
     gc_client = GcPauses().install()  # the client's pauses while it streams
     sp, me = psutil.Process(proc.pid), psutil.Process()
     c0s, c0c, t0 = sp.cpu_times(), me.cpu_times(), time.perf_counter()
@@ -193,6 +196,8 @@ def main() -> None:
     ap.add_argument("--weights", default="empose12_cpu")
     ap.add_argument("--imu-weights", default="pip_cpu", help="weights of the imu6 scenario")
     ap.add_argument("--warmup", type=int, default=30, help="server --warmup (synthetic steps before ready)")
+    ap.add_argument("--set", action="append", default=None, metavar="KEY=VALUE",
+                    help="server --set (repeatable), e.g. --set refine_steps=3 (EM-POSE's refinement)")
     ap.add_argument("--clip", default="cmu_daz/05/05_01", help="a test-split clip (looped)")
     ap.add_argument("--rate", type=float, default=120.0, help="EM sensor rate, Hz")
     ap.add_argument("--stride", default="1", help="server --stride: 1 = estimate every frame")
