@@ -68,6 +68,18 @@ def test_rotation_between_including_antiparallel() -> None:
     np.testing.assert_allclose(out.numpy(), (b / b.norm(dim=-1, keepdim=True)).numpy(), atol=1e-9)
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_skew_is_the_cross_product_matrix(dtype: torch.dtype) -> None:
+    gen = torch.Generator().manual_seed(0)
+    v, w = torch.randn(2, 5, 3, generator=gen, dtype=dtype)
+    K = g.skew(v)
+    assert K.shape == (5, 3, 3) and K.dtype == dtype
+    assert torch.allclose((K @ w.unsqueeze(-1)).squeeze(-1), torch.linalg.cross(v, w, dim=-1), atol=1e-6)
+    assert torch.equal(K.transpose(-1, -2), -K)
+    with pytest.raises(ShapeError, match=r"skew: expected shape \(\.\.\., 3\)"):
+        g.skew(torch.zeros(4, 2))
+
+
 def test_bad_shapes_raise() -> None:
     with pytest.raises(ShapeError, match=r"\(\.\.\., 3\)"):
         g.axis_angle_to_matrix(torch.zeros(4, 4))

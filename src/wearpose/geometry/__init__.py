@@ -38,6 +38,7 @@ from wearpose.geometry.rotations import (
     vector_heading,
     best_yaw,
     rotation_z,
+    skew,
     slerp_matrix,
 )
 from wearpose.geometry.frames import (
@@ -74,7 +75,7 @@ __all__ = [
     "axis_angle_to_matrix", "matrix_to_axis_angle", "quat_to_matrix", "matrix_to_quat",
     "rot6d_to_matrix", "matrix_to_rot6d", "euler_to_matrix", "matrix_to_euler",
     "geodesic_angle", "smooth_geodesic_angle", "twist_angle", "slerp_matrix", "project_to_so3", "rotation_between",
-    "rotation_x", "rotation_y", "rotation_z", "heading", "vector_heading", "best_yaw",
+    "rotation_x", "rotation_y", "rotation_z", "skew", "heading", "vector_heading", "best_yaw",
     "Z_UP_TO_Y_UP", "Y_UP_TO_Z_UP", "SMPL_TO_X_FORWARD_BODY", "change_world_rotation", "change_world_points",
     "MIRROR_X", "mirror_rotation", "mirror_points",
     "TO_UNITY", "to_unity_points", "to_unity_rotation", "to_unity_quat",

@@ -35,6 +35,15 @@ def _check_last(x: torch.Tensor, shape: tuple[int, ...], name: str) -> None:
         raise ShapeError(f"{name}: expected shape (..., {', '.join(map(str, shape))}), got {tuple(x.shape)}")
 
 
+def skew(v: torch.Tensor) -> torch.Tensor:
+    """Cross-product matrix ``[v]x`` ``(..., 3, 3)`` of vectors ``(..., 3)``: ``[v]x w = v x w``
+    (antisymmetric; the derivative of ``R`` under an angular change ``v`` is ``[v]x R``)."""
+    _check_last(v, (3,), "skew")
+    z = torch.zeros_like(v[..., 0])
+    x, y, w = v.unbind(-1)
+    return torch.stack([torch.stack([z, -w, y], -1), torch.stack([w, z, -x], -1), torch.stack([-y, x, z], -1)], -2)
+
+
 def axis_angle_to_matrix(aa: torch.Tensor) -> torch.Tensor:
     """Axis-angle / exponential map ``(..., 3)`` (radians) -> rotation matrix ``(..., 3, 3)``."""
     _check_last(aa, (3,), "axis_angle")

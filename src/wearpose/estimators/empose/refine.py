@@ -38,7 +38,7 @@ import torch
 
 from wearpose.errors import ConfigError
 from wearpose.estimators.empose.model import NUM_PRED, PRED_JOINTS
-from wearpose.geometry import matrix_to_rot6d
+from wearpose.geometry import matrix_to_rot6d, skew
 
 #: L-BFGS memory (curvature pairs per frame).
 MEMORY = 5
@@ -146,13 +146,6 @@ def lbfgs(fg: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]], x0: t
     return x, f
 
 
-def _skew(v: torch.Tensor) -> torch.Tensor:
-    """``[v]x`` ``(..., 3, 3)`` of vectors ``(..., 3)``: ``[v]x w = v x w``."""
-    z = torch.zeros_like(v[..., 0])
-    x, y, w = v.unbind(-1)
-    return torch.stack([torch.stack([z, -w, y], -1), torch.stack([w, z, -x], -1), torch.stack([-y, x, z], -1)], -2)
-
-
 def residual_jacobian(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tuple[float, float] = (1.0, 1.0)
                       ) -> tuple[torch.Tensor, torch.Tensor]:
     """The residual vector of L_r at a kernel forward and its Jacobian in the 6D pose.
@@ -189,7 +182,7 @@ def residual_jacobian(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tu
     k_idx = torch.arange(3, device=dev).repeat(S)
     r_idx = torch.arange(3 * S, device=dev)
     gp[:, r_idx, s_idx, k_idx] = 0.5
-    E = _skew(torch.eye(3, dtype=dt, device=dev))  # (3, 3, 3): [e_k]x
+    E = skew(torch.eye(3, dtype=dt, device=dev))  # (3, 3, 3): [e_k]x
     gR[:, 3 * S + r_idx, s_idx] = 0.25 * (E[k_idx] @ R_hat[:, s_idx])  # (N, 3 S, 3, 3)
     fields = list(ctx["_"])
     rep = lambda t: t.repeat_interleave(rows, 0)  # noqa: E731
@@ -204,7 +197,7 @@ def residual_jacobian(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tu
     Jp = G[:, :3 * S]  # (N, 3 S, 120)
     Jw = G[:, 3 * S:].reshape(N, S, 3, POSE_DIM)  # angular change of each sensor's rotation
     # d R[:, c] = -[R[:, c]]x w: (N, S, c, i, j) @ (N, S, j, 120) -> rows ordered (s, i, c).
-    cols = _skew(R_hat.transpose(-1, -2))  # (N, S, 3 (c), 3, 3): [R[:, c]]x
+    cols = skew(R_hat.transpose(-1, -2))  # (N, S, 3 (c), 3, 3): [R[:, c]]x
     JR = -(cols @ Jw.unsqueeze(2)).permute(0, 1, 3, 2, 4).reshape(N, 9 * S, POSE_DIM)
     return rho, torch.cat([wp * Jp, wr * JR], 1)
 
