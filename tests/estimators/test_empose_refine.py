@@ -72,7 +72,7 @@ def test_refinement_lowers_rec_on_a_perturbed_frame_and_leaves_the_others_untouc
     assert float(rec[4]) > 10 * float(others.max())  # the perturbation is what the gate sees
     thr = float(others.max()) * 2
     out = refine_frames(kernel, ctx["local_rot"], betas, rec, clip["position"], clip["orientation"], clip["off_R"],
-                        clip["off_t"], steps=10, threshold=thr, weight=0.01)
+                        clip["off_t"], steps=10, threshold=thr, weight=0.01, solver="lbfgs")
     assert out.gated.tolist() == [t == 4 for t in range(T)]
     assert float(out.rec[4]) < 0.2 * float(rec[4])
     keep = torch.arange(T) != 4

@@ -66,7 +66,7 @@ class EmposeConfig(SimulatedTrainConfig):
     ``mapper_input`` what its joint mapper sees per sensor, ``"raw"`` (the measurement, default)
     or ``"site"`` (the skin-site pose the measurement and the subject offsets imply).
     Measurement-consistency refinement at inference (:mod:`wearpose.estimators.empose.refine`;
-    issue 24): ``refine_steps`` L-BFGS iterations on L_r plus the pose prior after the learned
+    issue 24): ``refine_steps`` solver iterations on L_r plus the pose prior after the learned
     updates (0 = off, the trained model as it is), on the frames whose L_r exceeds
     ``refine_threshold`` (m^2 + squared Frobenius, summed over sensors; 0 = every frame, the
     default; a gate calibrated on validation clips,

@@ -294,7 +294,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
             return Refined(local_rot, rec, torch.zeros_like(rec, dtype=torch.bool))
         return refine_frames(self.sensors.lean(), local_rot, betas, rec, p, R, offR, offt, steps=cfg.refine_steps,
                              threshold=float(cfg.refine_threshold), weight=cfg.refine_weight,
-                             rec_weights=self.model.rec_weights, solver=cfg.refine_solver)
+                             solver=cfg.refine_solver, rec_weights=self.model.rec_weights)
 
     @torch.no_grad()
     def to_world(self, track: PoseTrack, source_R: torch.Tensor, source_p: torch.Tensor) -> PoseTrack:
@@ -348,8 +348,9 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         self.reset()
 
     def set_refine_steps(self, n: int) -> None:
-        """Refine the gated frames with ``n`` L-BFGS iterations from now on (0 = off; module doc of
-        :mod:`~wearpose.estimators.empose.refine`), e.g. ``--set refine_steps=5``.
+        """Refine the gated frames (every frame by default) with ``n`` iterations of
+        ``config.refine_solver`` from now on (0 = off; module doc of
+        :mod:`~wearpose.estimators.empose.refine`), e.g. ``--set refine_steps=3``.
 
         Raises:
             ConfigError: ``n`` is not a whole number >= 0.

@@ -17,6 +17,8 @@ pull the pose towards the measurements, starting from the learned estimate ``u_0
   is the model's pose prior; the chordal distance of the first two rotation columns keeps
   joints the sensors pin only weakly near where the network put them). ``w`` is
   ``EmposeConfig.refine_weight`` (units of L_r per squared 6D unit);
+- the solver: Levenberg-Marquardt Gauss-Newton on L_r's residuals (:func:`gauss_newton`, the
+  default, with an exact Jacobian from :func:`residual_jacobian`) or L-BFGS (:func:`lbfgs`);
 - L_r and its gradient: the closed-form kernel of :mod:`~wearpose.estimators.empose.fastgrad`
   (no autograd), batched over the gated frames; the L-BFGS is batched too (one independent
   problem per frame, two-loop recursion with ``MEMORY`` pairs, backtracking Armijo line search
@@ -215,8 +217,7 @@ def _jacobian_chunked(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tu
         return residual_jacobian(kernel, ctx, rec_weights)
     out = []
     for a in range(0, N, JACOBIAN_CHUNK):
-        sl = lambda t: t[a:a + JACOBIAN_CHUNK] if t.shape[0] == N and t.dim() >= 2 else t  # noqa: E731
-        part = [sl(t) for t in fields[:-2]]
+        part = [t[a:a + JACOBIAN_CHUNK] for t in fields[:-2]]  # every saved tensor but the offsets is per frame
         oR, ot = fields[-2], fields[-1]
         part += [oR[a:a + JACOBIAN_CHUNK] if oR.dim() == 4 else oR, ot[a:a + JACOBIAN_CHUNK] if ot.dim() == 3 else ot]
         out.append(residual_jacobian(kernel, {"_": tuple(part), "R_hat": ctx["R_hat"][a:a + JACOBIAN_CHUNK]},
@@ -279,7 +280,7 @@ def gauss_newton(kernel: Any, u0: torch.Tensor, b: torch.Tensor, meas_p: torch.T
 def refine_frames(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, rec: torch.Tensor,
                   meas_p: torch.Tensor, meas_R: torch.Tensor, off_R: torch.Tensor, off_t: torch.Tensor, *,
                   steps: int, threshold: float, weight: float,
-                  rec_weights: tuple[float, float] = (1.0, 1.0), solver: str = "lbfgs") -> Refined:
+                  solver: str, rec_weights: tuple[float, float] = (1.0, 1.0)) -> Refined:
     """Refine the frames whose L_r exceeds ``threshold`` (module doc).
 
     Args:
@@ -289,7 +290,9 @@ def refine_frames(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, rec
             betas ``(N, 10)`` the shape each frame was estimated with; rec ``(N,)`` its L_r.
         meas_p: ``(N, S, 3)`` m, meas_R ``(N, S, 3, 3)``: measurements relative to the source.
         off_R: ``(N, S, 3, 3)`` or ``(S, 3, 3)``; off_t ``(N, S, 3)`` or ``(S, 3)`` m: offsets.
-        steps: L-BFGS iterations; threshold: the gate on ``rec``; weight: the prior weight w.
+        steps: the solver's iterations; threshold: the gate on ``rec``; weight: the prior weight w;
+            solver: ``"gn"`` (:func:`gauss_newton`) or ``"lbfgs"`` (:func:`lbfgs`), given by the
+            caller (``EmposeConfig.refine_solver``, whose default is the only one).
         rec_weights: L_r's (position, rotation) weights (the model's, ``LGDRNN.rec_weights``).
 
     Returns:
