@@ -333,3 +333,36 @@ def test_explicit_stride_serves_any_rate_with_a_note() -> None:
     r, stats = _run(main())
     assert r["ready"]["stride"] == 1 and "trained at 60 Hz" in r["ready"]["note"]
     assert r["poses_received"] == 30 and stats["refused_total"] == 0
+
+
+def test_empose_with_refinement_and_no_offsets_is_refused_at_hello() -> None:
+    """EM-POSE's refinement fits the pose through the sensors' offsets: a hello without them is
+    refused at once, naming the offsets, where a stream gives them and how to turn the refinement
+    off (before, the subject was accepted and every frame failed); with them it is served."""
+    from wearpose.body import BodyModel
+    from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
+
+    body = BodyModel()
+    make = lambda: EmposeEstimator(EmposeConfig.preset("tiny", 12).override(refine_steps=1), body=body)  # noqa: E731
+    names = make().sensor_names
+    S = len(names)
+    offsets = {"sensors": list(names), "rotation": np.broadcast_to(np.eye(3), (S, 3, 3)).tolist(),
+               "translation_mean_m": np.zeros((S, 3)).tolist()}
+    rng = np.random.default_rng(0)
+
+    async def main():  # noqa: ANN202
+        async with StreamServer(make, port=0, warmup=0, limits=NO_SHEDDING) as srv, StreamClient(srv.url) as c:
+            with pytest.raises(StreamError) as info:
+                await c.hello(Hello(1, names, ("position", "orientation"), 30.0))
+            refused = srv.stats()
+            await c.hello(Hello(2, names, ("position", "orientation"), 30.0, subject_info={"offsets": offsets}))
+            for k in range(3):
+                data = np.concatenate([0.3 * rng.standard_normal((S, 3)), np.broadcast_to(np.eye(3), (S, 3, 3)).reshape(S, 9)],
+                                      1).astype(np.float32)
+                await c.send_frame(FramePacket(2, k, k / 30.0, np.ones(S, bool), data))
+            return str(info.value), refused, await c.bye(2), srv.stats()
+
+    msg, refused, final, stats = _run(main())
+    assert "refine_steps=1" in msg and "offsets" in msg and "subject_info['offsets']" in msg and "refine_steps=0" in msg, msg
+    assert refused["refused_total"] == 1 and "1" not in map(str, refused["subjects"])
+    assert final["estimated"] == 3 and final.get("estimator_errors", 0) == 0 and stats["refused_total"] == 1

@@ -159,12 +159,16 @@ def use_calibration_window(estimator: Any, recording: Recording) -> tuple[float,
 def use_subject_calibration(estimator: Any, recording: Any) -> bool:
     """Give ``estimator`` the subject calibration ``recording.subject`` holds (EM-POSE sensor
     offsets, read exactly as offline); ``recording`` needs only a ``subject`` dict (the stream
-    server passes a subject's hello). Returns whether anything was applied."""
-    if not ((recording.subject or {}).get("offsets") and hasattr(estimator, "set_offsets")
-            and hasattr(estimator, "_offsets_from")):
+    server passes a subject's hello). Returns whether the recording's own calibration was applied.
+
+    An estimator that takes offsets is given them here even when the recording has none, through
+    the same reading as offline: it refuses now (EM-POSE with the refinement on raises
+    :class:`~wearpose.errors.ConfigError`, so a server refuses the subject at its hello rather
+    than failing every frame) or warns and uses identity offsets, as its first step would."""
+    if not (hasattr(estimator, "set_offsets") and hasattr(estimator, "_offsets_from")):
         return False
     estimator.set_offsets(*estimator._offsets_from(recording))
-    return True
+    return bool((recording.subject or {}).get("offsets"))
 
 
 def start_online(estimator: Any, recording: Recording) -> None:

@@ -78,6 +78,7 @@ import torch
 from websockets.asyncio.server import serve
 from websockets.exceptions import ConnectionClosed
 
+from wearpose.errors import WearposeError
 from wearpose.estimators.base import Estimator, PoseFrame, SensorFrame
 from wearpose.estimators.run import open_model, use_subject_calibration
 from wearpose.evaluate.latency import apply_settings
@@ -877,7 +878,11 @@ class StreamServer:
                               f"(it needs {list(est.sensor_names)})")
         stride = self._stride_for(hello, est)  # before the warm-up: a refusal costs no steps
 
-        use_subject_calibration(est, _SubjectOnly(hello.subject_info))  # EM-POSE offsets, as from a Recording
+        try:  # EM-POSE offsets, as from a Recording
+            use_subject_calibration(est, _SubjectOnly(hello.subject_info))
+        except WearposeError as exc:
+            raise PacketError(f"{exc}; a stream gives them in its hello as subject_info['offsets'] ({{'sensors': "
+                              f"[...], 'rotation': (S, 3, 3), 'translation_mean_m': (S, 3)}})") from None
         if self.warmup > 0:
             _warm_up(est, hello, self.warmup)
         est.reset()
@@ -1095,6 +1100,7 @@ class _SubjectOnly:
     """The part of a Recording an estimator reads subject calibration from."""
 
     subject: dict[str, Any]
+    origin: str = "hello.subject_info"  # where an estimator's error says the calibration was read
 
 
 _F32 = struct.Struct("<f")
