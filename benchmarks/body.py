@@ -32,7 +32,7 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
-from wearpose.body import SITES_TRACE_AFTER, BodyModel
+from wearpose.body import BodyModel
 from wearpose.evaluate.latency import import_baseline, machine_info, reference_timing, time_calls
 from wearpose.geometry import axis_angle_to_matrix
 
@@ -111,9 +111,7 @@ def main() -> None:
                 site_diff = float(max((a.positions - b.positions).abs().max(), (a.rotations - b.rotations).abs().max()))
                 va, vb = body(pose, betas, trans, return_normals=True), old(pose, betas, trans, return_normals=True)
                 mesh_diff = float(max((va.vertices - vb.vertices).abs().max(), (va.normals - vb.normals).abs().max()))
-            # At B = 1 every path is warmed past the site path's trace (BodyModel.sites traces a
-            # repeated one-frame query): what a per-frame caller gets after its first calls.
-            times = time_calls(fns, reps, warmup=SITES_TRACE_AFTER + 2 if B == 1 else 1)
+            times = time_calls(fns, reps)
             for k in new_p:
                 med = float(np.median(times[("new", k)]))
                 row = {"path": k, "batch": B, "median_s": med, "p99_s": float(np.percentile(times[("new", k)], 99)),

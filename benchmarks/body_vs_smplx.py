@@ -34,7 +34,7 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
-from wearpose.body import SITES_TRACE_AFTER, BodyModel, load_default_asset
+from wearpose.body import BodyModel, load_default_asset
 from wearpose.body.skeleton import PARENTS
 from wearpose.evaluate.latency import machine_info, reference_timing, time_calls
 
@@ -102,9 +102,7 @@ def main() -> None:
                 "wearpose 12 sites": lambda: ours.sites(aa, betas, trans, vertex_ids=site_v, tangent_ids=site_t),
             }
             reps = args.repeats if B == 1 else max(3, args.repeats // 5)
-            # At B = 1 every path is warmed past the site path's trace (BodyModel.sites traces a
-            # repeated one-frame query): what a per-frame caller gets after its first calls.
-            times = time_calls(fns, reps, warmup=SITES_TRACE_AFTER + 2 if B == 1 else 1)
+            times = time_calls(fns, reps)
             base = float(np.median(times["smplx full mesh"]))
             for k, v in times.items():
                 med = float(np.median(v))

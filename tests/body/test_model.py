@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from tests.conftest import make_tiny_asset
-from wearpose.body import SITES_TRACE_AFTER, BodyModel, forward_kinematics
+from wearpose.body import BodyModel, forward_kinematics
 from wearpose.errors import ShapeError, WearposeError
 from wearpose.geometry import axis_angle_to_matrix
 
@@ -277,46 +277,3 @@ def test_site_patch_follows_a_copy_with_other_site_vertices(body: BodyModel) -> 
     verts = body(pose).vertices
     np.testing.assert_allclose(moved.sites(pose).positions[:, 0].numpy(), verts[:, body._site_tangent[0]].numpy(), atol=1e-12)
     assert torch.equal(body.sites(pose).positions, before)
-
-
-@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_one_frame_sites_are_traced_after_repeated_calls_and_stay_bit_equal(dtype: torch.dtype) -> None:
-    """A per-frame query (B = 1, no autograd) runs eagerly for SITES_TRACE_AFTER - 1 calls of a
-    site list, then as a trace of the same computation: bit-equal to the eager path on new poses,
-    shapes and translations, per site list; a buffer written in place (load_state_dict) gets a
-    new trace, not the old constants; autograd at B = 1 still takes the eager path."""
-    body = BodyModel(dtype=dtype)
-    g = torch.Generator().manual_seed(11)
-    draw = lambda: (axis_angle_to_matrix(torch.randn(1, 24, 3, generator=g, dtype=dtype) * 0.5),  # noqa: E731
-                    torch.randn(1, 10, generator=g, dtype=dtype), torch.randn(1, 3, generator=g, dtype=dtype))
-
-    def eager(R, b, t, names=None):  # noqa: ANN001, ANN202 - the untraced computation
-        names = tuple(names) if names is not None else body.site_names
-        key = ("site names", names, body._site_vertices.tobytes(), body._site_tangent.tobytes())
-        return body._site_frames(body._patch(key, lambda: body.site_ids(names)[1:]), R, b, t)
-
-    def traces() -> int:
-        return sum(1 for v in body._patches.values() if isinstance(v, dict) and v["fn"] is not None)
-
-    with torch.no_grad():
-        for k in range(SITES_TRACE_AFTER + 3):
-            R, b, t = draw()
-            s = body.sites(R, b, t)
-            assert traces() == (k + 1 >= SITES_TRACE_AFTER), k
-            ref = eager(R, b, t)
-            for got, want in zip((s.positions, s.rotations, s.joints, s.global_rot), ref):
-                assert got.dtype == dtype and torch.equal(got, want), k
-        two = ("head", "pelvis")  # another site list: its own count and trace
-        for _ in range(SITES_TRACE_AFTER):
-            R, b, t = draw()
-            assert torch.equal(body.sites(R, b, t, two).rotations, eager(R, b, t, two)[1])
-        assert traces() == 2
-        state = {k: v.clone() for k, v in body.state_dict().items()}
-        state["v_template"] += 0.01
-        body.load_state_dict(state)
-        R, b, t = draw()
-        assert torch.equal(body.sites(R, b, t).positions, eager(R, b, t)[0])
-    R, b, t = draw()
-    R.requires_grad_()
-    out = body.sites(R, b, t)
-    assert out.rotations.requires_grad and torch.equal(out.rotations.detach(), eager(R.detach(), b, t)[1])

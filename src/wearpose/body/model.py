@@ -56,13 +56,6 @@ SKIN_CHUNK_VERTEX_FRAMES = 8 * 13718
 #: directions (34 MB for SMPL's mesh) are read once per block instead of once per skinning chunk.
 POSE_BLOCK_FRAMES = 128
 
-#: :meth:`BodyModel.sites` for one frame without autograd (a per-frame query, e.g. a live
-#: sensor view) runs as a TorchScript trace of the same computation from this call on with the
-#: same site list: the same aten ops without Python between them (about 1.7x less time per call
-#: at B = 1, where the ~100 small torch calls are the cost; bit-equal, tested). Tracing and the
-#: trace's first two (profiling) runs cost about 30 ms once, which a one-off call should not pay.
-SITES_TRACE_AFTER = 20
-
 
 @dataclass
 class _FaceOps:
@@ -533,8 +526,7 @@ class BodyModel(nn.Module):
             tids = np.asarray(tangent_ids, dtype=np.int64) if tangent_ids is not None else np.array(
                 [self._neighbour(int(v)) for v in vids], dtype=np.int64)
             names = tuple(f"v{v}" for v in vids)
-            key: tuple = ("sites", tuple(int(v) for v in vids), tuple(int(v) for v in tids))
-            pt = self._patch(key, lambda: (vids, tids))
+            pt = self._patch(("sites", tuple(int(v) for v in vids), tuple(int(v) for v in tids)), lambda: (vids, tids))
         else:
             # Keyed by the names and the site table's bytes (resolving the names to ids on every
             # call was a tenth of a call at B = 1); the bytes, because a copy of the body may share
@@ -543,20 +535,7 @@ class BodyModel(nn.Module):
             key = ("site names", names, self._site_vertices.tobytes(), self._site_tangent.tobytes())
             pt = self._patch(key, lambda: self.site_ids(names)[1:])
         R, b, t, batch = self._batch(pose, betas, trans)
-        if R.shape[0] == 1 and not (torch.is_grad_enabled() and (R.requires_grad or b.requires_grad or t.requires_grad)):
-            p, rot, J, G = self._site_frames_one(key, pt, R, b, t)
-        else:
-            p, rot, J, G = self._site_frames(pt, R, b, t)
-        if len(batch) == 1:  # a flat batch already
-            return SiteOutput(names=names, positions=p, rotations=rot, joints=J, global_rot=G)
-        un = lambda x: x.reshape(*batch, *x.shape[1:])  # noqa: E731
-        return SiteOutput(names=names, positions=un(p), rotations=un(rot), joints=un(J), global_rot=un(G))
-
-    def _site_frames(self, pt: _Patch, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor
-                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Site positions ``(N, K, 3)`` and frames ``(N, K, 3, 3)``, joints ``(N, 24, 3)`` and global
-        rotations ``(N, 24, 3, 3)`` of a flat batch: the patch skinned, then each site's frame."""
-        verts, normals, J, G = self._skin_patch(pt, R, betas, trans)
+        verts, normals, J, G = self._skin_patch(pt, R, b, t)
         # index_select and linalg.vector_norm: the gathers and the norm that indexing and
         # Tensor.norm make, at half their per-call cost.
         p, n = verts.index_select(1, pt.site), normals.index_select(1, pt.site)
@@ -564,23 +543,11 @@ class BodyModel(nn.Module):
         e = e - (e * n).sum(-1, keepdim=True) * n
         tan = e / torch.linalg.vector_norm(e, dim=-1, keepdim=True).clamp_min(1e-12)
         bit = torch.linalg.cross(n, tan, dim=-1)
-        return p, torch.stack([tan, bit, n], dim=-1), J, G  # frame columns (t, n x t, n)
-
-    def _site_frames_one(self, key: tuple, pt: _Patch, R: torch.Tensor, betas: torch.Tensor, trans: torch.Tensor
-                         ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """:meth:`_site_frames` for one frame without autograd: eager for the first
-        :data:`SITES_TRACE_AFTER` - 1 calls of a site list, then a trace of it (cached with the
-        patch, so per device, dtype and buffer state: the trace holds the buffers as constants)."""
-        entry = self._cached(("sites trace", key), lambda: {"calls": 0, "fn": None})
-        if entry["fn"] is None:
-            entry["calls"] += 1
-            if entry["calls"] < SITES_TRACE_AFTER or torch.jit.is_tracing():
-                return self._site_frames(pt, R, betas, trans)
-            with warnings.catch_warnings(), torch.no_grad():
-                warnings.simplefilter("ignore")  # TracerWarnings: the patch's ids and sizes are meant to be baked in
-                entry["fn"] = torch.jit.trace(lambda R, b, t: self._site_frames(pt, R, b, t), (R, betas, trans),
-                                              check_trace=False)
-        return entry["fn"](R, betas, trans)
+        rot = torch.stack([tan, bit, n], dim=-1)  # columns
+        if len(batch) == 1:  # a flat batch already
+            return SiteOutput(names=names, positions=p, rotations=rot, joints=J, global_rot=G)
+        un = lambda x: x.reshape(*batch, *x.shape[1:])  # noqa: E731
+        return SiteOutput(names=names, positions=un(p), rotations=un(rot), joints=un(J), global_rot=un(G))
 
     def _patch(self, key: tuple, ids: Callable[[], tuple[np.ndarray, np.ndarray]]) -> _Patch:
         """The local patch of some sites (site and tangent vertices and the sites' one-ring
