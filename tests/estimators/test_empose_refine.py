@@ -235,11 +235,19 @@ def test_gauss_newton_is_monotone_and_beats_lbfgs_at_equal_iterations(body: Body
     f0 = kernel.forward(torch.cat([u0, b], -1), mp, mR, oR, ot)["rec"]
     prev = f0
     for k in (1, 2, 3, 5):
-        u, f = gauss_newton(kernel, u0, b, mp, mR, oR, ot, steps=k, weight=1e-4)
+        u, f, _ = gauss_newton(kernel, u0, b, mp, mR, oR, ot, steps=k, weight=1e-4)
         assert bool((f <= prev + 1e-7).all())
         prev = f
     rec_gn = kernel.forward(torch.cat([u, b], -1), mp, mR, oR, ot)["rec"]
     assert bool((rec_gn < 0.01 * f0).all())
+    # The context it returns is the forward at its u, bit for bit: after steps every frame kept,
+    # some kept (started at the noise-free truth, where rounding decides), and none kept (a
+    # damping that makes every step vanish: u comes back as it went in).
+    for start, damping in ((u0, 1e-3), (u_true, 1e-3), (u0, 1e30)):
+        v, _, ctx = gauss_newton(kernel, start, b, mp, mR, oR, ot, steps=2, weight=1e-4, damping=damping)
+        fresh = kernel.forward(torch.cat([v, b], -1), mp, mR, oR, ot)
+        assert all(torch.equal(a, c) for a, c in zip(ctx["_"], fresh["_"])) and torch.equal(ctx["rec"], fresh["rec"])
+    assert torch.equal(v, u0)
 
     def fg(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         ctx = kernel.forward(torch.cat([x, b], -1), mp, mR, oR, ot)

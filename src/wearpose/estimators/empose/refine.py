@@ -228,7 +228,7 @@ def _jacobian_chunked(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tu
 def gauss_newton(kernel: Any, u0: torch.Tensor, b: torch.Tensor, meas_p: torch.Tensor, meas_R: torch.Tensor,
                  off_R: torch.Tensor, off_t: torch.Tensor, *, steps: int, weight: float,
                  rec_weights: tuple[float, float] = (1.0, 1.0), damping: float = 1e-3
-                 ) -> tuple[torch.Tensor, torch.Tensor]:
+                 ) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
     """Batched Levenberg-Marquardt on ``f(u) = ||rho(u)||^2 + w ||u - u0||^2``, one problem per frame.
 
     Each iteration solves ``(J^T J + (w + lam) I) d = -(J^T rho + w (u - u0))`` (120 x 120 per
@@ -243,7 +243,8 @@ def gauss_newton(kernel: Any, u0: torch.Tensor, b: torch.Tensor, meas_p: torch.T
     offsets as :func:`refine_frames`.
 
     Returns:
-        u ``(N, 120)`` and f ``(N,)`` at it; f never exceeds f(u0).
+        u ``(N, 120)``, f ``(N,)`` at it (never above f(u0)) and the kernel forward's context at
+        it (unweighted residuals: the caller applies ``rec_weights``), so no caller re-runs it.
     """
     def ev(u: torch.Tensor) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         ctx = kernel.forward(torch.cat([u, b], -1), meas_p, meas_R, off_R, off_t)
@@ -272,9 +273,9 @@ def gauss_newton(kernel: Any, u0: torch.Tensor, b: torch.Tensor, meas_p: torch.T
         lam = torch.where(ok, (lam / 3.0).clamp_min(1e-9), lam * 10.0)
         if bool(ok.all()):
             ctx = ctxn
-        else:
+        elif bool(ok.any()):  # some frames moved: the context of the mixed u (none moved: ctx is u's)
             f, ctx = ev(u)
-    return u, f
+    return u, f, ctx
 
 
 def refine_frames(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, rec: torch.Tensor,
@@ -315,13 +316,17 @@ def refine_frames(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, rec
         return f, kernel.backward(ctx)[:, :POSE_DIM] + 2.0 * weight * du
 
     if solver == "gn":
-        u, _ = gauss_newton(kernel, u0, b, mp, mR, oR, ot, steps=steps, weight=weight, rec_weights=rec_weights)
+        # Its context at u has unweighted residuals; L_r with the weights is the kernel's own sum.
+        _, _, ctx = gauss_newton(kernel, u0, b, mp, mR, oR, ot, steps=steps, weight=weight, rec_weights=rec_weights)
+        rp, rR = ctx["_"][-4], ctx["_"][-3]
+        rec_u = rec_weights[0] * (rp ** 2).sum((-1, -2)) + rec_weights[1] * (rR ** 2).sum((-1, -2, -3))
     else:
         u, _ = lbfgs(fg, u0, steps)
-    ctx = kernel.forward(torch.cat([u, b], -1), mp, mR, oR, ot, rec_weights)
+        ctx = kernel.forward(torch.cat([u, b], -1), mp, mR, oR, ot, rec_weights)
+        rec_u = ctx["rec"]
     out_rot, out_rec = local_rot.clone(), rec.clone()
     out_rot[idx] = root_from_source(ctx).to(local_rot.dtype)
-    out_rec[idx] = ctx["rec"].to(rec.dtype)
+    out_rec[idx] = rec_u.to(rec.dtype)
     return Refined(out_rot, out_rec, gated)
 
 
