@@ -144,10 +144,11 @@ def test_archive_init_from_and_seed_set_the_run(tmp_path: Path) -> None:
     assert Path(r.values["init_from"]).is_file() and r.values["seed"] == 4 and r.seed == 4
 
 
-def test_empose12_cpu_recipe_is_the_shipped_cards_command_and_corpus() -> None:
-    """The recipe written after the fact for the shipped EM-POSE 12 (v1) says what its card says."""
+def test_empose12_cpu_recipe_is_the_v1_cards_command_and_corpus() -> None:
+    """The recipe written after the fact for EM-POSE 12 v1 (shipped until version 5, now in the
+    archive) says what its card says."""
     r = load_recipe("empose12_cpu")
-    card = json.loads(weight_path("empose12_cpu").with_suffix(".json").read_text())
+    card = json.loads((WEIGHTS_DIR / "archive" / "empose12_cpu_v1.json").read_text())
     given = _card_options(card)
     given.pop("out")
     assert {k: str(r.values[k]) for k in given} == given
@@ -155,6 +156,20 @@ def test_empose12_cpu_recipe_is_the_shipped_cards_command_and_corpus() -> None:
     assert r.values["source"] is None and not r.values["mirror"] and r.values["init_from"] is None
     assert r.corpus is not None and r.corpus["name"] == "data"  # corpus v1: 1143 train clips on the card
     assert card["training_data"]["clips"] == 1143
+
+
+def test_shipped_empose12_cpu_card_names_the_recipe_that_reproduces_it() -> None:
+    """The shipped EM-POSE 12 (version 5) was trained by `wearpose train --recipe empose12_cpu_v5`:
+    its card carries that recipe as resolved (corpus v2, no training mix) and its file's hash."""
+    card = json.loads(weight_path("empose12_cpu").with_suffix(".json").read_text())
+    r = load_recipe("empose12_cpu_v5")
+    assert card["train_command"] == "wearpose train --recipe empose12_cpu_v5"
+    assert card["recipe"]["name"] == r.name == "empose12_cpu_v5" and card["recipe"]["seed"] == r.seed
+    assert card["recipe"]["sha1"] == r.sha1  # the recipe file is the one that trained it, byte for byte
+    assert card["recipe"]["corpus"]["name"] == r.corpus["name"] == "data-v2"
+    assert card["training_data"]["corpus"]["manifest_sha1"] == r.corpus["manifest_sha1"]
+    assert card["recipe"]["options"]["epochs"] == r.values["epochs"] == 14 and not r.values["mirror"]
+    assert card["validation"]["epoch"] <= 14
 
 
 def _ckpt(path: Path, val: float, w: float, fp: str = "same", extra: bool = False) -> Path:
