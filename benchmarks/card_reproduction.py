@@ -36,8 +36,9 @@ FIGURES: dict[str, list[tuple[str, tuple[str, ...], tuple[str, ...]]]] = {
     **{m: [(f"clean {k}", ("clean", k), ("metrics", k)) for k in (
         "mpjae_all_deg", "mpjae_distal_deg", "mpjae_tracking_deg", "mpjae_other_deg")]
        for m in ("birae6_cpu", "birae3_cpu")},
-    # miposer_cpu's card (retrained, issue 22) keeps one block per condition; miposer1_cpu's the older flat keys
-    "miposer_cpu": [(f"{c} upper MPJPE cm", (c, "mpjpe_upper_cm"), ("metrics", f"{c}_mpjpe_upper_cm"))
+    # miposer_cpu's card (version 2, shipped from `wearpose evaluate`'s JSON) has the evaluation's own
+    # flat keys; miposer1_cpu's the older flat keys
+    "miposer_cpu": [(f"{c} upper MPJPE cm", (f"{c}_mpjpe_upper_cm",), ("metrics", f"{c}_mpjpe_upper_cm"))
                     for c in ("calibrated", "uncalibrated")],
     "miposer1_cpu": [("calibrated upper MPJPE cm", ("mpjpe_upper_cm_calibrated",), ("metrics", "calibrated_mpjpe_upper_cm")),
                      ("uncalibrated upper MPJPE cm", ("mpjpe_upper_cm_uncalibrated",), ("metrics", "uncalibrated_mpjpe_upper_cm"))],
