@@ -225,6 +225,13 @@ def _jacobian_chunked(kernel: Any, ctx: dict[str, torch.Tensor], rec_weights: tu
     return torch.cat([o[0] for o in out]), torch.cat([o[1] for o in out])
 
 
+def _weighted_rec(ctx: dict[str, torch.Tensor], rec_weights: tuple[float, float]) -> torch.Tensor:
+    """L_r ``(N,)`` with the (position, rotation) weights, from a kernel context computed without
+    them (its residuals unweighted): the sum the kernel forms when given the weights."""
+    rp, rR = ctx["_"][-4], ctx["_"][-3]
+    return rec_weights[0] * (rp ** 2).sum((-1, -2)) + rec_weights[1] * (rR ** 2).sum((-1, -2, -3))
+
+
 def gauss_newton(kernel: Any, u0: torch.Tensor, b: torch.Tensor, meas_p: torch.Tensor, meas_R: torch.Tensor,
                  off_R: torch.Tensor, off_t: torch.Tensor, *, steps: int, weight: float,
                  rec_weights: tuple[float, float] = (1.0, 1.0), damping: float = 1e-3
@@ -244,15 +251,12 @@ def gauss_newton(kernel: Any, u0: torch.Tensor, b: torch.Tensor, meas_p: torch.T
 
     Returns:
         u ``(N, 120)``, f ``(N,)`` at it (never above f(u0)) and the kernel forward's context at
-        it (unweighted residuals: the caller applies ``rec_weights``), so no caller re-runs it.
+        it (unweighted residuals: :func:`_weighted_rec` gives L_r), so no caller re-runs it.
     """
     def ev(u: torch.Tensor) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         ctx = kernel.forward(torch.cat([u, b], -1), meas_p, meas_R, off_R, off_t)
-        rp, rR = ctx["_"][-4], ctx["_"][-3]
         du = u - u0
-        f = (rec_weights[0] * (rp ** 2).sum((-1, -2)) + rec_weights[1] * (rR ** 2).sum((-1, -2, -3))
-             + weight * (du * du).sum(-1))
-        return f, ctx
+        return _weighted_rec(ctx, rec_weights) + weight * (du * du).sum(-1), ctx
 
     u = u0.clone()
     f, ctx = ev(u)
@@ -316,10 +320,8 @@ def refine_frames(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, rec
         return f, kernel.backward(ctx)[:, :POSE_DIM] + 2.0 * weight * du
 
     if solver == "gn":
-        # Its context at u has unweighted residuals; L_r with the weights is the kernel's own sum.
         _, _, ctx = gauss_newton(kernel, u0, b, mp, mR, oR, ot, steps=steps, weight=weight, rec_weights=rec_weights)
-        rp, rR = ctx["_"][-4], ctx["_"][-3]
-        rec_u = rec_weights[0] * (rp ** 2).sum((-1, -2)) + rec_weights[1] * (rR ** 2).sum((-1, -2, -3))
+        rec_u = _weighted_rec(ctx, rec_weights)
     else:
         u, _ = lbfgs(fg, u0, steps)
         ctx = kernel.forward(torch.cat([u, b], -1), mp, mR, oR, ot, rec_weights)
