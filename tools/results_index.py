@@ -55,6 +55,9 @@ NOTES = {
        for k in ("latency_birae6_cpu", "latency_birae6_cpu_stream")},
     "unseen_motion_birae6_cpu": "birae6_cpu v1 (archive:birae6_cpu_v1); v1 and v2 side by side in "
                                 "generalisation_birae_unseen_motion",
+    **{k: "its LGD-RNN 6 row is empose6_cpu v1 (archive:empose6_cpu_v1); v2 in generalisation_empose6_v2_*"
+       for k in ("empose_table2_em6", "empose_table4")},
+    "latency_empose6_cpu": "empose6_cpu v1 (archive:empose6_cpu_v1); v2 has the same architecture, so the same cost",
     "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals')",
     "empose_table3_rep": "a second training of four Table 3 rows: the run-to-run spread",
     "physics_val_kres0.1": "made before contact_no_lift; with physics_val_literal_weights the evidence "

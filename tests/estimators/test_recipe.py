@@ -38,7 +38,8 @@ def test_shipped_recipes_load_and_miposer_cpu_is_its_cards_command() -> None:
     for name in shipped_recipes():
         r = load_recipe(name)
         assert r.name == name and r.seed is not None and r.corpus is not None, name
-    for weights, recipe in (("miposer_cpu", "miposer_cpu_v2"), ("pip_cpu", "pip_cpu"), ("birae6_cpu", "birae6_cpu_v2")):
+    for weights, recipe in (("miposer_cpu", "miposer_cpu_v2"), ("pip_cpu", "pip_cpu"), ("birae6_cpu", "birae6_cpu_v2"),
+                            ("empose6_cpu", "empose6_cpu_v2")):
         rec = json.loads(weight_path(weights).with_suffix(".json").read_text())["recipe"]
         assert (rec["name"], rec["sha1"]) == (recipe, load_recipe(recipe).sha1), weights
     r = load_recipe("miposer_cpu")
