@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from wearpose.cli import app
 from wearpose.errors import ConfigError, InputFileError
 from wearpose.estimators.recipe import check_corpus, check_seed, find_recipe, load_recipe, shipped_recipes
-from wearpose.weights import WEIGHTS_DIR, weight_path
+from wearpose.weights import WEIGHTS_DIR, list_weights, weight_path
 
 runner = CliRunner()
 HEADER = "format: wearpose.recipe\nversion: 1\n"
@@ -171,6 +171,32 @@ def test_shipped_empose12_cpu_card_names_the_recipe_that_reproduces_it() -> None
     assert card["training_data"]["corpus"]["manifest_sha1"] == r.corpus["manifest_sha1"]
     assert card["recipe"]["options"]["epochs"] == r.values["epochs"] == 14 and not r.values["mirror"]
     assert card["validation"]["epoch"] <= 14
+
+
+#: Shipped weights still trained before recipes existed (corpus v1), each kept for a reason
+#: docs/recipes.md gives: birae3_cpu (its corpus-v2 recipe was run; v1 kept for its calibration),
+#: the two-stage EM-POSE and the baselines (not retrained yet). A new weight without a recipe, or
+#: one of these retrained and shipped, fails here until this set says so.
+WITHOUT_RECIPE = {"birae3_cpu", "empose12_twostage_cpu", "imuposer_cpu", "miposer1_cpu", "nbeats_cpu"}
+
+
+def test_every_shipped_weight_names_the_recipe_file_that_made_it() -> None:
+    """Every shipped card with a ``recipe`` block was trained by ``wearpose train --recipe NAME``
+    from that very recipe file (its SHA-1) on the corpus the recipe names; the others are the
+    declared few of corpus v1."""
+    without = set()
+    for name in list_weights():
+        card = json.loads(weight_path(name).with_suffix(".json").read_text())
+        if "recipe" not in card:
+            without.add(name)
+            assert card["training_data"].get("clips") == 1143, name  # corpus v1's train split
+            continue
+        r = load_recipe(card["recipe"]["name"])
+        assert card["recipe"]["sha1"] == r.sha1, name
+        assert card["recipe"]["corpus"] == r.corpus, name
+        assert card["training_data"]["corpus"]["manifest_sha1"] == r.corpus["manifest_sha1"], name
+        assert card["train_command"] == f"wearpose train --recipe {r.name}", name
+    assert without == WITHOUT_RECIPE
 
 
 def _ckpt(path: Path, val: float, w: float, fp: str = "same", extra: bool = False) -> Path:
