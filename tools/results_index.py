@@ -57,6 +57,8 @@ NOTES = {
                                 "generalisation_birae_unseen_motion",
     **{k: "its LGD-RNN 6 row is empose6_cpu v1 (archive:empose6_cpu_v1); v2 in generalisation_empose6_v2_*"
        for k in ("empose_table2_em6", "empose_table4")},
+    **{k: "miposer1_cpu v1 (archive:miposer1_cpu_v1); v2 in generalisation_miposer1_v2_*, same architecture"
+       for k in ("miposer_fig5_smartwatch", "latency_miposer1_cpu")},
     "latency_empose6_cpu": "empose6_cpu v1 (archive:empose6_cpu_v1); v2 has the same architecture, so the same cost",
     "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals')",
     "empose_table3_rep": "a second training of four Table 3 rows: the run-to-run spread",

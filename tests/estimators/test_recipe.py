@@ -177,7 +177,7 @@ def test_shipped_empose12_cpu_card_names_the_recipe_that_reproduces_it() -> None
 #: docs/recipes.md gives: birae3_cpu (its corpus-v2 recipe was run; v1 kept for its calibration),
 #: the two-stage EM-POSE and the baselines (not retrained yet). A new weight without a recipe, or
 #: one of these retrained and shipped, fails here until this set says so.
-WITHOUT_RECIPE = {"birae3_cpu", "empose12_twostage_cpu", "imuposer_cpu", "miposer1_cpu", "nbeats_cpu"}
+WITHOUT_RECIPE = {"birae3_cpu", "empose12_twostage_cpu", "imuposer_cpu", "nbeats_cpu"}
 
 
 def test_every_shipped_weight_names_the_recipe_file_that_made_it() -> None:
