@@ -65,7 +65,7 @@ NOTES = {
     **{k: "recipe empose12_cpu_v6, run and not shipped (a foot 5.0 cm under the floor on the demo walk; docs/empose.md)"
        for k in ("generalisation_empose12_v6_test", "generalisation_empose12_v6_unseen_motion",
                  "generalisation_empose12_v6_heldout_bodies", "generalisation_empose12_v6_shapefit_heldout_bodies")},
-    "latency_empose6_cpu": "empose6_cpu v1 (archive:empose6_cpu_v1); v2 has the same architecture, so the same cost",
+    "latency_empose6_cpu": "empose6_cpu v1 (archive:empose6_cpu_v1); v3 has the same architecture, so the same cost",
     "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals')",
     "empose_table3_rep": "a second training of four Table 3 rows: the run-to-run spread",
     "physics_val_kres0.1": "made before contact_no_lift; with physics_val_literal_weights the evidence "
