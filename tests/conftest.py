@@ -69,7 +69,8 @@ def make_tiny_asset(seed: int = 0, num_betas: int = 10, posedirs: bool = False) 
 #: id, so that ``clips(split=..., source=...)[:n]`` (n <= this) are the full store's clips.
 CORPUS_PER_SPLIT = 4
 #: Clips that tests name, always in the session's store (each is in the test split).
-CORPUS_NAMED = ("cmu_daz/05/05_01", "bandai/bandai-B/dataset-2_walk_feminine_003")
+CORPUS_NAMED = ("cmu_daz/05/05_01", "bandai/bandai-B/dataset-2_walk_feminine_003",
+                "bandai/bandai-B/dataset-2_run_youthful_005")
 
 _FRESH: dict[str, str] = {}
 

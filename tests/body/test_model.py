@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from tests.conftest import make_tiny_asset
-from wearpose.body import BodyModel, forward_kinematics
+from wearpose.body import JOINT_NAMES, BodyModel, forward_kinematics
 from wearpose.errors import ShapeError, WearposeError
 from wearpose.geometry import axis_angle_to_matrix
 
@@ -224,6 +224,26 @@ def test_lowest_height_matches_the_skinned_mesh(dtype) -> None:
         assert low.shape == (40,) and low.dtype == dtype
         assert float((low - full).abs().max()) < tol and float((low - full).abs().mean()) < 0.005
     assert len(body._support_vertices()) < body.num_vertices / 3  # only the hull vertices are read
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_lowest_point_names_the_joint_that_carries_it(dtype) -> None:
+    """The lowest point's joint is the dominant joint of the skinned mesh's lowest vertex where
+    the two agree on the vertex (standing: a foot; lying on the back: the torso), and the joints
+    are the posed joints plus the translation."""
+    body = BodyModel(dtype=dtype)
+    R = torch.eye(3, dtype=dtype).expand(2, 24, 3, 3).clone()
+    R[1, 0] = axis_angle_to_matrix(torch.tensor([-torch.pi / 2, 0.0, 0.0], dtype=torch.float64)).to(dtype)  # on the back
+    trans = torch.tensor([[0.0, 1.0, 0.0], [0.3, 0.2, -1.0]], dtype=dtype)
+    out = body.lowest_point(R, None, trans)
+    full = body(R, None, trans, return_normals=False)
+    assert out.height.shape == (2,) and out.joint.dtype == torch.long and out.joints.dtype == dtype
+    torch.testing.assert_close(out.joints, full.joints)
+    torch.testing.assert_close(out.height, body.lowest_height(R, None, trans))
+    names = [JOINT_NAMES[int(j)] for j in out.joint]
+    assert names[0] in {"left_foot", "right_foot", "left_ankle", "right_ankle"}, names
+    assert names[1] in {"pelvis", "spine1", "spine2", "spine3", "head", "left_collar", "right_collar",
+                        "left_shoulder", "right_shoulder", "neck"}, names
 
 
 def test_normals_with_autograd() -> None:

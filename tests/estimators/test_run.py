@@ -102,3 +102,60 @@ def test_wearpose_estimate_reads_its_checkpoint_once(as_path: bool, tmp_path: Pa
                                    "--out", str(tmp_path / "pose.npz"), "--json"])
     assert res.exit_code == 0, res.output
     assert [c for c in torch_loads if c.endswith(".pt")] == [str(weight_path("empose12_cpu"))], torch_loads
+
+
+def _hopping_track(fps: float = 30.0, ground: int = 9, flight: int = 21, hops: int = 3,
+                   forward_m_s: float = 0.0, leap_m_s: float = 2.0):
+    """A body bounding forward like a runner: ``ground`` frames still on its floor (lowest point
+    at 0.4 m above y = 0 before placement), then ``flight`` frames of a 20 cm parabola travelling
+    ``leap_m_s`` forward, ``hops`` times; the whole body also gliding at ``forward_m_s``."""
+    from wearpose.body import BodyModel
+    from wearpose.estimators.base import PoseTrack
+
+    body = BodyModel(dtype=torch.float64)
+    rest = torch.eye(3, dtype=torch.float64).expand(1, 24, 3, 3)
+    up = -float(body.lowest_height(rest, None, None)[0]) + 0.4  # root height that puts the feet at 0.4 m
+    s = torch.arange(flight, dtype=torch.float64).add(1) / (flight + 1)
+    cycle = torch.cat([torch.zeros(ground, dtype=torch.float64), 0.8 * s * (1 - s)])  # peak 0.2 m
+    y = cycle.repeat(hops) + up
+    T = y.shape[0]
+    trans = torch.zeros(T, 3, dtype=torch.float64)
+    trans[:, 1] = y
+    speed = torch.where(cycle.repeat(hops) == 0, 0.0, leap_m_s) + forward_m_s  # m/s, per frame
+    trans[:, 2] = torch.cumsum(speed, 0) / fps
+    track = PoseTrack(torch.eye(3, dtype=torch.float64).expand(T, 24, 3, 3).clone(), torch.zeros(10, dtype=torch.float64),
+                      trans, torch.ones(T, dtype=torch.bool), fps)
+    return track, body, (cycle.repeat(hops) == 0)
+
+
+def test_on_the_floor_puts_the_contact_frames_on_it_not_the_flight() -> None:
+    """A bounding run is in the air for 70 % of its frames: the median over all frames would put
+    the flight on the floor and the stance 9 cm under it; the contact frames' median puts the
+    stance feet at 0 (to float precision) and keeps the leaps' heights. The frame before each
+    take-off and after each landing is not: its central difference spans a flight frame."""
+    from wearpose.estimators.run import contact_frames, on_the_floor
+
+    track, body, ground = _hopping_track()
+    low = body.lowest_point(track.local_rot, track.betas, track.trans)
+    contact = contact_frames(low, track.fps)
+    assert float(contact[ground].float().mean()) > 0.7 and not bool(contact[~ground].any()), contact
+    placed = on_the_floor(track, body)
+    after = body.lowest_height(placed.local_rot, placed.betas, placed.trans)
+    assert float(after[ground].abs().max()) < 1e-9, after[ground]
+    assert float(after.max()) == pytest.approx(0.2, abs=0.01)  # the hops stay hops
+    assert placed.extras["floor"] == "median lowest point of the contact frames on y = 0"
+    # the rule it replaces: the median over all frames sinks the stance (what runs showed)
+    assert float((low.height[ground] - low.height.median()).max()) < -0.09
+
+
+def test_on_the_floor_without_contact_takes_every_frame_and_says_so() -> None:
+    """A body gliding at 1 m/s never has a joint at rest: the median over every frame, named."""
+    from wearpose.estimators.run import contact_frames, on_the_floor
+
+    track, body, _ = _hopping_track(forward_m_s=1.0)
+    low = body.lowest_point(track.local_rot, track.betas, track.trans)
+    assert not bool(contact_frames(low, track.fps).any())
+    placed = on_the_floor(track, body)
+    after = body.lowest_height(placed.local_rot, placed.betas, placed.trans)
+    assert float(after.median().abs()) < 1e-9
+    assert placed.extras["floor"] == "median lowest point on y = 0 (too few contact frames)"

@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from tests.sensors.sensor_testutils import smooth_motion
+from wearpose.body import BodyModel
 from wearpose.calibration import calibration_pose
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.recording import CALIBRATION_WINDOW_KEY, calibration_window, prepend_tpose
@@ -26,7 +27,16 @@ def test_prepend_tpose_holds_the_tpose_inside_the_marked_window() -> None:
     body = full.pose[a:b + 1, 1:]  # every held frame is SMPL's T-pose (the root keeps the clip's heading)
     assert torch.allclose(body, calibration_pose("tpose")[1:].to(body.dtype).expand_as(body), atol=1e-5)
     assert torch.allclose(full.pose[hold + blend:], m.pose)  # then the clip, unchanged
-    assert torch.allclose(full.trans[:hold], m.trans[:1].expand(hold, 3))
+    assert torch.allclose(full.trans[:hold, [0, 2]], m.trans[:1, [0, 2]].expand(hold, 2))
+    # it stands on the clip's floor (the median lowest point of its first second), as a wearer
+    # does, instead of at the clip's first root height; the blend eases from there into the clip
+    body = BodyModel()
+    floor = body.lowest_height(m.pose[:60], m.betas, m.trans[:60]).median()
+    held = body.lowest_height(full.pose[:hold], full.betas, full.trans[:hold])
+    assert float((held - floor).abs().max()) < 1e-5
+    steps = full.trans[1:hold + blend + 1, 1] - full.trans[:hold + blend, 1]
+    lift = float(full.trans[0, 1] - m.trans[0, 1])
+    assert float(steps.abs().max()) <= abs(lift) / blend * 1.6 + 1e-6  # no jump: smoothstep's top slope is 1.5x
 
 
 def test_prepend_tpose_refuses_a_hold_too_short() -> None:

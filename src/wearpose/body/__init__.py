@@ -5,7 +5,7 @@ Public entry: :class:`BodyModel` (forward returns :class:`BodyOutput`), skeleton
 """
 
 from wearpose.body.asset import BodyAsset, load_asset_npz, load_default_asset, load_smpl_file
-from wearpose.body.model import BodyModel, BodyOutput, SiteOutput
+from wearpose.body.model import BodyModel, BodyOutput, LowestPoint, SiteOutput
 from wearpose.body.kinematics import forward_kinematics, global_to_local
 from wearpose.body.poses import IPOSE_ANGLE, POSES, calibration_pose
 from wearpose.body.skeleton import (
@@ -13,7 +13,7 @@ from wearpose.body.skeleton import (
 )
 
 __all__ = [
-    "BodyModel", "BodyOutput", "SiteOutput",
+    "BodyModel", "BodyOutput", "LowestPoint", "SiteOutput",
     "BodyAsset", "load_asset_npz", "load_default_asset", "load_smpl_file",
     "forward_kinematics", "global_to_local", "calibration_pose", "POSES", "IPOSE_ANGLE",
     "JOINT_NAMES", "JOINT_INDEX", "NUM_JOINTS", "PARENTS", "MAJOR_JOINTS", "IGNORED_JOINTS", "SIP_JOINTS", "MIRROR",

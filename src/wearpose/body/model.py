@@ -47,6 +47,15 @@ class SiteOutput:
     global_rot: torch.Tensor  #: (..., 24, 3, 3)
 
 
+@dataclass
+class LowestPoint:
+    """The body's lowest point per frame (:meth:`BodyModel.lowest_point`)."""
+
+    height: torch.Tensor  #: (T,) world y of the lowest point, m (Y up)
+    joint: torch.Tensor  #: (T,) long: the joint whose part carries it (its dominant skinning joint)
+    joints: torch.Tensor  #: (T, 24, 3) posed joint positions, m, world (trans added)
+
+
 #: Vertex-frames skinned (and given normals) together: the working set of one chunk (``(12, n,
 #: V)`` skinning transforms) stays in the CPU cache; the full mesh (13,718 vertices) goes 8
 #: frames at a time, a patch of sites as many frames as make the same number of vertex-frames.
@@ -435,7 +444,21 @@ class BodyModel(nn.Module):
 
     def lowest_height(self, pose: torch.Tensor, betas: torch.Tensor | None = None, trans: torch.Tensor | None = None,
                       chunk: int = 256) -> torch.Tensor:
-        """Height (y, m) of the body's lowest point per frame, cheaply enough for hours of motion.
+        """Height (y, m) of the body's lowest point per frame, cheaply enough for hours of motion:
+        ``lowest_point(...).height`` (:meth:`lowest_point`).
+
+        Args:
+            pose: ``(T, 24, 3, 3)`` local rotations; betas: ``(S,)``; trans: ``(T, 3)`` m or None.
+
+        Returns:
+            ``(T,)`` lowest height per frame, m (world y, Y up).
+        """
+        return self.lowest_point(pose, betas, trans, chunk).height
+
+    def lowest_point(self, pose: torch.Tensor, betas: torch.Tensor | None = None, trans: torch.Tensor | None = None,
+                     chunk: int = 256) -> LowestPoint:
+        """The body's lowest point per frame: its height, the joint that carries it, and the posed
+        joints (what a contact test needs: how fast that joint moves).
 
         Each vertex is moved rigidly with its dominant joint (LBS blending and pose correctives
         ignored: about a centimetre near the joints), so only the vertical row of each joint's
@@ -448,7 +471,8 @@ class BodyModel(nn.Module):
             pose: ``(T, 24, 3, 3)`` local rotations; betas: ``(S,)``; trans: ``(T, 3)`` m or None.
 
         Returns:
-            ``(T,)`` lowest height per frame, m (world y, Y up).
+            :class:`LowestPoint` with ``(T,)`` heights (m, world y, Y up), ``(T,)`` joint indices
+            and ``(T, 24, 3)`` world joint positions (m).
         """
         R, b, t, _ = self._batch(pose, betas, trans)
         ids = self._support_vertices()
@@ -456,13 +480,19 @@ class BodyModel(nn.Module):
         v_shaped = self.v_template[ids] + torch.einsum("vcs,s->vc", self.shapedirs[ids], b[0])
         J_rest = self.rest_joints(b[0])
         offset = v_shaped - J_rest[part]  # (V', 3), rest pose, m
-        out = []
+        heights, joints, positions = [], [], []
         for a in range(0, R.shape[0], chunk):
             G, J = forward_kinematics(R[a:a + chunk], J_rest.expand(R[a:a + chunk].shape[0], -1, -1), self.parents)
             up = G[:, :, 1, :]  # (N, 24, 3): the world-y row of each joint's rotation
             y = J[:, part, 1] + (up[:, part] * offset).sum(-1)  # (N, V)
-            out.append(y.amin(-1) + t[a:a + chunk, 1])
-        return torch.cat(out) if out else torch.zeros(0, dtype=self.dtype)
+            low, arg = y.min(-1)
+            heights.append(low + t[a:a + chunk, 1])
+            joints.append(part[arg])
+            positions.append(J + t[a:a + chunk, None])
+        if not heights:
+            return LowestPoint(torch.zeros(0, dtype=self.dtype), torch.zeros(0, dtype=torch.long),
+                               torch.zeros(0, NUM_JOINTS, 3, dtype=self.dtype))
+        return LowestPoint(torch.cat(heights), torch.cat(joints), torch.cat(positions))
 
     def _support_vertices(self) -> torch.Tensor:
         """Ids of the vertices on the convex hull of their dominant joint's vertex set (rest pose)."""

@@ -23,19 +23,19 @@ DECLARATIONS: dict[str, dict[str, str]] = {"mm": {"position_unit": "mm", **_REST
                                            "cm": {"position_unit": "cm", **_REST}}
 
 
-def kit_recording(kit: str, motion: Any, fps: float, tpose_s: float = 1.0, seed: int = 2) -> Any:
-    """``motion`` after a marked ``tpose_s`` T-pose, every sensor of ``kit`` simulated at ``fps``
-    without noise (canonical form), the motion as ground truth."""
+def kit_recording(kit: str, motion: Any, fps: float, tpose_s: float | None = 1.0, seed: int = 2) -> Any:
+    """``motion`` after a marked ``tpose_s`` T-pose (none when None), every sensor of ``kit``
+    simulated at ``fps`` without noise (canonical form), the motion as ground truth."""
     # start-up: body, recording and sensors add ~70 ms (26 modules) to import this module
     from wearpose.body import BodyModel
     from wearpose.recording import CALIBRATION_WINDOW_KEY, Recording, prepend_tpose  # start-up: as above
     from wearpose.sensors import simulate  # start-up: as above
 
-    m, window = prepend_tpose(motion, tpose_s)
+    m, window = prepend_tpose(motion, tpose_s) if tpose_s is not None else (motion, None)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the kit's documented site substitutions warn per call
         res = simulate(m, kit, BodyModel(), seed=seed, noise="none", rate=fps)
-    return Recording.from_simulation(res, m, meta={CALIBRATION_WINDOW_KEY: window})
+    return Recording.from_simulation(res, m, meta={CALIBRATION_WINDOW_KEY: window} if window else {})
 
 
 def declared_differences(source: ModelSource, recording: Any,

@@ -4,9 +4,10 @@ IMU methods (PIP, BiRAE's inertial alignment) need the wearer to stand in a know
 moment so that each sensor's mounting (sensor -> bone) and the world heading can be solved
 (``docs/calibration.md``). A real capture starts with it because the operator asks for it; a
 *simulated* recording only has it when the motion has it. :func:`prepend_tpose` gives a motion
-that opening hold (the construction MI-Poser's training data uses too,
-:func:`tpose_then`: ``hold_s`` of SMPL's T-pose at the clip's
-first position and heading, a ``blend_s`` smoothstep slerp into the first frame, then the clip),
+that opening hold (:func:`tpose_then`: ``hold_s`` of SMPL's T-pose at the clip's
+first position and heading, a ``blend_s`` smoothstep slerp into the first frame, then the clip;
+then lifted to stand on the clip's floor, as a wearer stands; MI-Poser's training data uses
+:func:`tpose_then` alone, whose T-pose sinks 2-6 cm: docs/miposer.md),
 and :func:`tpose_meta` / :func:`calibration_window` write and read where the hold is:
 
 ``meta["calibration_window"] = {"pose": "tpose", "start_s": a, "stop_s": b, "prefix_s": p}``
@@ -19,6 +20,7 @@ version bump; a recording without the entry is read exactly as before.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import torch
@@ -56,8 +58,34 @@ def tpose_then(motion: Any, hold_s: float, blend_s: float) -> tuple[Any, int]:
     return MotionSequence(full, motion.betas, trans, fps, dict(motion.meta)), nh + nb
 
 
+def _on_the_clips_floor(full: Any, prefix: int, hold: int, clip: Any) -> tuple[Any, int]:
+    """``full`` (:func:`tpose_then`'s) with its held T-pose standing on the floor the clip
+    stands on, and the blend easing from that height into the clip's first frame.
+
+    :func:`tpose_then` holds the T-pose at the clip's first root position: straight legs under a
+    walking pelvis put the soles 2-6 cm under the floor (5.4 cm before CMU's walk 05_01), where
+    no wearer stands for a calibration. The clip's floor here is the median lowest point of its
+    first second (one glitched first frame does not move it).
+    """
+    from wearpose.body import BodyModel  # start-up: as in tpose_then
+
+    body = BodyModel()
+    first = clip.slice(0, max(1, min(clip.num_frames, int(round(clip.fps)))))
+    with torch.no_grad():
+        floor = body.lowest_height(first.pose.to(body.dtype), first.betas.to(body.dtype), first.trans.to(body.dtype)).median()
+        held = body.lowest_height(full.pose[:1].to(body.dtype), full.betas.to(body.dtype), full.trans[:1].to(body.dtype))[0]
+    lift = torch.zeros(full.num_frames, dtype=full.trans.dtype)
+    nb = prefix - hold
+    x = torch.arange(1, nb + 1, dtype=torch.float64) / (nb + 1)
+    lift[:hold] = float(floor - held)
+    lift[hold:prefix] = (float(floor - held) * (1 - x * x * (3 - 2 * x))).to(lift.dtype)  # tpose_then's smoothstep
+    trans = full.trans.clone()
+    trans[:, 1] += lift
+    return replace(full, trans=trans), prefix
+
+
 def prepend_tpose(motion: Any, hold_s: float, blend_s: float = DEFAULT_BLEND_S) -> tuple[Any, dict[str, Any]]:
-    """``motion`` with a calibration T-pose held before it.
+    """``motion`` with a calibration T-pose held before it, standing on the clip's floor.
 
     Args:
         motion: a :class:`wearpose.motion.MotionSequence` (any fps).
@@ -71,10 +99,10 @@ def prepend_tpose(motion: Any, hold_s: float, blend_s: float = DEFAULT_BLEND_S) 
     if not hold_s > 0:
         raise ConfigError(f"the T-pose hold must be > 0 s, got {hold_s!r}")
     fps = float(motion.fps)
-    full, prefix = tpose_then(motion, float(hold_s), float(blend_s))
     hold = int(round(hold_s * fps))
     if hold < 2:
         raise ConfigError(f"a {hold_s} s T-pose is {hold} frame(s) at {fps:g} fps; expected at least 2 frames")
+    full, prefix = _on_the_clips_floor(*tpose_then(motion, float(hold_s), float(blend_s)), hold, motion)
     # Same margins as MI-Poser's calibration window: skip the first instant, end on the last held frame.
     window = {"pose": "tpose", "start_s": round(min(0.1, 0.25 * hold_s), 6), "stop_s": round((hold - 1) / fps, 6),
               "prefix_s": round(prefix / fps, 6)}
