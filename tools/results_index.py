@@ -62,9 +62,10 @@ NOTES = {
     **{k: "recipe empose6_cpu_v2: empose6_cpu v2, shipped for an hour on 2026-12-04 and replaced by v3"
        for k in ("generalisation_empose6_v2_test", "generalisation_empose6_v2_unseen_motion",
                  "generalisation_empose6_v2_heldout_bodies", "generalisation_empose6_v2_shapefit_heldout_bodies")},
-    **{k: "recipe empose12_cpu_v6, run and not shipped (a foot 5.0 cm under the floor on the demo walk; docs/empose.md)"
-       for k in ("generalisation_empose12_v6_test", "generalisation_empose12_v6_unseen_motion",
-                 "generalisation_empose12_v6_heldout_bodies", "generalisation_empose12_v6_shapefit_heldout_bodies")},
+    **{k: "empose12_cpu v5 (archive:empose12_cpu_v5), shipped until v6; v1, v5 and v6 in generalisation_empose12_v6_*"
+       for k in ("generalisation_empose12_v5_test", "generalisation_empose12_v5_unseen_motion",
+                 "generalisation_empose12_v5_heldout_bodies", "generalisation_empose12_v5_shapefit_heldout_bodies")},
+    "recipe_reproduction": "its empose12_cpu_v5 row's reference, 'shipped empose12_cpu', is now archive:empose12_cpu_v5",
     "latency_empose6_cpu": "empose6_cpu v1 (archive:empose6_cpu_v1); v3 has the same architecture, so the same cost",
     "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals')",
     "empose_table3_rep": "a second training of four Table 3 rows: the run-to-run spread",

@@ -156,14 +156,19 @@ def test_empose12_cpu_recipe_is_the_v1_cards_command_and_corpus() -> None:
 
 
 def test_shipped_empose12_cpu_card_names_the_recipe_that_reproduces_it() -> None:
-    """The shipped EM-POSE 12 (version 5) was trained by `wearpose train --recipe empose12_cpu_v5`
+    """The shipped EM-POSE 12 (version 6) was trained by `wearpose train --recipe empose12_cpu_v6`
     (name, file hash, corpus and command: test_every_shipped_weight_names_the_recipe_file_that_made_it);
-    its card carries that recipe as resolved: corpus v2, 14 epochs, no training mix."""
+    its card carries that recipe as resolved: corpus v2, 5 epochs, the mix without random wearers;
+    version 5 (no mix) is archived with its own recipe's card."""
     card = json.loads(weight_path("empose12_cpu").with_suffix(".json").read_text())
-    r = load_recipe("empose12_cpu_v5")
+    r = load_recipe("empose12_cpu_v6")
     assert card["recipe"]["seed"] == r.seed and r.corpus["name"] == "data-v2"
-    assert card["recipe"]["options"]["epochs"] == r.values["epochs"] == 14 and not r.values["mirror"]
-    assert card["validation"]["epoch"] <= 14
+    assert card["recipe"]["options"]["epochs"] == r.values["epochs"] == 5 and r.values["mirror"]
+    assert r.values["procedural"] == 20 and r.values["mix_copies"] == 1 and r.values["shapes"] in (None, "corpus")
+    assert card["validation"]["epoch"] <= 5
+    v5 = json.loads((WEIGHTS_DIR / "archive" / "empose12_cpu_v5.json").read_text())
+    r5 = load_recipe("empose12_cpu_v5")
+    assert v5["recipe"]["sha1"] == r5.sha1 and r5.values["epochs"] == 14 and not r5.values["mirror"]
 
 
 #: Shipped weights still trained before recipes existed (corpus v1), each kept for a reason
@@ -173,7 +178,7 @@ def test_shipped_empose12_cpu_card_names_the_recipe_that_reproduces_it() -> None
 WITHOUT_RECIPE = {"birae3_cpu", "empose12_twostage_cpu", "imuposer_cpu", "nbeats_cpu"}
 
 #: The recipe (``src/wearpose/estimators/<method>/recipes/<name>.yaml``) that made each shipped weight.
-SHIPPED_RECIPES = {"empose12_cpu": "empose12_cpu_v5", "empose6_cpu": "empose6_cpu_v3", "pip_cpu": "pip_cpu",
+SHIPPED_RECIPES = {"empose12_cpu": "empose12_cpu_v6", "empose6_cpu": "empose6_cpu_v3", "pip_cpu": "pip_cpu",
                    "birae6_cpu": "birae6_cpu_v2", "miposer_cpu": "miposer_cpu_v2", "miposer1_cpu": "miposer1_cpu_v2"}
 
 
