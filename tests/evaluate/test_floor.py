@@ -27,3 +27,19 @@ def test_contact_frames_keep_a_run_out_of_the_floor(corpus_root: Path) -> None:
     assert every["lowest_cm"] < -5.0 and every["clips_under"] == 1, every
     assert contact["lowest_cm"] > -5.0 and contact["clips_under"] == 0 and contact["standing_sink_pct"] == 0.0, contact
     assert abs(every["median_abs_cm"] - contact["median_abs_cm"]) < 2.0  # one shift of the same estimate
+
+
+def test_summary_counts_what_a_user_sees() -> None:
+    """Standing frames off by more than 5 cm either way, any frame more than 5 cm under the floor;
+    a frame 6 cm over the truth in mid-air is neither."""
+    import torch
+
+    from wearpose.evaluate.floor import FloorFrames, _summary
+
+    e = torch.tensor([-0.06, 0.0, 0.06, 0.06, 0.0])
+    standing = torch.tensor([True, True, True, False, True])
+    height = torch.tensor([-0.055, 0.01, 0.07, 0.30, -0.02])
+    s = _summary(FloorFrames(e, standing, height))
+    assert s["standing_sink_pct"] == pytest.approx(20.0) and s["standing_float_pct"] == pytest.approx(20.0)
+    assert s["under_floor_pct"] == pytest.approx(20.0) and s["lowest_cm"] == pytest.approx(-5.5)
+    assert (s["worst_standing_sink_cm"], s["worst_standing_float_cm"]) == (pytest.approx(-6.0), pytest.approx(6.0))

@@ -4,8 +4,8 @@ A body whose joints are right on average can still have its feet under the floor
 (EM-POSE's v6 put a foot 5 cm under it in one frame of a walk: docs/empose.md), and MPJPE, which
 is root-relative, never sees it. :func:`floor_placement` runs a model on simulated test clips the
 way ``wearpose estimate`` does (:func:`wearpose.estimators.run.estimate_recording`: a marked 1 s
-T-pose first for the estimators that calibrate on one, sensors without noise, the world placement of :func:`~wearpose.estimators.run.place_in_world`)
-and compares, frame by frame after the T-pose, the height of the estimate's lowest point with the
+T-pose first for the estimators that calibrate on one, sensors without noise, the world
+placement of :func:`~wearpose.estimators.run.place_in_world`) and compares, frame by frame after the T-pose, the height of the estimate's lowest point with the
 truth's (m inside, cm in the report):
 
 - ``e = estimate's lowest point - truth's lowest point`` per frame, the truth set on its own floor
@@ -45,8 +45,8 @@ FLOOR_LIMIT_M = 0.05
 STANDING_TOL_M = 0.03
 #: A clip whose truth does not stand on y = 0 (its contact frames' median lowest point further
 #: than this, m: uneven terrain, a source under its floor) is left out of the pooled figures
-#: and listed: placing on a flat floor cannot be right there. The corpus's flat-floor clips stand
-#: at 1.5-3 cm (the soles' skin under the joints the importer floors: the test split).
+#: and listed: placing on a flat floor cannot be right there. The corpus's flat-floor test clips
+#: stand 0.5-3 cm above y = 0 by this measure; CMU's martial-arts clips 7-15 cm under it.
 TRUTH_OFF_FLOOR_M = 0.05
 #: The contact speeds (m/s) scored beside the shipped one; ``None``: the median over every frame.
 DEFAULT_RULES: tuple[float | None, ...] = tuple(dict.fromkeys((None, 0.2, 0.35, 0.5, 0.75, CONTACT_SPEED_M_S)))
