@@ -7,7 +7,7 @@ moment so that each sensor's mounting (sensor -> bone) and the world heading can
 that opening hold (:func:`tpose_then`: ``hold_s`` of SMPL's T-pose at the clip's
 first position and heading, a ``blend_s`` smoothstep slerp into the first frame, then the clip;
 then lifted to stand on the clip's floor, as a wearer stands; MI-Poser's training data uses
-:func:`tpose_then` alone, whose T-pose sinks 2-6 cm: docs/miposer.md),
+:func:`tpose_then` alone, whose T-pose sinks 2-6 cm: docs/placement.md),
 and :func:`tpose_meta` / :func:`calibration_window` write and read where the hold is:
 
 ``meta["calibration_window"] = {"pose": "tpose", "start_s": a, "stop_s": b, "prefix_s": p}``
@@ -34,6 +34,12 @@ CALIBRATION_WINDOW_KEY = "calibration_window"
 DEFAULT_BLEND_S = 0.5
 
 
+def _smoothstep(n: int) -> torch.Tensor:
+    """``(n,)`` float64 blend weights strictly between 0 and 1: no velocity jump at either end."""
+    x = torch.arange(1, n + 1, dtype=torch.float64) / (n + 1)
+    return x * x * (3 - 2 * x)
+
+
 def tpose_then(motion: Any, hold_s: float, blend_s: float) -> tuple[Any, int]:
     """``hold_s`` of the T-pose at the clip's first position and heading, a ``blend_s`` slerp
     into the first frame, then the clip.
@@ -50,8 +56,7 @@ def tpose_then(motion: Any, hold_s: float, blend_s: float) -> tuple[Any, int]:
     pose = motion.pose.to(torch.float64)
     base = calibration_pose("tpose").clone()
     base[0] = rotation_y(heading(pose[0, 0]))  # the wearer faces where the clip starts
-    x = torch.arange(1, nb + 1, dtype=torch.float64) / (nb + 1)
-    w = x * x * (3 - 2 * x)  # smoothstep: no velocity jump at either end
+    w = _smoothstep(nb)
     blend = slerp_matrix(base.expand(nb, 24, 3, 3), pose[0].expand(nb, 24, 3, 3), w[:, None].expand(nb, 24))
     full = torch.cat([base.expand(nh, 24, 3, 3), blend, pose]).to(motion.pose.dtype)
     trans = torch.cat([motion.trans[:1].expand(nh + nb, 3), motion.trans])
@@ -75,10 +80,8 @@ def _on_the_clips_floor(full: Any, prefix: int, hold: int, clip: Any) -> tuple[A
         floor = body.lowest_height(first.pose.to(body.dtype), first.betas.to(body.dtype), first.trans.to(body.dtype)).median()
         held = body.lowest_height(full.pose[:1].to(body.dtype), full.betas.to(body.dtype), full.trans[:1].to(body.dtype))[0]
     lift = torch.zeros(full.num_frames, dtype=full.trans.dtype)
-    nb = prefix - hold
-    x = torch.arange(1, nb + 1, dtype=torch.float64) / (nb + 1)
     lift[:hold] = float(floor - held)
-    lift[hold:prefix] = (float(floor - held) * (1 - x * x * (3 - 2 * x))).to(lift.dtype)  # tpose_then's smoothstep
+    lift[hold:prefix] = (float(floor - held) * (1 - _smoothstep(prefix - hold))).to(lift.dtype)  # as the pose blends
     trans = full.trans.clone()
     trans[:, 1] += lift
     return replace(full, trans=trans), prefix
