@@ -47,6 +47,45 @@ def table(results: dict[str, dict]) -> list[str]:
     return lines
 
 
+def plot(models: list[str], clip: str, out: Path) -> int:
+    """One clip's lowest point per frame: the truth on its floor and each model under the rule
+    before (every frame) and the shipped one (contact frames), the 5 cm band shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from wearpose.body import BodyModel
+    from wearpose.evaluate.floor import clip_floor
+    from wearpose.motion import resample
+
+    store, body = CorpusStore(), BodyModel()
+    fig, axes = plt.subplots(len(models), 1, figsize=(8, 2.6 * len(models)), sharex=True, squeeze=False)
+    for ax, spec in zip(axes[:, 0], models):
+        name, _, model = spec.rpartition("=")
+        source = open_model(model)
+        m = store.load(clip)
+        m = resample(m, source.fps) if source.fps and abs(m.fps - source.fps) > 1e-6 else m
+        res = clip_floor(source, m, body, rules=(None, CONTACT_SPEED_M_S))
+        t = torch.arange(m.num_frames) / m.fps
+        before, shipped = res["rules"]["every frame"], res["rules"][rule_name(CONTACT_SPEED_M_S)]
+        truth = (shipped.height - shipped.e) * 100
+        ax.axhspan(-FLOOR_LIMIT_M * 100, 0, color="0.9")
+        ax.axhline(0, color="k", lw=0.8)
+        ax.plot(t, truth, color="k", lw=1.2, label="truth")
+        ax.plot(t, before.height * 100, color="tab:red", lw=1, label="estimate, floor = median of every frame (before)")
+        ax.plot(t, shipped.height * 100, color="tab:blue", lw=1, label="estimate, floor = median of contact frames")
+        ax.set_ylabel("lowest point [cm]")
+        ax.set_title(f"{name or model}: {clip}", fontsize=9)
+    axes[0, 0].legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    print(f"wrote {out}", file=sys.stderr)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("models", nargs="+", help="MODEL or NAME=MODEL (shipped name, archive:NAME, or a .pt file)")
@@ -54,7 +93,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--every", type=int, default=1, help="every n-th clip of the sorted split")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--plot", metavar="CLIP", default=None,
+                    help="instead: draw CLIP's lowest point over time, truth and each model under each rule, to --out (.png)")
     args = ap.parse_args(argv)
+    if args.plot:
+        return plot(args.models, args.plot, Path(args.out or ROOT / "docs" / "img" / "floor_contact.png"))
     torch.set_num_threads(args.threads)
     store = CorpusStore()
     clips = sorted(store.clips(split=args.split))[::args.every]
