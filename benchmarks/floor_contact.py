@@ -57,7 +57,6 @@ def plot(models: list[str], clip: str, out: Path) -> int:
 
     from wearpose.body import BodyModel
     from wearpose.evaluate.floor import clip_floor
-    from wearpose.motion import resample
 
     store, body = CorpusStore(), BodyModel()
     fig, axes = plt.subplots(len(models), 1, figsize=(8, 2.6 * len(models)), sharex=True, squeeze=False)
@@ -65,10 +64,9 @@ def plot(models: list[str], clip: str, out: Path) -> int:
         name, _, model = spec.rpartition("=")
         source = open_model(model)
         m = store.load(clip)
-        m = resample(m, source.fps) if source.fps and abs(m.fps - source.fps) > 1e-6 else m
         res = clip_floor(source, m, body, rules=(None, CONTACT_SPEED_M_S))
-        t = torch.arange(m.num_frames) / m.fps
         before, shipped = res["rules"]["every frame"], res["rules"][rule_name(CONTACT_SPEED_M_S)]
+        t = torch.arange(len(shipped.e)) / (source.fps or m.fps)  # clip_floor scores at the model's rate
         truth = (shipped.height - shipped.e) * 100
         ax.axhspan(-FLOOR_LIMIT_M * 100, 0, color="0.9")
         ax.axhline(0, color="k", lw=0.8)

@@ -279,7 +279,7 @@ def on_the_floor(track: PoseTrack, body: BodyModel) -> PoseTrack:
     that stretch's error to the whole clip (an EM-POSE walk floated 9-16 cm when floored on its
     T-pose); over contact frames, because a run is in the air for most of its frames: the median
     over all frames put its flight on the floor and its stance feet up to 6.5 cm under it. The
-    price: where the legs' error spans more than 10 cm over a stride, the stance feet now hover
+    price: where the legs' error spans 7-12 cm over a run's stance frames, the stance feet now hover
     rather than sink (docs/placement.md has both counts). With fewer than
     :data:`MIN_CONTACT_SHARE` contact frames, the median over every frame.
     Without a translation, each frame's lowest point at 0. Lowest points:

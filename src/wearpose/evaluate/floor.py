@@ -66,7 +66,10 @@ class FloorFrames(NamedTuple):
 
 def clip_floor(source: ModelSource, motion: Any, body: BodyModel, rules: tuple[float | None, ...] = DEFAULT_RULES,
                estimator: Any = None) -> dict[str, Any]:
-    """One clip's :class:`FloorFrames` per rule (module doc). ``motion`` at the model's rate."""
+    """One clip's :class:`FloorFrames` per rule (module doc); ``motion`` is brought to the
+    model's rate first."""
+    if source.fps and abs(motion.fps - source.fps) > 1e-6:
+        motion = resample(motion, source.fps)
     estimator = estimator if estimator is not None else source.make()
     # a T-pose only for estimators that calibrate on one (PIP, BiRAE, MI-Poser): an EM wearer has
     # no reason to stand in one
@@ -131,10 +134,7 @@ def floor_placement(source: ModelSource, store: CorpusStore, split: str = "test"
     pooled: dict[str, list[FloorFrames]] = {}
     per_clip, excluded = [], []
     for i, cid in enumerate(ids):
-        m = store.load(cid)
-        if source.fps and abs(m.fps - source.fps) > 1e-6:
-            m = resample(m, source.fps)
-        res = clip_floor(source, m, body, rules, estimator=source.make())  # a fresh state per clip
+        res = clip_floor(source, store.load(cid), body, rules, estimator=source.make())  # a fresh state per clip
         per_clip.append({"clip": cid, "rules": {name: _summary(f) for name, f in res["rules"].items()},
                          "floor": res["floor"], "truth_floor_cm": res["truth_floor_m"] * 100})
         if abs(res["truth_floor_m"]) > TRUTH_OFF_FLOOR_M:
