@@ -105,6 +105,27 @@ def test_site_jitter_moves_sites_per_clip(tmp_path: Path, body) -> None:
     assert float(moved.max()) <= 0.05 + 1e-6
 
 
+def test_rest_offsets_turn_each_train_clip_by_its_own_draw(tmp_path: Path, body) -> None:
+    """aug_rest_offset_deg: in place (no extra ids), per clip, reproducible, up to the angle, and
+    only in the training split's store; the fingerprint changes, runs without it keep theirs."""
+    store = Store(tmp_path, {"train": 2, "val": 1})
+    ids = store.clips("train")
+    cfg = tiny(aug_rest_offset_deg=25.0)
+    ts, got, extra = training_source("train", store, ids, cfg, body, "empose")
+    assert got == ids and extra["mix"]["augment"]["rest_offset_deg"] == 25.0
+    assert "rest_offset_deg" not in TrainingMix.from_config(tiny(aug_mirror=True)).settings()["augment"]
+    a, a2, b = ts.load(ids[0]), ts.load(ids[0]), ts.load(ids[1])
+    plain_a, plain_b = store.load(ids[0]), store.load(ids[1])
+    assert torch.equal(a.pose, a2.pose) and a.meta["augment"] == ["rest_offset"]
+    da = torch.rad2deg(geodesic_angle(a.pose[:, 1:], plain_a.pose[:, 1:].to(a.pose)))
+    db = torch.rad2deg(geodesic_angle(b.pose[:, 1:], plain_b.pose[:, 1:].to(b.pose)))
+    assert float(da.max()) <= 2 * 25.0 + 1e-4 and float(da.mean()) > 1.0  # a local turn is C_p^T R C_j: two offsets
+    assert not torch.allclose(da, db)  # each clip its own offsets
+    assert training_source("val", store, store.clips("val"), cfg, body, "empose")[0] is store
+    assert "25 deg" in TrainingMix.from_config(cfg).describe()
+    assert TrainingMix.from_config(cfg).corpus_settings()["rest_offset_deg"] == 25.0
+
+
 def test_empose_train_split_holds_the_wearers_shapes(tmp_path: Path, body) -> None:
     """EM-POSE's shape target follows the wearer, so its shape estimate trains (issue 24.5)."""
     store = Store(tmp_path / "store", {"train": 2, "val": 1})
@@ -118,17 +139,17 @@ def test_empose_train_split_holds_the_wearers_shapes(tmp_path: Path, body) -> No
 
 
 @pytest.mark.parametrize("bad", [{"aug_speed_copies": -1}, {"procedural_per_family": -2}, {"aug_site_jitter_m": 0.5},
-                                 {"train_shapes": "giant"}, {"aug_speed_range": (1.2, 0.9)}])
+                                 {"aug_rest_offset_deg": 60.0}, {"train_shapes": "giant"}, {"aug_speed_range": (1.2, 0.9)}])
 def test_config_refuses_bad_mix_fields(bad) -> None:
     with pytest.raises(ConfigError, match=next(iter(bad))):
         tiny(**bad)
 
 
 def test_train_run_sets_seed_and_mix_on_the_config() -> None:
-    run = TrainRun(seed=7, mirror=True, procedural=3, shapes="random", site_jitter=0.02)
+    run = TrainRun(seed=7, mirror=True, procedural=3, shapes="random", site_jitter=0.02, rest_offset=20.0)
     cfg = tiny().override(**run.config_overrides())
-    assert (cfg.seed, cfg.aug_mirror, cfg.procedural_per_family, cfg.train_shapes, cfg.aug_site_jitter_m) == \
-        (7, True, 3, "random", 0.02)
+    assert (cfg.seed, cfg.aug_mirror, cfg.procedural_per_family, cfg.train_shapes, cfg.aug_site_jitter_m,
+            cfg.aug_rest_offset_deg) == (7, True, 3, "random", 0.02, 20.0)
     assert tiny().override(**TrainRun().config_overrides()) == tiny()  # nothing given: the preset's
 
 

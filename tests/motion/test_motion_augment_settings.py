@@ -14,7 +14,8 @@ from wearpose.body import BodyModel
 from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.motion.augment import (
-    LOWER_BODY, AugmentSettings, augment_clip, augmented_ids, jitter_sites, mix_parts, rotate_heading,
+    LOWER_BODY, AugmentSettings, augment_clip, augmented_ids, jitter_sites, mix_parts, offset_rest,
+    random_rest_offsets, rotate_heading,
 )
 
 
@@ -34,6 +35,39 @@ def test_heading_turns_every_joint_about_the_vertical(body: BodyModel) -> None:
     Ry = rotation_y(torch.tensor(math.radians(70.0), dtype=torch.float64))
     assert torch.allclose(J1, J0 @ Ry.T, atol=1e-5)
     assert out.meta["augment"] == ["heading=70"]
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_rest_offset_turns_every_joint_frame_by_its_constant(body: BodyModel, dtype: torch.dtype) -> None:
+    """G'_j = G_j C_j for every joint and frame (the global frames from the body's own FK)."""
+    seq = smooth_motion(T=12, seed=4).to(dtype)
+    C = random_rest_offsets(30.0, torch.Generator().manual_seed(3))
+    out = offset_rest(seq, C)
+    assert out.pose.dtype == dtype and out.meta["augment"] == ["rest_offset"]
+    G0 = body(seq.pose, seq.betas, seq.trans, return_vertices=False).global_rot.double()
+    G1 = body(out.pose, out.betas, out.trans, return_vertices=False).global_rot.double()
+    assert torch.allclose(G1, G0 @ C, atol=1e-5)
+    assert torch.equal(out.trans, seq.trans)
+    # rotations stay rotations (float32 included)
+    eye = torch.eye(3, dtype=dtype)
+    assert torch.allclose(out.pose @ out.pose.transpose(-1, -2), eye.expand_as(out.pose), atol=1e-5)
+
+
+def test_random_rest_offsets_stay_within_the_angle_and_follow_the_generator() -> None:
+    from wearpose.geometry import geodesic_angle
+
+    a = random_rest_offsets(20.0, torch.Generator().manual_seed(1))
+    b = random_rest_offsets(20.0, torch.Generator().manual_seed(1))
+    c = random_rest_offsets(20.0, torch.Generator().manual_seed(2))
+    ang = torch.rad2deg(geodesic_angle(a, torch.eye(3, dtype=a.dtype).expand_as(a)))
+    assert a.shape == (24, 3, 3) and torch.equal(a, b) and not torch.equal(a, c)
+    assert float(ang.max()) <= 20.0 + 1e-9 and float(ang.max()) > 10.0  # 24 uniform draws: one above half
+    assert torch.allclose(random_rest_offsets(0.0, torch.Generator()), torch.eye(3, dtype=torch.float64).expand(24, 3, 3))
+
+
+def test_rest_offset_refuses_a_wrong_shape() -> None:
+    with pytest.raises(ShapeError, match=r"expected \(24, 3, 3\)"):
+        offset_rest(smooth_motion(T=4, seed=1), torch.eye(3).expand(22, 3, 3))
 
 
 def test_mix_parts_takes_legs_and_path_from_lower(body: BodyModel) -> None:

@@ -136,6 +136,9 @@ MIX_OPTIONS: tuple[TrainOption, ...] = (
                 int, min=0),
     TrainOption("site_jitter", None, "Strap every simulated sensor up to M metres off its site, drawn per "
                                      "training clip.", float, min=0.0, max=0.1),
+    TrainOption("rest_offset", None, "Turn every joint of every training clip by a constant offset of up to DEG "
+                                     "degrees, drawn per clip (another capture chain's rest pose).", float,
+                min=0.0, max=45.0),
     TrainOption("procedural", None, "Add N procedural clips of each motion family the corpus lacks (squat, kneel, "
                                     "pick up, sit, lie down, crawl, reach).", int, min=0),
     TrainOption("shapes", None, "Wearers of the training clips: corpus (the clips' own body) or random (an adult "
@@ -167,6 +170,7 @@ class TrainRun:
     heading_copies: int | None = None
     mix_copies: int | None = None
     site_jitter: float | None = None
+    rest_offset: float | None = None
     procedural: int | None = None
     shapes: str | None = None
     families: str | None = None
@@ -180,7 +184,8 @@ class TrainRun:
         preset's; ``config.override`` skips them)."""
         return {"seed": self.seed, "aug_mirror": self.mirror or None, "aug_speed_copies": self.speed_copies,
                 "aug_heading_copies": self.heading_copies, "aug_mix_copies": self.mix_copies,
-                "aug_site_jitter_m": self.site_jitter, "procedural_per_family": self.procedural,
+                "aug_site_jitter_m": self.site_jitter, "aug_rest_offset_deg": self.rest_offset,
+                "procedural_per_family": self.procedural,
                 "train_shapes": self.shapes,
                 "procedural_families": None if self.families is None else tuple(
                     f.strip() for f in self.families.split(",") if f.strip())}

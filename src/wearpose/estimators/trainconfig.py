@@ -34,7 +34,9 @@ class TrainConfig(ConfigIO):
     image of every corpus clip; ``aug_speed_copies`` copies played at a speed drawn from
     ``aug_speed_range`` (log-uniform); ``aug_heading_copies`` copies turned to a random heading;
     ``aug_mix_copies`` copies whose upper body comes from another clip; ``aug_site_jitter_m``
-    sensors strapped up to that far (m) off their sites, drawn per clip; ``procedural_per_family``
+    sensors strapped up to that far (m) off their sites, drawn per clip; ``aug_rest_offset_deg``
+    every joint turned by a constant offset of up to that many degrees, drawn per clip (another
+    capture chain's rest pose, :func:`wearpose.motion.augment.offset_rest`); ``procedural_per_family``
     procedural clips of each family of :mod:`wearpose.motion.procedural` (squat, kneel, ...);
     ``procedural_families`` the families drawn (``()``: all seven; names are checked against
     the generator's where the mix is built, :meth:`wearpose.estimators.trainmix.TrainingMix.from_config`);
@@ -61,6 +63,7 @@ class TrainConfig(ConfigIO):
     aug_heading_copies: int = 0
     aug_mix_copies: int = 0
     aug_site_jitter_m: float = 0.0
+    aug_rest_offset_deg: float = 0.0
     procedural_per_family: int = 0
     procedural_families: tuple[str, ...] = ()
     train_shapes: str = "corpus"
@@ -79,6 +82,8 @@ class TrainConfig(ConfigIO):
                               f"got {self.aug_speed_range!r}")
         if not 0.0 <= self.aug_site_jitter_m <= 0.1:
             raise ConfigError(f"{name}.aug_site_jitter_m: expected 0-0.1 m, got {self.aug_site_jitter_m!r}")
+        if not 0.0 <= self.aug_rest_offset_deg <= 45.0:
+            raise ConfigError(f"{name}.aug_rest_offset_deg: expected 0-45 deg, got {self.aug_rest_offset_deg!r}")
         fams = tuple(self.procedural_families)
         if len(set(fams)) != len(fams) or not all(isinstance(f, str) and f for f in fams):
             raise ConfigError(f"{name}.procedural_families: expected distinct family names, got {self.procedural_families!r}")

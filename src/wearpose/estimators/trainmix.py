@@ -17,7 +17,10 @@ method's data builder iterates over:
   stream) and re-fitted to it (:func:`wearpose.motion.refit_to_body`); a clip has the same wearer
   for every method (seeded by the clip id in the ``train-body`` namespace, not per method);
 - **sensor placement**: :meth:`TrainingStore.body_for` gives the body whose sensor sites moved by
-  up to ``aug_site_jitter_m`` (:func:`wearpose.motion.augment.jitter_sites`), drawn per clip.
+  up to ``aug_site_jitter_m`` (:func:`wearpose.motion.augment.jitter_sites`), drawn per clip;
+- **capture chain**: with ``aug_rest_offset_deg`` every clip's joints are turned by constant
+  offsets drawn for it (:func:`wearpose.motion.augment.offset_rest`, namespace ``rest-offset``),
+  before its wearer is fitted.
 
 Validation and test splits never change: :func:`training_source` returns them as they are.
 :meth:`TrainingMix.settings` goes into the data fingerprint (empty when nothing is added, so the
@@ -33,7 +36,8 @@ import torch
 
 from wearpose.errors import ConfigError
 from wearpose.estimators.seeding import clip_seed
-from wearpose.motion.augment import AugmentSettings, augment_clip, augmented_ids, jitter_sites
+from wearpose.motion.augment import (AugmentSettings, augment_clip, augmented_ids, jitter_sites, offset_rest,
+                                     random_rest_offsets)
 from wearpose.motion.procedural import FAMILIES, PREFIX, procedural_clip
 from wearpose.motion.procedural import clip_id as procedural_id
 from wearpose.motion.sequence import MotionSequence
@@ -42,6 +46,8 @@ from wearpose.motion.sequence import MotionSequence
 BODY_NAMESPACE = "train-body"
 #: Seed namespace of the per-clip sensor-site draws (``aug_site_jitter_m``).
 JITTER_NAMESPACE = "site-jitter"
+#: Seed namespace of the per-clip joint offsets (``aug_rest_offset_deg``).
+REST_OFFSET_NAMESPACE = "rest-offset"
 #: Frame rate the procedural clips are made at (methods resample to their own).
 PROCEDURAL_FPS = 60.0
 
@@ -67,7 +73,8 @@ class TrainingMix:
         """The mix a :class:`~wearpose.estimators.trainconfig.TrainConfig` asks for."""
         aug = AugmentSettings(mirror=bool(cfg.aug_mirror), speed_copies=int(cfg.aug_speed_copies),
                               speed_range=tuple(cfg.aug_speed_range), heading_copies=int(cfg.aug_heading_copies),
-                              mix_copies=int(cfg.aug_mix_copies), site_jitter_m=float(cfg.aug_site_jitter_m))
+                              mix_copies=int(cfg.aug_mix_copies), site_jitter_m=float(cfg.aug_site_jitter_m),
+                              rest_offset_deg=float(cfg.aug_rest_offset_deg))
         families = tuple(cfg.procedural_families) or FAMILIES
         unknown = [f for f in families if f not in FAMILIES]
         if unknown:
@@ -83,7 +90,8 @@ class TrainingMix:
     @property
     def active(self) -> bool:
         """Whether the train split differs from its corpus clips at all."""
-        return self.adds_clips or self.shapes != "corpus" or self.augment.site_jitter_m > 0
+        return (self.adds_clips or self.shapes != "corpus" or self.augment.site_jitter_m > 0
+                or self.augment.rest_offset_deg > 0)
 
     def settings(self) -> dict[str, Any]:
         """What the data fingerprint holds of the mix: ``{}`` when inactive, else every field."""
@@ -94,10 +102,14 @@ class TrainingMix:
 
     def corpus_settings(self) -> dict[str, Any]:
         """What changes the *corpus* clips themselves (their wearers and sensor sites), for a
-        cache that keeps them apart from the added clips (PIP's): ``{}`` when neither does."""
-        if self.shapes == "corpus" and self.augment.site_jitter_m <= 0:
+        cache that keeps them apart from the added clips (PIP's): ``{}`` when none does."""
+        a = self.augment
+        if self.shapes == "corpus" and a.site_jitter_m <= 0 and a.rest_offset_deg <= 0:
             return {}
-        return {"wearers": self.shapes, "site_jitter_m": self.augment.site_jitter_m}
+        out: dict[str, Any] = {"wearers": self.shapes, "site_jitter_m": a.site_jitter_m}
+        if a.rest_offset_deg > 0:
+            out["rest_offset_deg"] = a.rest_offset_deg
+        return out
 
     def describe(self) -> str:
         """The weight card's sentence about the mix (``""`` when inactive): what the train split
@@ -123,6 +135,9 @@ class TrainingMix:
                          "re-fitted to it")
         if a.site_jitter_m > 0:
             extra.append(f"sensor sites jittered up to {a.site_jitter_m * 100:g} cm per clip")
+        if a.rest_offset_deg > 0:
+            extra.append(f"every clip's joints turned by constant offsets of up to {a.rest_offset_deg:g} deg drawn "
+                         "for it (another capture chain's rest pose; wearpose.motion.augment.offset_rest)")
         return "; ".join(x for x in (text, *extra) if x)
 
     def extra_ids(self, corpus_ids: Sequence[str]) -> list[str]:
@@ -173,12 +188,15 @@ class TrainingStore:
         return random_body_shape(clip_seed(clip_id, self.seed, BODY_NAMESPACE), num_betas, "random")
 
     def load(self, clip_id: str) -> MotionSequence:
-        """Corpus clip, augmented copy or procedural clip ``clip_id``, on its wearer."""
+        """Corpus clip, augmented copy or procedural clip ``clip_id``, on its wearer (with its joint
+        offsets first when ``aug_rest_offset_deg``; a procedural clip is made on its wearer)."""
         if clip_id.startswith(PREFIX):
             family, _, index = clip_id[len(PREFIX):].split("/")
-            return procedural_clip(family, int(index), self._body(), seed=self.seed, namespace="train",
-                                   fps=PROCEDURAL_FPS, body_shape=self.mix.shapes == "random")
+            return self._offset(clip_id, procedural_clip(family, int(index), self._body(), seed=self.seed,
+                                                         namespace="train", fps=PROCEDURAL_FPS,
+                                                         body_shape=self.mix.shapes == "random"))
         motion = self._augmented(clip_id) if "#" in clip_id else self.store.load(clip_id)
+        motion = self._offset(clip_id, motion)
         if self.mix.shapes == "corpus":
             return motion
         from wearpose.motion import refit_to_body  # start-up: motion adds ~91 ms to import this module
@@ -193,6 +211,13 @@ class TrainingStore:
             return body
         g = torch.Generator().manual_seed(clip_seed(clip_id, self.seed, JITTER_NAMESPACE))
         return jitter_sites(body, radius, g)
+
+    def _offset(self, clip_id: str, motion: MotionSequence) -> MotionSequence:
+        max_deg = self.mix.augment.rest_offset_deg
+        if max_deg <= 0:
+            return motion
+        g = torch.Generator().manual_seed(clip_seed(clip_id, self.seed, REST_OFFSET_NAMESPACE))
+        return offset_rest(motion, random_rest_offsets(max_deg, g, motion.pose.shape[1]))
 
     def _augmented(self, aid: str) -> MotionSequence:
         cid = aid.rsplit("#", 1)[0]
@@ -239,5 +264,5 @@ def clip_body(store: Any, clip_id: str, body: Any) -> Any:
     return store.body_for(clip_id, body) if isinstance(store, TrainingStore) else body
 
 
-__all__ = ["BODY_NAMESPACE", "JITTER_NAMESPACE", "PROCEDURAL_FPS", "TrainingMix", "TrainingStore", "clip_body",
+__all__ = ["BODY_NAMESPACE", "JITTER_NAMESPACE", "PROCEDURAL_FPS", "REST_OFFSET_NAMESPACE", "TrainingMix", "TrainingStore", "clip_body",
            "mix_clause", "training_source"]

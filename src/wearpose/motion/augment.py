@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from wearpose.body.skeleton import MIRROR
+from wearpose.body.skeleton import MIRROR, PARENTS
 from wearpose.errors import ConfigError, ShapeError
-from wearpose.geometry import mirror_points, mirror_rotation, rotation_y
+from wearpose.geometry import axis_angle_to_matrix, mirror_points, mirror_rotation, rotation_y
 from wearpose.motion.sequence import MotionSequence
 
 
@@ -142,6 +142,47 @@ def jitter_sites(body: Any, radius: float, generator: torch.Generator, names: An
     return out
 
 
+def offset_rest(seq: MotionSequence, offsets: torch.Tensor) -> MotionSequence:
+    """``seq`` as another capture chain would store it: every joint's frame turned by a constant
+    rotation, ``G'_j = G_j C_j`` (global orientation of joint ``j``), so the local rotations become
+    ``R'_j = C_parent(j)^T R_j C_j`` (root: ``R'_0 = R_0 C_0``). Two conversions of the same
+    captures differ so: CMU 02_01-04 through the Daz BVH and through CMU's ASF/AMC are 6-30 deg
+    apart per major joint, nearly constant over a take (docs/augmentation.md). The root path is
+    kept; positions of the joints below a turned joint move with it.
+
+    Args:
+        seq: ``T`` frames of the 24 SMPL joints; offsets: ``(24, 3, 3)`` rotations ``C_j``.
+
+    Returns:
+        A new sequence, ``meta["augment"]`` extended by ``"rest_offset"``.
+
+    Raises:
+        ShapeError: ``offsets`` not ``(J, 3, 3)`` for the sequence's ``J`` joints.
+    """
+    J = seq.pose.shape[1]
+    if tuple(offsets.shape) != (J, 3, 3) or J != len(PARENTS):
+        raise ShapeError(f"offset_rest: offsets of shape {tuple(offsets.shape)}; expected ({len(PARENTS)}, 3, 3) "
+                         f"for a sequence of {J} joints")
+    C = offsets.to(seq.pose)
+    parent_C = torch.stack([torch.eye(3, dtype=C.dtype) if p < 0 else C[p] for p in PARENTS])
+    pose = parent_C.transpose(-1, -2) @ seq.pose @ C
+    return MotionSequence(pose, seq.betas.clone(), seq.trans.clone(), seq.fps, _tagged(seq.meta, "rest_offset"))
+
+
+def random_rest_offsets(max_deg: float, generator: torch.Generator, num_joints: int = len(PARENTS)) -> torch.Tensor:
+    """``(num_joints, 3, 3)`` float64 rotations for :func:`offset_rest`: each about a uniformly
+    random axis by an angle uniform in ``[0, max_deg]`` degrees (three normal and one uniform draw
+    per joint from ``generator``)."""
+    axis = torch.randn(num_joints, 3, generator=generator, dtype=torch.float64)
+    axis = axis / axis.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    angle = torch.rand(num_joints, generator=generator, dtype=torch.float64) * math.radians(float(max_deg))
+    return axis_angle_to_matrix(axis * angle[:, None])
+
+
+#: Largest accepted :attr:`AugmentSettings.rest_offset_deg` (the chains measured differ by <= 30 deg
+#: at the major joints; beyond 45 a pose stops looking like the captured one).
+MAX_REST_OFFSET_DEG = 45.0
+
 @dataclass(frozen=True)
 class AugmentSettings:
     """Motion and placement augmentation of a method's *training* clips, in one recordable form
@@ -159,6 +200,10 @@ class AugmentSettings:
             (tags ``mix<k>``; the partner is drawn by the caller's generator).
         site_jitter_m: radius (m) of the random displacement of every sensor site, drawn per clip
             (0 = sensors at their nominal sites).
+        rest_offset_deg: every joint of every clip turned by a constant offset of up to this many
+            degrees, drawn per clip (:func:`offset_rest`: another capture chain's rest pose; 0 = off).
+            In place, no copies; left out of :meth:`to_dict` at 0, so fingerprints of runs without
+            it stay as they were.
     """
 
     mirror: bool = False
@@ -167,6 +212,7 @@ class AugmentSettings:
     heading_copies: int = 0
     mix_copies: int = 0
     site_jitter_m: float = 0.0
+    rest_offset_deg: float = 0.0
 
     def __post_init__(self) -> None:
         lo, hi = (float(x) for x in self.speed_range)
@@ -177,12 +223,17 @@ class AugmentSettings:
                 raise ConfigError(f"AugmentSettings.{name}: expected >= 0, got {getattr(self, name)!r}")
         if not (0.0 <= float(self.site_jitter_m) <= 0.1):
             raise ConfigError(f"AugmentSettings.site_jitter_m: expected 0-0.1 m, got {self.site_jitter_m!r}")
+        if not (0.0 <= float(self.rest_offset_deg) <= MAX_REST_OFFSET_DEG):
+            raise ConfigError(f"AugmentSettings.rest_offset_deg: expected 0-{MAX_REST_OFFSET_DEG:g} deg, "
+                              f"got {self.rest_offset_deg!r}")
         object.__setattr__(self, "speed_range", (lo, hi))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain values (lists for tuples), JSON/YAML-ready."""
         d = asdict(self)
         d["speed_range"] = list(self.speed_range)
+        if not self.rest_offset_deg:
+            del d["rest_offset_deg"]
         return d
 
     @classmethod
