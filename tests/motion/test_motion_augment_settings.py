@@ -14,8 +14,8 @@ from wearpose.body import BodyModel
 from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.motion.augment import (
-    LOWER_BODY, AugmentSettings, augment_clip, augmented_ids, jitter_sites, mix_parts, offset_rest,
-    random_rest_offsets, rotate_heading,
+    LOWER_BODY, AugmentSettings, augment_clip, augmented_ids, jitter_sites, joint_frame_offsets, mix_parts,
+    offset_rest, random_rest_offsets, rotate_heading,
 )
 
 
@@ -63,6 +63,21 @@ def test_random_rest_offsets_stay_within_the_angle_and_follow_the_generator() ->
     assert a.shape == (24, 3, 3) and torch.equal(a, b) and not torch.equal(a, c)
     assert float(ang.max()) <= 20.0 + 1e-9 and float(ang.max()) > 10.0  # 24 uniform draws: one above half
     assert torch.allclose(random_rest_offsets(0.0, torch.Generator()), torch.eye(3, dtype=torch.float64).expand(24, 3, 3))
+
+
+def test_joint_frame_offsets_recover_the_offsets_of_offset_rest() -> None:
+    from wearpose.geometry import geodesic_angle
+
+    seq = smooth_motion(T=20, seed=5).to(torch.float64)
+    C = random_rest_offsets(30.0, torch.Generator().manual_seed(8))
+    got = joint_frame_offsets(seq.pose, offset_rest(seq, C).pose)
+    assert torch.allclose(got.mean, C, atol=1e-9) and float(got.spread_deg.max()) < 1e-5
+    assert torch.allclose(got.angle_deg, torch.rad2deg(geodesic_angle(C, torch.eye(3, dtype=C.dtype).expand_as(C))),
+                          atol=1e-5)
+    same = joint_frame_offsets(seq.pose, seq.pose)
+    assert float(same.angle_deg.max()) < 1e-5 and float(same.local_deg.max()) < 1e-5
+    with pytest.raises(ShapeError, match="expected both"):
+        joint_frame_offsets(seq.pose, seq.pose[:-1])
 
 
 def test_rest_offset_refuses_a_wrong_shape() -> None:

@@ -179,6 +179,53 @@ def random_rest_offsets(max_deg: float, generator: torch.Generator, num_joints: 
     return axis_angle_to_matrix(axis * angle[:, None])
 
 
+@dataclass(frozen=True)
+class JointOffsets:
+    """What :func:`joint_frame_offsets` measures between two versions of one motion.
+
+    Attributes:
+        mean: ``(J, 3, 3)`` the constant offset ``C_j`` (chordal mean of ``G_a^T G_b`` over frames,
+            projected onto SO(3)); ``offset_rest(a, mean)`` is the closest constant-offset model of b.
+        angle_deg: ``(J,)`` its rotation angle, degrees.
+        spread_deg: ``(J,)`` mean angle between each frame's offset and ``mean``, degrees: how far
+            from constant the difference is.
+        local_deg: ``(J,)`` mean angle between the two versions' local rotations, degrees (what a
+            model's joint-angle targets see).
+    """
+
+    mean: torch.Tensor
+    angle_deg: torch.Tensor
+    spread_deg: torch.Tensor
+    local_deg: torch.Tensor
+
+
+def joint_frame_offsets(a: torch.Tensor, b: torch.Tensor) -> JointOffsets:
+    """How ``b`` differs from ``a`` as per-joint frame offsets, the model of :func:`offset_rest`.
+
+    Args:
+        a, b: ``(T, J, 3, 3)`` local rotations of the same motion, frame by frame (same rate,
+            aligned), on the SMPL tree (:data:`~wearpose.body.skeleton.PARENTS`).
+
+    Raises:
+        ShapeError: the shapes differ or are not ``(T, 24, 3, 3)``.
+    """
+    if a.shape != b.shape or a.dim() != 4 or tuple(a.shape[1:]) != (len(PARENTS), 3, 3):
+        raise ShapeError(f"joint_frame_offsets: shapes {tuple(a.shape)} and {tuple(b.shape)}; expected both "
+                         f"(T, {len(PARENTS)}, 3, 3)")
+    from wearpose.body.kinematics import forward_kinematics  # the rotation part only: rest joints at 0
+    from wearpose.geometry import geodesic_angle, project_to_so3
+
+    a, b = a.double(), b.double()
+    zeros = torch.zeros(len(PARENTS), 3, dtype=torch.float64)
+    Ga, Gb = forward_kinematics(a, zeros)[0], forward_kinematics(b, zeros)[0]
+    per_frame = Ga.transpose(-1, -2) @ Gb
+    mean = project_to_so3(per_frame.mean(0))
+    eye = torch.eye(3, dtype=torch.float64).expand_as(mean)
+    return JointOffsets(mean, torch.rad2deg(geodesic_angle(mean, eye)),
+                        torch.rad2deg(geodesic_angle(per_frame, mean.expand_as(per_frame))).mean(0),
+                        torch.rad2deg(geodesic_angle(a, b)).mean(0))
+
+
 #: Largest accepted :attr:`AugmentSettings.rest_offset_deg` (the chains measured differ by <= 30 deg
 #: at the major joints; beyond 45 a pose stops looking like the captured one).
 MAX_REST_OFFSET_DEG = 45.0
