@@ -6,8 +6,8 @@ Run: ``python benchmarks/chain_offsets.py [--out benchmarks/results/chain_offset
 The corpus holds CMU's takes 02_01-04 twice: through cgspeed's Daz BVH conversion
 (``cmu_daz/02``) and as CMU's own ASF/AMC (``crosscheck/cmu_asf/02``). Each version is imported
 onto SMPL-24 (:func:`wearpose.motion.import_motion`, the importer a user's file goes through),
-both are brought to 60 Hz, the Daz file's converter T-pose (its frame 0) is dropped, and the
-frames are aligned by the lag (within +-0.1 s) that makes the local rotations closest. Then
+both are brought to 60 Hz, the Daz file's first two frames are dropped (0 is the converter's
+T-pose, 1 still blends from it: tests/motion/crosscheck_testutils.py), and the frames are aligned by the lag (within +-0.1 s) that makes the local rotations closest. Then
 :func:`wearpose.motion.augment.joint_frame_offsets` per take: the constant per-joint offset
 between the versions, how constant it is, and the local-rotation difference a model sees. This is
 what ``--rest-offset`` (:func:`wearpose.motion.augment.offset_rest`) simulates; its recipes use
@@ -33,6 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 TAKES = ("02_01", "02_02", "02_03", "02_04")
 RATE_HZ = 60.0
 MAX_LAG = 6  # frames at 60 Hz
+DAZ_SKIP = 2  # the converter's T-pose and the frame blending from it
 
 
 def aligned(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, int]:
@@ -53,7 +54,7 @@ def measure(data: Path) -> dict:
     for take in TAKES:
         daz = resample(import_motion(data / "cmu_daz" / "02" / f"{take}.bvh.gz").sequence, RATE_HZ)
         asf = resample(import_motion(data / "crosscheck" / "cmu_asf" / "02" / f"{take}.amc.gz").sequence, RATE_HZ)
-        a, b, lag = aligned(daz.pose[1:], asf.pose)  # Daz frame 0: the converter's T-pose
+        a, b, lag = aligned(daz.pose[DAZ_SKIP:], asf.pose)
         off = joint_frame_offsets(a, b)
         takes[take] = {"frames": len(a), "lag_frames": lag, "angle_deg": off.angle_deg.tolist(),
                        "spread_deg": off.spread_deg.tolist(), "local_deg": off.local_deg.tolist()}

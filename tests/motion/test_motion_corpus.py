@@ -131,3 +131,24 @@ def test_cross_format_asf_amc_against_bvh() -> None:
         assert r["offset"] == 1 and s["root_spread_deg"] < 0.01, (take, r["offset"], s["root_spread_deg"])
         assert s["mean_cm"] <= 2.0, (take, s["mean_cm"])
         assert m["root_relative"]["mean_cm"] < 6.0 and m["travel_rescaled"]["mean_cm"] < 7.0, (take, m["root_relative"])
+
+
+@pytest.mark.budget(30)  # one 120 Hz AMC import and one BVH import (see the test above)
+def test_two_conversion_chains_differ_by_nearly_constant_joint_offsets() -> None:
+    """The premise of ``--rest-offset`` (docs/augmentation.md, benchmarks/chain_offsets.py): take
+    02_01 through the Daz BVH and through CMU's ASF/AMC differs, joint by joint, by an offset that
+    is large (collars about 30 deg) yet nearly constant over the take (spread a few degrees)."""
+    if not (DATA / "crosscheck" / "cmu_asf" / "02").is_dir():
+        pytest.skip("corpus v2 crosscheck/ folder not present")
+    from wearpose.body.skeleton import JOINT_INDEX
+    from wearpose.motion import import_motion, resample
+    from wearpose.motion.augment import joint_frame_offsets
+
+    daz = resample(import_motion(DATA / "cmu_daz" / "02" / "02_01.bvh.gz").sequence, 60.0).pose[2:]
+    asf = resample(import_motion(DATA / "crosscheck" / "cmu_asf" / "02" / "02_01.amc.gz").sequence, 60.0).pose
+    n = min(len(daz), len(asf) - 1)
+    off = joint_frame_offsets(daz[:n], asf[1:n + 1])  # lag of one frame (benchmarks/chain_offsets.md)
+    for name in ("left_collar", "right_collar", "neck"):
+        j = JOINT_INDEX[name]
+        assert float(off.angle_deg[j]) > 20.0 and float(off.spread_deg[j]) < 6.0, (name, off.angle_deg[j], off.spread_deg[j])
+    assert float(off.spread_deg.max()) < 15.0
