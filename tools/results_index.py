@@ -71,6 +71,8 @@ NOTES = {
     **{k: "recipe imuposer_cpu_v2, run and not shipped (v3, 7 epochs, lower on validation: 57.6 against 58.8 mm)"
        for k in ("generalisation_imuposer_v2_test", "generalisation_imuposer_v2_unseen_motion",
                  "generalisation_imuposer_v2_heldout_bodies")},
+    **{k: "recipe empose12_cpu_v7, run and not shipped (test 14.7 mm against the shipped v6's 13.4; docs/empose.md)"
+       for k in ("generalisation_empose12_v7_test", "generalisation_empose12_chain_v7_asf_takes")},
     "recipe_reproduction": "its empose12_cpu_v5 row's reference, 'shipped empose12_cpu', is now archive:empose12_cpu_v5",
     "latency_empose6_cpu": "empose6_cpu v1 (archive:empose6_cpu_v1); v3 has the same architecture, so the same cost",
     "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals')",
