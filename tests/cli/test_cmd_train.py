@@ -62,11 +62,12 @@ def _options(method: str) -> dict[str, Any]:
 #: Options every method's command gained since (issue 24: --source, the unseen-lab protocol's training side).
 ADDED: dict[str, Any] = {"--source": None}
 #: Options the four methods gained with the shared training mix (issue 24.3, MIX_OPTIONS): the seed,
-#: --init-from for every one, and the mix (--families: which procedural families). PIP's --speed-copies was 0 and is None now: "the preset's",
+#: --init-from for every one, and the mix (--families: which procedural families; --rest-offset: the
+#: capture-chain offsets). PIP's --speed-copies was 0 and is None now: "the preset's",
 #: which is 0 in every preset (the same run).
 MIX_ADDED: dict[str, Any] = {"--seed": None, "--init-from": None, "--mirror": False, "--speed-copies": None,
                              "--heading-copies": None, "--mix-copies": None, "--site-jitter": None,
-                             "--procedural": None, "--shapes": None, "--families": None}
+                             "--rest-offset": None, "--procedural": None, "--shapes": None, "--families": None}
 #: Own options the methods gained since: --lr for EM-POSE and MI-Poser (fine-tuning recipes);
 #: EM-POSE's --lambda-shape (issue 24: with wearers of every size the shape loss outweighs the pose loss).
 OWN_ADDED: dict[str, dict[str, Any]] = {"empose": {"--lr": None, "--lambda-shape": None}, "miposer": {"--lr": None}}

@@ -264,5 +264,5 @@ def clip_body(store: Any, clip_id: str, body: Any) -> Any:
     return store.body_for(clip_id, body) if isinstance(store, TrainingStore) else body
 
 
-__all__ = ["BODY_NAMESPACE", "JITTER_NAMESPACE", "PROCEDURAL_FPS", "REST_OFFSET_NAMESPACE", "TrainingMix", "TrainingStore", "clip_body",
-           "mix_clause", "training_source"]
+__all__ = ["BODY_NAMESPACE", "JITTER_NAMESPACE", "PROCEDURAL_FPS", "REST_OFFSET_NAMESPACE", "TrainingMix",
+           "TrainingStore", "clip_body", "mix_clause", "training_source"]

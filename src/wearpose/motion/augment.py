@@ -18,9 +18,12 @@ from typing import Any
 import numpy as np
 import torch
 
+from wearpose.body.kinematics import forward_kinematics
 from wearpose.body.skeleton import MIRROR, PARENTS
 from wearpose.errors import ConfigError, ShapeError
-from wearpose.geometry import axis_angle_to_matrix, mirror_points, mirror_rotation, rotation_y
+from wearpose.geometry import (
+    axis_angle_to_matrix, geodesic_angle, mirror_points, mirror_rotation, project_to_so3, rotation_y,
+)
 from wearpose.motion.sequence import MotionSequence
 
 
@@ -146,8 +149,8 @@ def offset_rest(seq: MotionSequence, offsets: torch.Tensor) -> MotionSequence:
     """``seq`` as another capture chain would store it: every joint's frame turned by a constant
     rotation, ``G'_j = G_j C_j`` (global orientation of joint ``j``), so the local rotations become
     ``R'_j = C_parent(j)^T R_j C_j`` (root: ``R'_0 = R_0 C_0``). Two conversions of the same
-    captures differ so: CMU 02_01-04 through the Daz BVH and through CMU's ASF/AMC are 6-30 deg
-    apart per major joint, nearly constant over a take (docs/augmentation.md). The root path is
+    captures differ so: CMU 02_01-04 through the Daz BVH and through CMU's ASF/AMC are up to 30
+    deg apart per major joint (collars), nearly constant over a take (docs/augmentation.md). The root path is
     kept; positions of the joints below a turned joint move with it.
 
     Args:
@@ -212,11 +215,8 @@ def joint_frame_offsets(a: torch.Tensor, b: torch.Tensor) -> JointOffsets:
     if a.shape != b.shape or a.dim() != 4 or tuple(a.shape[1:]) != (len(PARENTS), 3, 3):
         raise ShapeError(f"joint_frame_offsets: shapes {tuple(a.shape)} and {tuple(b.shape)}; expected both "
                          f"(T, {len(PARENTS)}, 3, 3)")
-    from wearpose.body.kinematics import forward_kinematics  # the rotation part only: rest joints at 0
-    from wearpose.geometry import geodesic_angle, project_to_so3
-
     a, b = a.double(), b.double()
-    zeros = torch.zeros(len(PARENTS), 3, dtype=torch.float64)
+    zeros = torch.zeros(len(PARENTS), 3, dtype=torch.float64)  # the rotation part only: rest joints at 0
     Ga, Gb = forward_kinematics(a, zeros)[0], forward_kinematics(b, zeros)[0]
     per_frame = Ga.transpose(-1, -2) @ Gb
     mean = project_to_so3(per_frame.mean(0))
