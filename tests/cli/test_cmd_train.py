@@ -67,7 +67,8 @@ ADDED: dict[str, Any] = {"--source": None}
 #: which is 0 in every preset (the same run).
 MIX_ADDED: dict[str, Any] = {"--seed": None, "--init-from": None, "--mirror": False, "--speed-copies": None,
                              "--heading-copies": None, "--mix-copies": None, "--site-jitter": None,
-                             "--rest-offset": None, "--procedural": None, "--shapes": None, "--families": None}
+                             "--rest-offset": None, "--rest-offset-joints": None,
+                             "--procedural": None, "--shapes": None, "--families": None}
 #: Own options the methods gained since: --lr for EM-POSE and MI-Poser (fine-tuning recipes);
 #: EM-POSE's --lambda-shape (issue 24: with wearers of every size the shape loss outweighs the pose loss).
 OWN_ADDED: dict[str, dict[str, Any]] = {"empose": {"--lr": None, "--lambda-shape": None}, "miposer": {"--lr": None}}

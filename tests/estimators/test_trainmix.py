@@ -124,6 +124,17 @@ def test_rest_offsets_turn_each_train_clip_by_its_own_draw(tmp_path: Path, body)
     assert training_source("val", store, store.clips("val"), cfg, body, "empose")[0] is store
     assert "25 deg" in TrainingMix.from_config(cfg).describe()
     assert TrainingMix.from_config(cfg).corpus_settings()["rest_offset_deg"] == 25.0
+    # on named joints only: the others keep the corpus rotation
+    ts2, _, _ = training_source("train", store, ids, tiny(aug_rest_offset_deg=25.0, aug_rest_offset_joints=("neck",)),
+                                body, "empose")
+    c = ts2.load(ids[0])
+    d = torch.rad2deg(geodesic_angle(c.pose, plain_a.pose.to(c.pose)))
+    from wearpose.body.skeleton import JOINT_INDEX, PARENTS
+
+    moved = {JOINT_INDEX["neck"], *[j for j, p in enumerate(PARENTS) if p == JOINT_INDEX["neck"]]}
+    assert float(d[:, sorted(moved)].max()) > 0.5 and float(d[:, [j for j in range(24) if j not in moved]].max()) < 1e-3
+    assert "the neck joints" in TrainingMix.from_config(tiny(aug_rest_offset_deg=25.0,
+                                                             aug_rest_offset_joints=("neck",))).describe()
 
 
 def test_empose_train_split_holds_the_wearers_shapes(tmp_path: Path, body) -> None:
@@ -146,10 +157,12 @@ def test_config_refuses_bad_mix_fields(bad) -> None:
 
 
 def test_train_run_sets_seed_and_mix_on_the_config() -> None:
-    run = TrainRun(seed=7, mirror=True, procedural=3, shapes="random", site_jitter=0.02, rest_offset=20.0)
+    run = TrainRun(seed=7, mirror=True, procedural=3, shapes="random", site_jitter=0.02, rest_offset=20.0,
+                   rest_offset_joints="neck, left_collar")
     cfg = tiny().override(**run.config_overrides())
     assert (cfg.seed, cfg.aug_mirror, cfg.procedural_per_family, cfg.train_shapes, cfg.aug_site_jitter_m,
-            cfg.aug_rest_offset_deg) == (7, True, 3, "random", 0.02, 20.0)
+            cfg.aug_rest_offset_deg, cfg.aug_rest_offset_joints) == (7, True, 3, "random", 0.02, 20.0,
+                                                                     ("neck", "left_collar"))
     assert tiny().override(**TrainRun().config_overrides()) == tiny()  # nothing given: the preset's
 
 

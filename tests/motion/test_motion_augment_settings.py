@@ -80,6 +80,21 @@ def test_joint_frame_offsets_recover_the_offsets_of_offset_rest() -> None:
         joint_frame_offsets(seq.pose, seq.pose[:-1])
 
 
+def test_rest_offsets_on_named_joints_only_keep_the_full_draw_there() -> None:
+    full = random_rest_offsets(30.0, torch.Generator().manual_seed(4))
+    some = random_rest_offsets(30.0, torch.Generator().manual_seed(4), joints=(13, 14, 12))
+    eye = torch.eye(3, dtype=torch.float64)
+    assert torch.equal(some[[12, 13, 14]], full[[12, 13, 14]])
+    others = [j for j in range(24) if j not in (12, 13, 14)]
+    assert torch.allclose(some[others], eye.expand(len(others), 3, 3))
+    st = AugmentSettings(rest_offset_deg=20.0, rest_offset_joints=("neck", "left_collar"))
+    assert st.to_dict()["rest_offset_joints"] == ["neck", "left_collar"]
+    assert AugmentSettings.from_dict(json.loads(json.dumps(st.to_dict()))) == st
+    assert "rest_offset_joints" not in AugmentSettings(rest_offset_deg=20.0).to_dict()
+    with pytest.raises(ConfigError, match="unknown joints.*'elbow'"):
+        AugmentSettings(rest_offset_deg=20.0, rest_offset_joints=("elbow",))
+
+
 def test_rest_offset_refuses_a_wrong_shape() -> None:
     with pytest.raises(ShapeError, match=r"expected \(24, 3, 3\)"):
         offset_rest(smooth_motion(T=4, seed=1), torch.eye(3).expand(22, 3, 3))

@@ -139,6 +139,8 @@ MIX_OPTIONS: tuple[TrainOption, ...] = (
     TrainOption("rest_offset", None, "Turn every joint of every training clip by a constant offset of up to DEG "
                                      "degrees, drawn per clip (another capture chain's rest pose).", float,
                 min=0.0, max=45.0),
+    TrainOption("rest_offset_joints", None, "The joints --rest-offset turns, comma-separated SMPL names (default: "
+                                            "all), e.g. left_collar,right_collar,neck.", str),
     TrainOption("procedural", None, "Add N procedural clips of each motion family the corpus lacks (squat, kneel, "
                                     "pick up, sit, lie down, crawl, reach).", int, min=0),
     TrainOption("shapes", None, "Wearers of the training clips: corpus (the clips' own body) or random (an adult "
@@ -171,6 +173,7 @@ class TrainRun:
     mix_copies: int | None = None
     site_jitter: float | None = None
     rest_offset: float | None = None
+    rest_offset_joints: str | None = None
     procedural: int | None = None
     shapes: str | None = None
     families: str | None = None
@@ -185,6 +188,8 @@ class TrainRun:
         return {"seed": self.seed, "aug_mirror": self.mirror or None, "aug_speed_copies": self.speed_copies,
                 "aug_heading_copies": self.heading_copies, "aug_mix_copies": self.mix_copies,
                 "aug_site_jitter_m": self.site_jitter, "aug_rest_offset_deg": self.rest_offset,
+                "aug_rest_offset_joints": None if self.rest_offset_joints is None else tuple(
+                    j.strip() for j in self.rest_offset_joints.split(",") if j.strip()),
                 "procedural_per_family": self.procedural,
                 "train_shapes": self.shapes,
                 "procedural_families": None if self.families is None else tuple(

@@ -36,7 +36,8 @@ class TrainConfig(ConfigIO):
     ``aug_mix_copies`` copies whose upper body comes from another clip; ``aug_site_jitter_m``
     sensors strapped up to that far (m) off their sites, drawn per clip; ``aug_rest_offset_deg``
     every joint turned by a constant offset of up to that many degrees, drawn per clip (another
-    capture chain's rest pose, :func:`wearpose.motion.augment.offset_rest`); ``procedural_per_family``
+    capture chain's rest pose, :func:`wearpose.motion.augment.offset_rest`), on the SMPL joints
+    named in ``aug_rest_offset_joints`` (``()``: all); ``procedural_per_family``
     procedural clips of each family of :mod:`wearpose.motion.procedural` (squat, kneel, ...);
     ``procedural_families`` the families drawn (``()``: all seven; names are checked against
     the generator's where the mix is built, :meth:`wearpose.estimators.trainmix.TrainingMix.from_config`);
@@ -48,7 +49,7 @@ class TrainConfig(ConfigIO):
     LR_SCHEDULES: ClassVar[tuple[str, ...]] = ("constant", "cosine")
     #: ``train_shapes`` values.
     TRAIN_SHAPES: ClassVar[tuple[str, ...]] = ("corpus", "random")
-    TUPLE_FIELDS = {"aug_speed_range": float, "procedural_families": str}
+    TUPLE_FIELDS = {"aug_speed_range": float, "procedural_families": str, "aug_rest_offset_joints": str}
 
     seed: int = 0
     val_clips: int = 0
@@ -64,6 +65,7 @@ class TrainConfig(ConfigIO):
     aug_mix_copies: int = 0
     aug_site_jitter_m: float = 0.0
     aug_rest_offset_deg: float = 0.0
+    aug_rest_offset_joints: tuple[str, ...] = ()
     procedural_per_family: int = 0
     procedural_families: tuple[str, ...] = ()
     train_shapes: str = "corpus"

@@ -34,6 +34,7 @@ from typing import Any, Sequence
 
 import torch
 
+from wearpose.body.skeleton import JOINT_INDEX
 from wearpose.errors import ConfigError
 from wearpose.estimators.seeding import clip_seed
 from wearpose.motion.augment import (AugmentSettings, augment_clip, augmented_ids, jitter_sites, offset_rest,
@@ -74,7 +75,8 @@ class TrainingMix:
         aug = AugmentSettings(mirror=bool(cfg.aug_mirror), speed_copies=int(cfg.aug_speed_copies),
                               speed_range=tuple(cfg.aug_speed_range), heading_copies=int(cfg.aug_heading_copies),
                               mix_copies=int(cfg.aug_mix_copies), site_jitter_m=float(cfg.aug_site_jitter_m),
-                              rest_offset_deg=float(cfg.aug_rest_offset_deg))
+                              rest_offset_deg=float(cfg.aug_rest_offset_deg),
+                              rest_offset_joints=tuple(cfg.aug_rest_offset_joints))
         families = tuple(cfg.procedural_families) or FAMILIES
         unknown = [f for f in families if f not in FAMILIES]
         if unknown:
@@ -109,6 +111,8 @@ class TrainingMix:
         out: dict[str, Any] = {"wearers": self.shapes, "site_jitter_m": a.site_jitter_m}
         if a.rest_offset_deg > 0:
             out["rest_offset_deg"] = a.rest_offset_deg
+        if a.rest_offset_deg > 0 and a.rest_offset_joints:
+            out["rest_offset_joints"] = list(a.rest_offset_joints)
         return out
 
     def describe(self) -> str:
@@ -136,8 +140,9 @@ class TrainingMix:
         if a.site_jitter_m > 0:
             extra.append(f"sensor sites jittered up to {a.site_jitter_m * 100:g} cm per clip")
         if a.rest_offset_deg > 0:
-            extra.append(f"every clip's joints turned by constant offsets of up to {a.rest_offset_deg:g} deg drawn "
-                         "for it (another capture chain's rest pose; wearpose.motion.augment.offset_rest)")
+            which = f"the {', '.join(a.rest_offset_joints)} joints" if a.rest_offset_joints else "every clip's joints"
+            extra.append(f"{which} turned by constant offsets of up to {a.rest_offset_deg:g} deg drawn per clip "
+                         "(another capture chain's rest pose; wearpose.motion.augment.offset_rest)")
         return "; ".join(x for x in (text, *extra) if x)
 
     def extra_ids(self, corpus_ids: Sequence[str]) -> list[str]:
@@ -217,7 +222,8 @@ class TrainingStore:
         if max_deg <= 0:
             return motion
         g = torch.Generator().manual_seed(clip_seed(clip_id, self.seed, REST_OFFSET_NAMESPACE))
-        return offset_rest(motion, random_rest_offsets(max_deg, g, motion.pose.shape[1]))
+        joints = tuple(JOINT_INDEX[n] for n in self.mix.augment.rest_offset_joints)
+        return offset_rest(motion, random_rest_offsets(max_deg, g, motion.pose.shape[1], joints))
 
     def _augmented(self, aid: str) -> MotionSequence:
         cid = aid.rsplit("#", 1)[0]

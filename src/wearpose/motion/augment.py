@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from wearpose.body.kinematics import forward_kinematics
-from wearpose.body.skeleton import MIRROR, PARENTS
+from wearpose.body.skeleton import JOINT_INDEX, MIRROR, PARENTS
 from wearpose.errors import ConfigError, ShapeError
 from wearpose.geometry import (
     axis_angle_to_matrix, geodesic_angle, mirror_points, mirror_rotation, project_to_so3, rotation_y,
@@ -172,13 +172,19 @@ def offset_rest(seq: MotionSequence, offsets: torch.Tensor) -> MotionSequence:
     return MotionSequence(pose, seq.betas.clone(), seq.trans.clone(), seq.fps, _tagged(seq.meta, "rest_offset"))
 
 
-def random_rest_offsets(max_deg: float, generator: torch.Generator, num_joints: int = len(PARENTS)) -> torch.Tensor:
+def random_rest_offsets(max_deg: float, generator: torch.Generator, num_joints: int = len(PARENTS),
+                        joints: tuple[int, ...] = ()) -> torch.Tensor:
     """``(num_joints, 3, 3)`` float64 rotations for :func:`offset_rest`: each about a uniformly
     random axis by an angle uniform in ``[0, max_deg]`` degrees (three normal and one uniform draw
-    per joint from ``generator``)."""
+    per joint from ``generator``, every joint drawn so a subset keeps the others' draws); with
+    ``joints`` (indices) the other joints get the identity."""
     axis = torch.randn(num_joints, 3, generator=generator, dtype=torch.float64)
     axis = axis / axis.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     angle = torch.rand(num_joints, generator=generator, dtype=torch.float64) * math.radians(float(max_deg))
+    if joints:
+        keep = torch.zeros(num_joints, dtype=torch.bool)
+        keep[list(joints)] = True
+        angle = torch.where(keep, angle, torch.zeros_like(angle))
     return axis_angle_to_matrix(axis * angle[:, None])
 
 
@@ -251,6 +257,8 @@ class AugmentSettings:
             degrees, drawn per clip (:func:`offset_rest`: another capture chain's rest pose; 0 = off).
             In place, no copies; left out of :meth:`to_dict` at 0, so fingerprints of runs without
             it stay as they were.
+        rest_offset_joints: the SMPL joint names that get offsets (``()``: every joint); left out of
+            :meth:`to_dict` when empty.
     """
 
     mirror: bool = False
@@ -260,6 +268,7 @@ class AugmentSettings:
     mix_copies: int = 0
     site_jitter_m: float = 0.0
     rest_offset_deg: float = 0.0
+    rest_offset_joints: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         lo, hi = (float(x) for x in self.speed_range)
@@ -273,7 +282,12 @@ class AugmentSettings:
         if not (0.0 <= float(self.rest_offset_deg) <= MAX_REST_OFFSET_DEG):
             raise ConfigError(f"AugmentSettings.rest_offset_deg: expected 0-{MAX_REST_OFFSET_DEG:g} deg, "
                               f"got {self.rest_offset_deg!r}")
+        unknown = [n for n in self.rest_offset_joints if n not in JOINT_INDEX]
+        if unknown:
+            raise ConfigError(f"AugmentSettings.rest_offset_joints: unknown joints {unknown}; expected SMPL names "
+                              f"({', '.join(JOINT_INDEX)})")
         object.__setattr__(self, "speed_range", (lo, hi))
+        object.__setattr__(self, "rest_offset_joints", tuple(self.rest_offset_joints))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain values (lists for tuples), JSON/YAML-ready."""
@@ -281,6 +295,10 @@ class AugmentSettings:
         d["speed_range"] = list(self.speed_range)
         if not self.rest_offset_deg:
             del d["rest_offset_deg"]
+        if self.rest_offset_joints:
+            d["rest_offset_joints"] = list(self.rest_offset_joints)
+        else:
+            del d["rest_offset_joints"]
         return d
 
     @classmethod
@@ -292,6 +310,8 @@ class AugmentSettings:
         kw = dict(d)
         if "speed_range" in kw:
             kw["speed_range"] = tuple(kw["speed_range"])
+        if "rest_offset_joints" in kw:
+            kw["rest_offset_joints"] = tuple(kw["rest_offset_joints"])
         return cls(**kw)
 
     def tags(self) -> list[str]:
