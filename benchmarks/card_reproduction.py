@@ -5,7 +5,7 @@ Run each model's test-split evaluation first, writing ``DIR/<model>.json``::
     wearpose evaluate empose12_cpu --threads 1 --out DIR/empose12_cpu          # and empose6_cpu
     wearpose evaluate pip_cpu --threads 1 --out DIR/pip_cpu                    # and birae6_cpu, birae3_cpu
     wearpose evaluate miposer_cpu --frame-stride 4 --threads 1 --out DIR/miposer_cpu
-    wearpose evaluate miposer1_cpu --frame-stride 8 --threads 1 --out DIR/miposer1_cpu
+    wearpose evaluate miposer1_cpu --frame-stride 4 --threads 1 --out DIR/miposer1_cpu
     wearpose evaluate imuposer_cpu --frame-stride 4 --threads 1 --out DIR/imuposer_cpu
     python benchmarks/empose_table10.py --ckpt 2-stage=src/wearpose/weights/empose12_twostage_cpu.pt --out DIR/table10_twostage
 
@@ -37,12 +37,12 @@ FIGURES: dict[str, list[tuple[str, tuple[str, ...], tuple[str, ...]]]] = {
         "mpjae_all_deg", "mpjae_distal_deg", "mpjae_tracking_deg", "mpjae_other_deg")]
        for m in ("birae6_cpu", "birae3_cpu")},
     # miposer_cpu's card (version 2, shipped from `wearpose evaluate`'s JSON) has the evaluation's own
-    # flat keys; miposer1_cpu's the older flat keys
+    # flat keys; miposer1_cpu's (version 2) and imuposer_cpu's (version 3) keep them under "metrics"
     "miposer_cpu": [(f"{c} upper MPJPE cm", (f"{c}_mpjpe_upper_cm",), ("metrics", f"{c}_mpjpe_upper_cm"))
                     for c in ("calibrated", "uncalibrated")],
-    "miposer1_cpu": [("calibrated upper MPJPE cm", ("mpjpe_upper_cm_calibrated",), ("metrics", "calibrated_mpjpe_upper_cm")),
-                     ("uncalibrated upper MPJPE cm", ("mpjpe_upper_cm_uncalibrated",), ("metrics", "uncalibrated_mpjpe_upper_cm"))],
-    "imuposer_cpu": [("upper MPJPE cm", ("mpjpe_upper_cm",), ("metrics", "mpjpe_upper_cm"))],
+    "miposer1_cpu": [(f"{c} upper MPJPE cm", ("metrics", f"{c}_mpjpe_upper_cm"), ("metrics", f"{c}_mpjpe_upper_cm"))
+                     for c in ("calibrated", "uncalibrated")],
+    "imuposer_cpu": [("upper MPJPE cm", ("metrics", "mpjpe_upper_cm"), ("metrics", "mpjpe_upper_cm"))],
 }
 
 

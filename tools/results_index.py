@@ -65,8 +65,6 @@ NOTES = {
     **{k: "empose12_cpu v5 (archive:empose12_cpu_v5), shipped until v6; v1, v5 and v6 in generalisation_empose12_v6_*"
        for k in ("generalisation_empose12_v5_test", "generalisation_empose12_v5_unseen_motion",
                  "generalisation_empose12_v5_heldout_bodies", "generalisation_empose12_v5_shapefit_heldout_bodies")},
-    "card_reproduction": "of the weights shipped at 9c751b6: its empose12_cpu (v5), empose6_cpu (v1), miposer1_cpu (v1) "
-                         "and imuposer_cpu (v1) rows are archived versions now; not re-run",
     "miposer_fig5": "its IMU-only column is imuposer_cpu v1 (archive:imuposer_cpu_v1); v3 in generalisation_imuposer_v3_*",
     **{k: "recipe imuposer_cpu_v2, run and not shipped (v3, 7 epochs, lower on validation: 57.6 against 58.8 mm)"
        for k in ("generalisation_imuposer_v2_test", "generalisation_imuposer_v2_unseen_motion",
