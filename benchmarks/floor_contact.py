@@ -59,11 +59,11 @@ def plot(models: list[str], clip: str, out: Path) -> int:
     from wearpose.evaluate.floor import clip_floor
 
     store, body = CorpusStore(), BodyModel()
+    m = store.load(clip)
     fig, axes = plt.subplots(len(models), 1, figsize=(8, 2.6 * len(models)), sharex=True, squeeze=False)
     for ax, spec in zip(axes[:, 0], models):
         name, _, model = spec.rpartition("=")
         source = open_model(model)
-        m = store.load(clip)
         res = clip_floor(source, m, body, rules=(None, CONTACT_SPEED_M_S))
         before, shipped = res["rules"]["every frame"], res["rules"][rule_name(CONTACT_SPEED_M_S)]
         t = torch.arange(len(shipped.e)) / (source.fps or m.fps)  # clip_floor scores at the model's rate

@@ -150,6 +150,12 @@ MIX_OPTIONS: tuple[TrainOption, ...] = (
 )
 
 
+def _names(text: str | None) -> tuple[str, ...] | None:
+    """A comma-separated option (``--families``, ``--rest-offset-joints``) as a tuple of names;
+    None (not given) stays None."""
+    return None if text is None else tuple(n.strip() for n in text.split(",") if n.strip())
+
+
 @dataclass(frozen=True)
 class TrainRun:
     """The shared options of one ``wearpose train`` run, as the training entry receives them
@@ -188,12 +194,9 @@ class TrainRun:
         return {"seed": self.seed, "aug_mirror": self.mirror or None, "aug_speed_copies": self.speed_copies,
                 "aug_heading_copies": self.heading_copies, "aug_mix_copies": self.mix_copies,
                 "aug_site_jitter_m": self.site_jitter, "aug_rest_offset_deg": self.rest_offset,
-                "aug_rest_offset_joints": None if self.rest_offset_joints is None else tuple(
-                    j.strip() for j in self.rest_offset_joints.split(",") if j.strip()),
-                "procedural_per_family": self.procedural,
-                "train_shapes": self.shapes,
-                "procedural_families": None if self.families is None else tuple(
-                    f.strip() for f in self.families.split(",") if f.strip())}
+                "aug_rest_offset_joints": _names(self.rest_offset_joints),
+                "procedural_per_family": self.procedural, "train_shapes": self.shapes,
+                "procedural_families": _names(self.families)}
 
     @property
     def limit_train(self) -> int | None:

@@ -111,8 +111,8 @@ class TrainingMix:
         out: dict[str, Any] = {"wearers": self.shapes, "site_jitter_m": a.site_jitter_m}
         if a.rest_offset_deg > 0:
             out["rest_offset_deg"] = a.rest_offset_deg
-        if a.rest_offset_deg > 0 and a.rest_offset_joints:
-            out["rest_offset_joints"] = list(a.rest_offset_joints)
+            if a.rest_offset_joints:
+                out["rest_offset_joints"] = list(a.rest_offset_joints)
         return out
 
     def describe(self) -> str:

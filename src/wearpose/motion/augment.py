@@ -150,8 +150,8 @@ def offset_rest(seq: MotionSequence, offsets: torch.Tensor) -> MotionSequence:
     rotation, ``G'_j = G_j C_j`` (global orientation of joint ``j``), so the local rotations become
     ``R'_j = C_parent(j)^T R_j C_j`` (root: ``R'_0 = R_0 C_0``). Two conversions of the same
     captures differ so: CMU 02_01-04 through the Daz BVH and through CMU's ASF/AMC are up to 30
-    deg apart per major joint (collars), nearly constant over a take (docs/augmentation.md). The root path is
-    kept; positions of the joints below a turned joint move with it.
+    deg apart per major joint (collars), nearly constant over a take (docs/augmentation.md). The
+    root path is kept; positions of the joints below a turned joint move with it.
 
     Args:
         seq: ``T`` frames of the 24 SMPL joints; offsets: ``(24, 3, 3)`` rotations ``C_j``.
@@ -235,6 +235,7 @@ def joint_frame_offsets(a: torch.Tensor, b: torch.Tensor) -> JointOffsets:
 #: Largest accepted :attr:`AugmentSettings.rest_offset_deg` (the chains measured differ by <= 30 deg
 #: at the major joints; beyond 45 a pose stops looking like the captured one).
 MAX_REST_OFFSET_DEG = 45.0
+
 
 @dataclass(frozen=True)
 class AugmentSettings:
