@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -101,6 +102,11 @@ def test_evaluate_end_to_end_on_synthetic_clips(tmp_path: Path, monkeypatch: pyt
     res = runner.invoke(app, ["evaluate", str(ck), "--split", "val", "--clips", "1", "--json"])
     assert res.exit_code == 0, res.output
     assert json.loads(res.stdout[res.stdout.index("{"):])["clips"] == 1
+    res = runner.invoke(app, ["evaluate", str(ck), "--split", "val", "--clips", "1"])
+    assert res.exit_code == 0, res.output
+    line = " ".join(res.output.split())  # the console wraps at 80 columns
+    assert re.search(r"tiny12: \d+ % of the squared joint error is constant over a clip; the largest constant "
+                     r"part: [a-z_]+ \d+\.\d mm", line), res.output
 
 
 def test_unseen_subjects_are_wider_than_the_training_prior() -> None:

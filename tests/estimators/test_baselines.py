@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 
 from test_empose import FakeStore, synthetic_motion  # tests/estimators is on sys.path (pytest rootdir mode)
 from wearpose.body import BodyModel
+from wearpose.body.skeleton import JOINT_NAMES, MAJOR_JOINTS
 from wearpose.errors import ConfigError
 from wearpose.estimators import CheckpointMismatchError, get_estimator, iter_frames, load_checkpoint, save_checkpoint
 from wearpose.estimators.empose import EmposeConfig, EmposeEstimator, lgd_loss
@@ -162,8 +163,20 @@ def test_evaluate_models_matches_evaluate_empose_and_writes_table(tmp_path: Path
     md = table2_markdown(res)
     assert md.splitlines()[0] == "| Model | MPJPE [mm] | PA-MPJPE [mm] | MPJAE [°] |"
     assert "| ResNet 12 |" in md and "| LGD-RNN 12 |" in md and "±" in md
+    # Per joint: the 15 major joints; their mean is the headline MPJPE (frame-weighted over clips),
+    # and the constant and varying parts add up to the RMS.
+    pj = m["per_joint"]
+    assert list(pj) == [JOINT_NAMES[j] for j in MAJOR_JOINTS]
+    assert sum(r["mpjpe_mm"] for r in pj.values()) / len(pj) == pytest.approx(m["mpjpe_mm"], rel=1e-4)
+    for r in pj.values():
+        assert r["rms_mm"] ** 2 == pytest.approx(r["bias_mm"] ** 2 + r["varying_mm"] ** 2, rel=1e-4)
+        assert r["rms_mm"] >= r["mpjpe_mm"] * (1 - 1e-6)
+    assert 0.0 < m["bias_share"] < 1.0
     md_path, js_path = write_table2(res, tmp_path / "out" / "t2", {"note": "hello"})
-    assert "hello" in md_path.read_text() and json.loads(js_path.read_text())["models"]["ResNet"]["frames"] > 0
+    text = md_path.read_text()
+    assert "hello" in text and json.loads(js_path.read_text())["models"]["ResNet"]["frames"] > 0
+    row = next(line for line in text.splitlines() if line.startswith("| left_shoulder |"))
+    assert row.count(" / ") == 2 * 3  # MPJPE / constant / varying for each of the three models
     other = EmposeEstimator(EmposeConfig.preset("tiny", 12).override(rate=60.0), body=body)
     with pytest.raises(ConfigError, match="one table"):
         evaluate_models({"a": lgd, "b": other}, "test", store=store)

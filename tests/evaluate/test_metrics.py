@@ -514,3 +514,77 @@ def test_metrics_are_differentiable():
             + M.positional_error(pred_j, gt_j, pred_local[:, 0], gt_local[:, 0]).sum())
     loss.backward()
     assert pred_local.grad is not None and torch.isfinite(pred_local.grad).all()
+
+
+# --------------------------------------------------------------------------- joint_error_split
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_joint_error_split_constant_offset_is_all_bias(dtype):
+    g = torch.Generator().manual_seed(0)
+    gt = torch.randn(50, 24, 3, generator=g, dtype=dtype)
+    offset = torch.zeros(24, 3, dtype=dtype)
+    offset[16] = torch.tensor([0.03, -0.04, 0.0], dtype=dtype)  # 5 cm at the left shoulder, every frame
+    s = M.joint_error_split(gt + offset, gt)
+    assert s.frames == 50 and s.rms.dtype == dtype and s.rms.shape == (24,)
+    assert float(s.bias[16]) == pytest.approx(0.05, rel=1e-5)
+    assert float(s.varying[16]) == pytest.approx(0.0, abs=1e-6)
+    assert float(s.rms[16]) == pytest.approx(0.05, rel=1e-5)
+    others = [j for j in range(24) if j != 16]
+    assert float(s.rms[others].abs().max()) == pytest.approx(0.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_joint_error_split_zero_mean_error_is_all_varying_and_parts_add_up(dtype):
+    g = torch.Generator().manual_seed(1)
+    gt = torch.randn(40, 24, 3, generator=g, dtype=dtype)
+    wobble = torch.randn(20, 24, 3, generator=g, dtype=dtype)
+    wobble[:, 0] = 0.0
+    noise = torch.cat([wobble, -wobble])  # every joint's error averages to exactly zero over the clip
+    s = M.joint_error_split(gt + noise, gt)
+    assert float(s.bias.abs().max()) == pytest.approx(0.0, abs=1e-6)
+    torch.testing.assert_close(s.varying, noise.square().sum(-1).mean(0).sqrt())
+    mixed = M.joint_error_split(gt + noise + torch.tensor([0.0, 0.1, 0.0], dtype=dtype), gt)
+    torch.testing.assert_close(mixed.rms.square(), mixed.bias.square() + mixed.varying.square())
+    assert float(mixed.bias[0]) == 0.0  # the root is aligned away
+
+
+def test_joint_error_split_root_frame_keeps_a_body_offset_constant():
+    # A skeleton offset fixed in the body: constant in the true root's frame, not in the joints' frame
+    # once the root turns.
+    T = 36
+    angles = torch.linspace(0, 2 * math.pi, T + 1, dtype=torch.float64)[:-1]
+    R = rotation_y(angles)
+    gt = torch.zeros(T, 24, 3, dtype=torch.float64)
+    gt[:, 1] = torch.tensor([0.1, 0.0, 0.0], dtype=torch.float64) @ R.transpose(-1, -2)
+    body_offset = torch.tensor([0.0, 0.0, 0.02], dtype=torch.float64)
+    pred = gt.clone()
+    pred[:, 1] = gt[:, 1] + body_offset @ R.transpose(-1, -2)
+    in_body = M.joint_error_split(pred, gt, R)
+    assert float(in_body.bias[1]) == pytest.approx(0.02, rel=1e-9)
+    assert float(in_body.varying[1]) == pytest.approx(0.0, abs=1e-9)
+    in_world = M.joint_error_split(pred, gt)  # the offset turns a full circle: its mean is zero
+    assert float(in_world.bias[1]) == pytest.approx(0.0, abs=1e-9)
+    assert float(in_world.varying[1]) == pytest.approx(0.02, rel=1e-9)
+
+
+def test_pool_joint_error_splits_weights_clips_by_frames():
+    g = torch.Generator().manual_seed(2)
+    a_gt, b_gt = torch.randn(10, 24, 3, generator=g), torch.randn(30, 24, 3, generator=g)
+    a = M.joint_error_split(a_gt + torch.tensor([0.03, 0.0, 0.0]), a_gt)
+    b = M.joint_error_split(b_gt + 0.01 * torch.randn(30, 24, 3, generator=g), b_gt)
+    p = M.pool_joint_error_splits([a, b])
+    assert p.frames == 40
+    torch.testing.assert_close(p.rms.square(), (10 * a.rms.square() + 30 * b.rms.square()) / 40)
+    torch.testing.assert_close(p.rms.square(), p.bias.square() + p.varying.square())
+    assert float(p.bias[5]) == pytest.approx(float((10 * a.bias[5] ** 2 + 30 * b.bias[5] ** 2) / 40) ** 0.5, rel=1e-5)
+
+
+def test_joint_error_split_refuses_bad_input_naming_the_shape():
+    x = torch.zeros(5, 24, 3)
+    with pytest.raises(ShapeError, match=r"one clip's joints \(T, J, 3\)"):
+        M.joint_error_split(x[None], x[None])
+    with pytest.raises(ShapeError, match="gt_root_rot"):
+        M.joint_error_split(x, x, torch.eye(3).expand(4, 3, 3))
+    with pytest.raises(ShapeError, match="no clips"):
+        M.pool_joint_error_splits([])
+    with pytest.raises(ShapeError, match="different joints"):
+        M.pool_joint_error_splits([M.joint_error_split(x, x), M.joint_error_split(x[:, :15], x[:, :15])])

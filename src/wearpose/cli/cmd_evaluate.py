@@ -182,6 +182,10 @@ def _render(r: dict[str, Any]) -> None:
             console.print(f"{name}: body shape, median over clips: height error {m['height_error_median_cm']:.1f} cm "
                           f"({m['height_difference_median_cm']:+.1f} cm), zero-pose vertex error "
                           f"{m['zero_pose_vertex_error_median_mm']:.1f} mm")
+        if "per_joint" in m:  # the error's constant part per clip (a skeleton, calibration or prior offset)
+            j, row = max(m["per_joint"].items(), key=lambda kv: kv[1]["bias_mm"])
+            console.print(f"{name}: {m['bias_share'] * 100:.0f} % of the squared joint error is constant over a "
+                          f"clip; the largest constant part: {j} {row['bias_mm']:.1f} mm (per joint: --out)")
     _render_breakdown(r["models"])
     for p in r.get("written", []):
         console.print(f"wrote {p}")

@@ -49,7 +49,7 @@ from wearpose.geometry.units import M_TO_CM, M_TO_MM, RAD_TO_DEG
 __all__ = [
     "ALL_JOINTS", "BIRAE_JOINT_GROUPS", "METRIC_UNITS", "TranslationErrorCurve",
     "root_relative_global_rotations", "mask_joint_rotations", "joint_angle_errors",
-    "joint_position_errors", "mpjpe", "pa_mpjpe", "procrustes_align", "mpjae", "mpjae_groups",
+    "joint_position_errors", "JointErrorSplit", "joint_error_split", "pool_joint_error_splits", "mpjpe", "pa_mpjpe", "procrustes_align", "mpjae", "mpjae_groups",
     "sip_error", "global_angular_error", "positional_error", "mesh_error", "jerk", "jitter",
     "cumulative_translation_error", "stance_foot_speed", "StanceSpeed", "shape_errors", "ShapeErrors", "to_report_units", "compute_all",
     "format_table",
@@ -309,6 +309,77 @@ def joint_position_errors(
     else:
         p, g = pred_joints, gt_joints
     return (p - g).norm(dim=-1)
+
+
+class JointErrorSplit(NamedTuple):
+    """:func:`joint_error_split`: one clip's root-relative joint position error, split into the part
+    every frame shares and the part that varies (each ``(J,)``, metres;
+    ``rms**2 == bias**2 + varying**2`` per joint)."""
+
+    rms: torch.Tensor  #: ``sqrt(mean_t |e_tj|^2)``
+    bias: torch.Tensor  #: ``|mean_t e_tj|``: a constant offset (a skeleton, calibration or prior bias)
+    varying: torch.Tensor  #: ``sqrt(mean_t |e_tj - mean_t e_tj|^2)``: what moves with the motion
+    frames: int  #: ``T``, the weight of this clip in :func:`pool_joint_error_splits`
+
+
+def joint_error_split(pred_joints: torch.Tensor, gt_joints: torch.Tensor, gt_root_rot: torch.Tensor | None = None,
+                      root_index: int = 0) -> JointErrorSplit:
+    """Split one clip's joint position error into its constant part and the rest.
+
+    The error vector of joint ``j`` in frame ``t`` is MPJPE's, root-aligned:
+    ``e_tj = (p_tj - p_t,root) - (g_tj - g_t,root)``; with ``gt_root_rot`` it is expressed in the
+    true root's frame (``R_root^T e``; the norms do not change, only the frame in which an offset
+    counts as constant: a skeleton or sensor-calibration offset is constant in the body, not in the
+    world). A large ``bias`` says the estimate puts a joint in a consistently wrong place for this
+    clip (another capture chain's skeleton, a calibration error, a prior that never saw such a
+    body), a large ``varying`` that it follows the motion badly.
+
+    Args:
+        pred_joints, gt_joints: ``(T, J, 3)`` joint positions of one clip, metres (``T >= 1``).
+        gt_root_rot: optional ``(T, 3, 3)`` true root orientations (root frame -> the joints' frame).
+        root_index: index of the root joint (SMPL pelvis = 0).
+
+    Returns:
+        :class:`JointErrorSplit`, ``(J,)`` tensors in metres.
+    """
+    _check_points(pred_joints, "pred_joints")
+    _check_points(gt_joints, "gt_joints")
+    _check_same_shape(pred_joints, gt_joints, "pred_joints", "gt_joints")
+    if pred_joints.dim() != 3 or pred_joints.shape[0] < 1:
+        raise ShapeError(f"joint_error_split: expected one clip's joints (T, J, 3) with T >= 1, "
+                         f"got {tuple(pred_joints.shape)}")
+    T, J = pred_joints.shape[:2]
+    if not -J <= root_index < J:
+        raise ShapeError(f"root_index: {root_index} out of range for {J} joints")
+    e = (pred_joints - pred_joints[:, root_index:root_index + 1]) - (gt_joints - gt_joints[:, root_index:root_index + 1])
+    if gt_root_rot is not None:
+        _check_last(gt_root_rot, (3, 3), "gt_root_rot", f"({T}, 3, 3)")
+        if gt_root_rot.shape[:-2] != (T,):
+            raise ShapeError(f"gt_root_rot: expected shape ({T}, 3, 3) (one root rotation per frame), "
+                             f"got {tuple(gt_root_rot.shape)}")
+        e = e @ gt_root_rot  # row vectors: (R^T e)^T = e^T R
+    mean = e.mean(0)
+    rms = e.square().sum(-1).mean(0).sqrt()
+    varying = (e - mean).square().sum(-1).mean(0).sqrt()
+    return JointErrorSplit(rms, mean.norm(dim=-1), varying, int(T))
+
+
+def pool_joint_error_splits(splits: Sequence[JointErrorSplit]) -> JointErrorSplit:
+    """Several clips' :class:`JointErrorSplit` as one, each weighted by its frames: the mean
+    squares are averaged, so ``rms**2 == bias**2 + varying**2`` still holds (``bias`` is then the
+    frame-weighted RMS over clips of each clip's constant offset, not one offset shared by all).
+
+    Raises:
+        ShapeError: no splits, or splits over different joint counts.
+    """
+    if not splits:
+        raise ShapeError("pool_joint_error_splits: no clips to pool")
+    if len({s.rms.shape for s in splits}) != 1:
+        raise ShapeError(f"pool_joint_error_splits: splits over different joints: {sorted({tuple(s.rms.shape) for s in splits})}")
+    n = sum(s.frames for s in splits)
+    def pooled(field: str) -> torch.Tensor:
+        return (sum(getattr(s, field).square() * s.frames for s in splits) / max(n, 1)).sqrt()
+    return JointErrorSplit(pooled("rms"), pooled("bias"), pooled("varying"), n)
 
 
 # --------------------------------------------------------------------------------------------

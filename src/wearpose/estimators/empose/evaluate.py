@@ -41,11 +41,12 @@ from typing import Any, Mapping, Sequence
 import torch
 
 from wearpose.errors import ConfigError
-from wearpose.body.skeleton import MAJOR_JOINTS
+from wearpose.body.skeleton import JOINT_NAMES, MAJOR_JOINTS
 from wearpose.estimators.bodies import clip_bodies, wearer_store
 from wearpose.estimators.bodies import wearers
 from wearpose.estimators.seeding import clip_seed
-from wearpose.evaluate.metrics import mpjae, mpjpe, pa_mpjpe
+from wearpose.evaluate.metrics import (JointErrorSplit, joint_error_split, joint_position_errors, mpjae, mpjpe, pa_mpjpe,
+                                       pool_joint_error_splits)
 from wearpose.evaluate.metrics import shape_errors
 from wearpose.geometry import axis_angle_to_matrix
 import dataclasses
@@ -187,6 +188,42 @@ def _refined_summary(rows: list[dict[str, Any]]) -> dict[str, float]:
     return {"refined_fraction": sum(r["refined_fraction"] * r["frames"] for r in have) / n} if n else {}
 
 
+def _per_joint_summary(splits: list[JointErrorSplit], sums: torch.Tensor) -> dict[str, Any]:
+    """``{"per_joint": {joint: {"mpjpe_mm", "rms_mm", "bias_mm", "varying_mm"}}, "bias_share"}``
+    over the 15 major joints and every scored frame (:func:`wearpose.evaluate.metrics.joint_error_split`,
+    pooled over clips; ``sums``: ``(24,)`` summed per-joint distances, m); ``bias_share`` = the
+    constant part's share of the mean squared error; none without a scored frame."""
+    if not splits:
+        return {}
+    p = pool_joint_error_splits(splits)
+    rows = {JOINT_NAMES[j]: {"mpjpe_mm": float(sums[j]) / p.frames * 1000.0, "rms_mm": float(p.rms[j]) * 1000.0,
+                             "bias_mm": float(p.bias[j]) * 1000.0, "varying_mm": float(p.varying[j]) * 1000.0}
+            for j in MAJOR_JOINTS}
+    major = list(MAJOR_JOINTS)
+    share = float(p.bias[major].square().sum() / p.rms[major].square().sum().clamp_min(1e-30))
+    return {"per_joint": rows, "bias_share": share}
+
+
+def per_joint_markdown(result: Mapping[str, Any], digits: int = 1) -> list[str]:
+    """Markdown lines: each model's error per major joint, split into the constant part per clip
+    and the part that varies (:func:`_per_joint_summary`); none when no model has it."""
+    models = {n: m for n, m in result["models"].items() if "per_joint" in m}
+    if not models:
+        return []
+    lines = ["", "## Per joint", "",
+             "Root-relative position error per major joint, mm: MPJPE / the part constant over a clip "
+             "(its offset in the true pelvis frame, RMS over clips) / the part that varies "
+             "(RMS; constant² + varying² = RMS²). "
+             + "; ".join(f"{n}: {m['bias_share'] * 100:.0f} % of the squared error is constant"
+                         for n, m in models.items()) + ".", "",
+             "| joint | " + " | ".join(models) + " |", "| --- | " + " | ".join("---" for _ in models) + " |"]
+    for j in next(iter(models.values()))["per_joint"]:
+        cells = [f"{m['per_joint'][j]['mpjpe_mm']:.{digits}f} / {m['per_joint'][j]['bias_mm']:.{digits}f} / "
+                 f"{m['per_joint'][j]['varying_mm']:.{digits}f}" for m in models.values()]
+        lines.append(f"| {j} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def _provenance(store: Any) -> dict[str, Any] | None:
     """Which store and corpus version the clips came from (:meth:`wearpose.motion.CorpusStore.provenance`;
     None for a stand-in store without it)."""
@@ -226,7 +263,9 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         "zero_pose_vertex_error_median_mm", ..., "frames", "method", "checkpoint", "epoch",
         "val_mpjpe_mm", "data_fingerprint", "train_command", "seconds", "per_clip": [{"clip",
         "frames", "mpjpe_mm", "pa_mpjpe_mm", "mpjae_deg", "height_error_cm",
-        "height_difference_cm", "zero_pose_vertex_error_mm", "wearer_height_cm"}]}}}``; with EM-POSE's
+        "height_difference_cm", "zero_pose_vertex_error_mm", "wearer_height_cm"}], "per_joint":
+        {joint: {"mpjpe_mm", "rms_mm", "bias_mm", "varying_mm"}}, "bias_share"}}}`` (per joint: the
+        error split into its constant part per clip and the rest, :func:`_per_joint_summary`); with EM-POSE's
         refinement on (``config.refine_steps > 0``) also ``"refined_fraction"`` (frames the gate
         refined) per model and per clip.
     """
@@ -248,6 +287,8 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
     errs: dict[str, dict[str, list[torch.Tensor]]] = {n: {"pe": [], "pa": [], "ae": []} for n in ests}
     secs = {n: 0.0 for n in ests}
     per_clip: dict[str, list[dict[str, Any]]] = {n: [] for n in ests}
+    splits: dict[str, list[JointErrorSplit]] = {n: [] for n in ests}
+    joint_sums = {n: torch.zeros(len(JOINT_NAMES), dtype=torch.float64) for n in ests}
     frames = 0
     for i, cid in enumerate(ids):
         # One simulation per clip for all models (same subject, same noise draw).
@@ -266,6 +307,9 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
             errs[name]["pe"].append(mpjpe(pj, r["joints"], MAJOR_JOINTS)[ok])
             errs[name]["pa"].append(pa_mpjpe(pj, r["joints"], MAJOR_JOINTS)[ok])
             errs[name]["ae"].append(mpjae(track.local_rot, r["pose"])[ok])
+            if bool(ok.any()):
+                splits[name].append(joint_error_split(pj[ok], r["joints"][ok], r["pose"][ok, 0]))
+                joint_sums[name] += joint_position_errors(pj[ok], r["joints"][ok]).sum(0).double()
             row = _clip_row(cid, errs[name])
             if getattr(track, "betas", None) is not None:  # the family's shape estimate
                 row.update(_shape_row(est.body, track.betas, r["betas"]))
@@ -283,6 +327,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         models[name] = {"mpjpe_mm": m1, "mpjpe_std_mm": s1, "pa_mpjpe_mm": m2, "pa_mpjpe_std_mm": s2,
                         "mpjae_deg": m3, "mpjae_std_deg": s3, **_shape_summary(per_clip[name]),
                         **_refined_summary(per_clip[name]),
+                        **_per_joint_summary(splits[name], joint_sums[name]),
                         "frames": sum(int(x.numel()) for x in errs[name]["pe"]),
                         "method": est.name, "checkpoint": str(src) if isinstance(src, (str, Path)) else None,
                         "epoch": est.meta.get("epoch"), "val_mpjpe_mm": est.meta.get("val_mpjpe_mm"),
@@ -361,7 +406,7 @@ def write_table(result: Mapping[str, Any], path_stem: str | Path, *, title: str 
     md = [f"# {title}", "",
           f"Produced by `{produced_by}` "
           "(`wearpose.estimators.empose.evaluate.evaluate_models`).", "", table2_markdown(result),
-          *shape_markdown(result), "", "## Models", "", "| Model | method | checkpoint | epoch | val MPJPE [mm] | parameters | estimate time [s] |",
+          *shape_markdown(result), *per_joint_markdown(result), "", "## Models", "", "| Model | method | checkpoint | epoch | val MPJPE [mm] | parameters | estimate time [s] |",
           "| --- | --- | --- | --- | --- | --- | --- |"]
     for name, m in result["models"].items():
         v = m.get("val_mpjpe_mm")
