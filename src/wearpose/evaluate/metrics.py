@@ -49,7 +49,8 @@ from wearpose.geometry.units import M_TO_CM, M_TO_MM, RAD_TO_DEG
 __all__ = [
     "ALL_JOINTS", "BIRAE_JOINT_GROUPS", "METRIC_UNITS", "TranslationErrorCurve",
     "root_relative_global_rotations", "mask_joint_rotations", "joint_angle_errors",
-    "joint_position_errors", "JointErrorSplit", "joint_error_split", "pool_joint_error_splits", "mpjpe", "pa_mpjpe", "procrustes_align", "mpjae", "mpjae_groups",
+    "joint_position_errors", "JointErrorSplit", "joint_error_split", "pool_joint_error_splits",
+    "mpjpe", "pa_mpjpe", "procrustes_align", "mpjae", "mpjae_groups",
     "sip_error", "global_angular_error", "positional_error", "mesh_error", "jerk", "jitter",
     "cumulative_translation_error", "stance_foot_speed", "StanceSpeed", "shape_errors", "ShapeErrors", "to_report_units", "compute_all",
     "format_table",
@@ -375,8 +376,10 @@ def pool_joint_error_splits(splits: Sequence[JointErrorSplit]) -> JointErrorSpli
     if not splits:
         raise ShapeError("pool_joint_error_splits: no clips to pool")
     if len({s.rms.shape for s in splits}) != 1:
-        raise ShapeError(f"pool_joint_error_splits: splits over different joints: {sorted({tuple(s.rms.shape) for s in splits})}")
+        shapes = sorted({tuple(s.rms.shape) for s in splits})
+        raise ShapeError(f"pool_joint_error_splits: splits over different joints: {shapes}")
     n = sum(s.frames for s in splits)
+
     def pooled(field: str) -> torch.Tensor:
         return (sum(getattr(s, field).square() * s.frames for s in splits) / max(n, 1)).sqrt()
     return JointErrorSplit(pooled("rms"), pooled("bias"), pooled("varying"), n)
