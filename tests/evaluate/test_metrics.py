@@ -528,6 +528,7 @@ def test_joint_error_split_constant_offset_is_all_bias(dtype):
     assert float(s.bias[16]) == pytest.approx(0.05, rel=1e-5)
     assert float(s.varying[16]) == pytest.approx(0.0, abs=1e-6)
     assert float(s.rms[16]) == pytest.approx(0.05, rel=1e-5)
+    assert float(s.mean[16]) == pytest.approx(0.05, rel=1e-5)
     others = [j for j in range(24) if j != 16]
     assert float(s.rms[others].abs().max()) == pytest.approx(0.0, abs=1e-6)
 
@@ -542,8 +543,10 @@ def test_joint_error_split_zero_mean_error_is_all_varying_and_parts_add_up(dtype
     s = M.joint_error_split(gt + noise, gt)
     assert float(s.bias.abs().max()) == pytest.approx(0.0, abs=1e-6)
     torch.testing.assert_close(s.varying, noise.square().sum(-1).mean(0).sqrt())
-    mixed = M.joint_error_split(gt + noise + torch.tensor([0.0, 0.1, 0.0], dtype=dtype), gt)
+    pred = gt + noise + torch.tensor([0.0, 0.1, 0.0], dtype=dtype)
+    mixed = M.joint_error_split(pred, gt)
     torch.testing.assert_close(mixed.rms.square(), mixed.bias.square() + mixed.varying.square())
+    torch.testing.assert_close(mixed.mean, M.joint_position_errors(pred, gt).mean(0))  # MPJPE's per joint
     assert float(mixed.bias[0]) == 0.0  # the root is aligned away
 
 
@@ -574,6 +577,7 @@ def test_pool_joint_error_splits_weights_clips_by_frames():
     p = M.pool_joint_error_splits([a, b])
     assert p.frames == 40
     torch.testing.assert_close(p.rms.square(), (10 * a.rms.square() + 30 * b.rms.square()) / 40)
+    torch.testing.assert_close(p.mean, (10 * a.mean + 30 * b.mean) / 40)
     torch.testing.assert_close(p.rms.square(), p.bias.square() + p.varying.square())
     assert float(p.bias[5]) == pytest.approx(float((10 * a.bias[5] ** 2 + 30 * b.bias[5] ** 2) / 40) ** 0.5, rel=1e-5)
 

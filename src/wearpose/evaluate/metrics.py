@@ -317,6 +317,7 @@ class JointErrorSplit(NamedTuple):
     every frame shares and the part that varies (each ``(J,)``, metres;
     ``rms**2 == bias**2 + varying**2`` per joint)."""
 
+    mean: torch.Tensor  #: ``mean_t |e_tj|``: the joint's MPJPE over the clip
     rms: torch.Tensor  #: ``sqrt(mean_t |e_tj|^2)``
     bias: torch.Tensor  #: ``|mean_t e_tj|``: a constant offset (a skeleton, calibration or prior bias)
     varying: torch.Tensor  #: ``sqrt(mean_t |e_tj - mean_t e_tj|^2)``: what moves with the motion
@@ -359,15 +360,15 @@ def joint_error_split(pred_joints: torch.Tensor, gt_joints: torch.Tensor, gt_roo
             raise ShapeError(f"gt_root_rot: expected shape ({T}, 3, 3) (one root rotation per frame), "
                              f"got {tuple(gt_root_rot.shape)}")
         e = e @ gt_root_rot  # row vectors: (R^T e)^T = e^T R
-    mean = e.mean(0)
+    offset = e.mean(0)
     rms = e.square().sum(-1).mean(0).sqrt()
-    varying = (e - mean).square().sum(-1).mean(0).sqrt()
-    return JointErrorSplit(rms, mean.norm(dim=-1), varying, int(T))
+    varying = (e - offset).square().sum(-1).mean(0).sqrt()
+    return JointErrorSplit(e.norm(dim=-1).mean(0), rms, offset.norm(dim=-1), varying, int(T))
 
 
 def pool_joint_error_splits(splits: Sequence[JointErrorSplit]) -> JointErrorSplit:
-    """Several clips' :class:`JointErrorSplit` as one, each weighted by its frames: the mean
-    squares are averaged, so ``rms**2 == bias**2 + varying**2`` still holds (``bias`` is then the
+    """Several clips' :class:`JointErrorSplit` as one, each weighted by its frames: the means are
+    averaged, and so are the mean squares, so ``rms**2 == bias**2 + varying**2`` still holds (``bias`` is then the
     frame-weighted RMS over clips of each clip's constant offset, not one offset shared by all).
 
     Raises:
@@ -382,7 +383,8 @@ def pool_joint_error_splits(splits: Sequence[JointErrorSplit]) -> JointErrorSpli
 
     def pooled(field: str) -> torch.Tensor:
         return (sum(getattr(s, field).square() * s.frames for s in splits) / max(n, 1)).sqrt()
-    return JointErrorSplit(pooled("rms"), pooled("bias"), pooled("varying"), n)
+    mean = sum(s.mean * s.frames for s in splits) / max(n, 1)
+    return JointErrorSplit(mean, pooled("rms"), pooled("bias"), pooled("varying"), n)
 
 
 # --------------------------------------------------------------------------------------------

@@ -45,7 +45,7 @@ from wearpose.body.skeleton import JOINT_NAMES, MAJOR_JOINTS
 from wearpose.estimators.bodies import clip_bodies, wearer_store
 from wearpose.estimators.bodies import wearers
 from wearpose.estimators.seeding import clip_seed
-from wearpose.evaluate.metrics import (JointErrorSplit, joint_error_split, joint_position_errors, mpjae, mpjpe, pa_mpjpe,
+from wearpose.evaluate.metrics import (JointErrorSplit, joint_error_split, mpjae, mpjpe, pa_mpjpe,
                                        pool_joint_error_splits)
 from wearpose.evaluate.metrics import shape_errors
 from wearpose.geometry import axis_angle_to_matrix
@@ -188,15 +188,15 @@ def _refined_summary(rows: list[dict[str, Any]]) -> dict[str, float]:
     return {"refined_fraction": sum(r["refined_fraction"] * r["frames"] for r in have) / n} if n else {}
 
 
-def _per_joint_summary(splits: list[JointErrorSplit], sums: torch.Tensor) -> dict[str, Any]:
+def _per_joint_summary(splits: list[JointErrorSplit]) -> dict[str, Any]:
     """``{"per_joint": {joint: {"mpjpe_mm", "rms_mm", "bias_mm", "varying_mm"}}, "bias_share"}``
     over the 15 major joints and every scored frame (:func:`wearpose.evaluate.metrics.joint_error_split`,
-    pooled over clips; ``sums``: ``(24,)`` summed per-joint distances, m); ``bias_share`` = the
+    pooled over clips); ``bias_share`` = the
     constant part's share of the mean squared error; none without a scored frame."""
     if not splits:
         return {}
     p = pool_joint_error_splits(splits)
-    rows = {JOINT_NAMES[j]: {"mpjpe_mm": float(sums[j]) / p.frames * 1000.0, "rms_mm": float(p.rms[j]) * 1000.0,
+    rows = {JOINT_NAMES[j]: {"mpjpe_mm": float(p.mean[j]) * 1000.0, "rms_mm": float(p.rms[j]) * 1000.0,
                              "bias_mm": float(p.bias[j]) * 1000.0, "varying_mm": float(p.varying[j]) * 1000.0}
             for j in MAJOR_JOINTS}
     major = list(MAJOR_JOINTS)
@@ -288,7 +288,6 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
     secs = {n: 0.0 for n in ests}
     per_clip: dict[str, list[dict[str, Any]]] = {n: [] for n in ests}
     splits: dict[str, list[JointErrorSplit]] = {n: [] for n in ests}
-    joint_sums = {n: torch.zeros(len(JOINT_NAMES), dtype=torch.float64) for n in ests}
     frames = 0
     for i, cid in enumerate(ids):
         # One simulation per clip for all models (same subject, same noise draw).
@@ -309,7 +308,6 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
             errs[name]["ae"].append(mpjae(track.local_rot, r["pose"])[ok])
             if bool(ok.any()):
                 splits[name].append(joint_error_split(pj[ok], r["joints"][ok], r["pose"][ok, 0]))
-                joint_sums[name] += joint_position_errors(pj[ok], r["joints"][ok]).sum(0).double()
             row = _clip_row(cid, errs[name])
             if getattr(track, "betas", None) is not None:  # the family's shape estimate
                 row.update(_shape_row(est.body, track.betas, r["betas"]))
@@ -327,7 +325,7 @@ def evaluate_models(checkpoints: Mapping[str, Any], split: str = "test", limit: 
         models[name] = {"mpjpe_mm": m1, "mpjpe_std_mm": s1, "pa_mpjpe_mm": m2, "pa_mpjpe_std_mm": s2,
                         "mpjae_deg": m3, "mpjae_std_deg": s3, **_shape_summary(per_clip[name]),
                         **_refined_summary(per_clip[name]),
-                        **_per_joint_summary(splits[name], joint_sums[name]),
+                        **_per_joint_summary(splits[name]),
                         "frames": sum(int(x.numel()) for x in errs[name]["pe"]),
                         "method": est.name, "checkpoint": str(src) if isinstance(src, (str, Path)) else None,
                         "epoch": est.meta.get("epoch"), "val_mpjpe_mm": est.meta.get("val_mpjpe_mm"),
