@@ -130,6 +130,40 @@ def test_smoke_recipe_runs_end_to_end_and_is_recorded(tmp_path: Path, corpus_sto
     assert load_checkpoint(tmp_path / "run" / "best.pt").meta["recipe"]["sha1"] == rec["sha1"]
 
 
+@pytest.mark.corpus
+@pytest.mark.budget(40)
+def test_a_further_training_runs_from_a_recipe_with_the_mix_and_reproduces(tmp_path: Path, corpus_store: Path,
+                                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """``method: nbeats`` (MI-Poser's forecaster, a further ``wearpose train`` command): the
+    recipe's mix reaches the train windows, the checkpoint and the shipped card keep the recipe
+    and the mix, and a second run is the same weights (``reproduction`` through the declared
+    reader)."""
+    import wearpose.weights
+    from wearpose.estimators.recipe import reproduction, selection_metric
+    from wearpose.interference.nbeats import kept_checkpoint
+
+    from tests.estimators.test_cli_train import _train
+
+    runs = [_train(["--recipe", "nbeats_smoke", "--out", str(tmp_path / d)]) for d in ("a", "b")]
+    assert runs[0]["method"] == "nbeats" and runs[0]["recipe"]["name"] == "nbeats_smoke" and runs[0]["epochs"] == 1
+    _, meta, _ = kept_checkpoint(tmp_path / "a" / "best.pt")
+    assert meta["recipe"]["sha1"] == load_recipe("nbeats_smoke").sha1 and meta["recipe"]["method"] == "nbeats"
+    # 3 corpus clips (--max-train-clips), their mirror images and one procedural squat
+    assert meta["train_clips_by_kind"] == {"corpus": 3, "augmented": 3, "procedural": 1} and meta["train_clips"] == 7
+    assert meta["mix"]["procedural_per_family"] == 1 and meta["mix"]["shapes"] == "random"
+    assert "mirror image" in meta["mix"]["description"] and sum(meta["clips_per_source"].values()) == 3
+    assert selection_metric("nbeats") == "val_mae_cm"
+    rep = reproduction("nbeats_smoke", tmp_path / "b" / "best.pt", tmp_path / "a" / "best.pt")
+    assert rep["passes"] and rep["max_abs_weight_difference"] == 0.0 and rep["same_data"], rep
+    assert rep["figures"]["val_mae_cm"]["relative"] == 0.0
+    monkeypatch.setattr(wearpose.weights, "WEIGHTS_DIR", tmp_path / "w")
+    (tmp_path / "w").mkdir()
+    _train(["nbeats", "--ship", str(tmp_path / "a" / "best.pt"), "--name", "nb_test"])
+    card = json.loads((tmp_path / "w" / "nb_test.json").read_text())
+    assert card["recipe"]["sha1"] == meta["recipe"]["sha1"] and card["training_data"]["mix"] == meta["mix"]
+    assert card["training_data"]["corpus"]["name"] == "data-v2"
+
+
 def test_archive_init_from_and_seed_set_the_run(tmp_path: Path) -> None:
     """``init_from: archive:<name>`` is the archived shipped file on any checkout; ``seed`` sets the run's --seed."""
     from wearpose.weights import WEIGHTS_DIR

@@ -116,8 +116,7 @@ def train_recipe(
     if recipe is None:
         console.print(ctx.get_help())
         raise typer.Exit(0)
-    from wearpose.estimators.recipe import check_corpus, load_recipe  # start-up: wearpose.estimators.recipe adds ~30 ms to wearpose --help
-    from wearpose.estimators.registry import get_method  # start-up: wearpose.estimators.registry adds ~25 ms to wearpose --help
+    from wearpose.estimators.recipe import check_corpus, load_recipe, training_for  # start-up: wearpose.estimators.recipe adds ~30 ms to wearpose --help
 
     try:
         r = load_recipe(recipe)
@@ -129,8 +128,7 @@ def train_recipe(
         check_corpus(r, CorpusStore().provenance().get("corpus"))
     values = {**r.values, "as_json": as_json, "resume": resume or bool(r.values.get("resume")),
               "out": out if out is not None else (r.values.get("out") or Path("runs") / r.name)}
-    training = get_method(r.method).training
-    assert training is not None, r.method  # load_recipe refuses a method without a training entry
+    training = training_for(r.method, r.path)
     run_training(training, values, f"wearpose train --recipe {shlex.quote(str(recipe))}" + (" --resume" if resume else ""),
                  recipe=r)
 

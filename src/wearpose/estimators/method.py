@@ -248,6 +248,12 @@ class Training:
             training with no presets: ``config``).
         mix: the method also takes :data:`MIX_OPTIONS` (seed, ``--init-from``, the training mix),
             passed on in :class:`TrainRun` (:meth:`TrainRun.config_overrides`).
+        val_metric: the validation figure ``best.pt`` is kept by (lower is better), for a
+            training outside :mod:`wearpose.estimators.train` (None: its ``train`` module's task
+            says, :func:`wearpose.estimators.recipe.selection_metric`).
+        reader: ``"module:function"`` reading one of its kept checkpoints as ``(weights, meta,
+            data_fingerprint)``, for a training whose checkpoints are not
+            :func:`~wearpose.estimators.checkpoint.save_checkpoint`'s (None: they are).
     """
 
     entry: str
@@ -258,6 +264,8 @@ class Training:
     help: Mapping[str, str] = field(default_factory=dict)
     omit: frozenset[str] = frozenset()
     mix: bool = False
+    val_metric: str | None = None
+    reader: str | None = None
 
     def all_options(self) -> tuple[TrainOption, ...]:
         """``--config``, the method's options, then the other shared ones (``--json`` last)."""

@@ -4,7 +4,7 @@
 A recipe (``format: wearpose.recipe``, ``version: 1``)::
 
     name: miposer_cpu                # the weights it makes (optional; default: the file's stem)
-    method: miposer                  # wearpose train <method>
+    method: miposer                  # wearpose train <method> (or another training command: nbeats)
     options: {config: cpu, model: avatarposer, wrists: 2, ...}   # the method's options
     budget: {epochs: 5}              # options that set the training length
     augmentation: {}                 # options that set the augmentation (PIP: mirror, speed_copies)
@@ -16,8 +16,11 @@ A recipe (``format: wearpose.recipe``, ``version: 1``)::
 Every key of ``options``, ``budget`` and ``augmentation`` is an option of ``wearpose train
 <method>`` by its keyword name (``batch_size``, ``checkpoint_every``; :class:`~wearpose.estimators.method.TrainOption`),
 given in one section only; options a recipe leaves out take their declared defaults, and the run
-records the whole resolved set. The shipped recipes are ``estimators/<method>/recipes/<name>.yaml``
-(found by name, :func:`find_recipe`); any other file is given by its path.
+records the whole resolved set. ``method`` names any ``wearpose train`` command: a method's own
+training or one of its further trainings (:attr:`~wearpose.estimators.method.MethodSpec.trainings`,
+e.g. MI-Poser's ``nbeats`` forecaster). The shipped recipes are
+``estimators/<method>/recipes/<name>.yaml`` beside the command's training entry (found by name,
+:func:`find_recipe`); any other file is given by its path.
 
 The checkpoint records the resolved recipe (``meta["recipe"]``) and ``tools/ship_weights.py``
 copies it into the weights' card.
@@ -33,7 +36,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from wearpose.errors import ConfigError, InputFileError
-from wearpose.estimators.method import MethodSpec
+from wearpose.estimators.method import Training
 import yaml
 
 FORMAT = "wearpose.recipe"
@@ -50,7 +53,8 @@ class Recipe:
     """A loaded recipe (module doc).
 
     Attributes:
-        path: the file; name: the weights it makes; method: the method's name.
+        path: the file; name: the weights it makes; method: the ``wearpose train`` command (a
+            method's name, or a further training's such as ``nbeats``).
         values: every option of ``wearpose train <method>`` by keyword name, resolved (the
             declared defaults overridden by the recipe's sections and ``init_from``).
         seed: the config seed the run must have (None: not checked).
@@ -75,15 +79,13 @@ class Recipe:
 
 
 def recipe_dirs() -> dict[str, Path]:
-    """Method name -> its shipped recipes folder (``estimators/<method>/recipes``), for the
-    declared trainable methods."""
-    from wearpose.estimators.registry import get_method, list_methods  # start-up: registry adds ~35 ms (63 modules) to import this module
+    """``wearpose train`` command -> its shipped recipes folder: ``recipes`` beside its training
+    entry's module (``estimators/<method>/recipes``; a method's further trainings share it)."""
+    from wearpose.estimators.registry import list_trainings  # start-up: registry adds ~35 ms (63 modules) to import this module
 
     out = {}
-    for name in list_methods(trainable=True):
-        spec = get_method(name)
-        module = spec.training.entry.partition(":")[0] if spec.training else ""
-        found = importlib.util.find_spec(module) if module else None
+    for name, training in list_trainings().items():
+        found = importlib.util.find_spec(training.entry.partition(":")[0])
         if found is not None and found.origin:
             out[name] = Path(found.origin).parent / "recipes"
     return out
@@ -91,7 +93,8 @@ def recipe_dirs() -> dict[str, Path]:
 
 def shipped_recipes() -> dict[str, Path]:
     """Recipe name -> file, of every shipped recipe."""
-    return {p.stem: p for d in recipe_dirs().values() if d.is_dir() for p in sorted(d.glob("*.yaml"))}
+    dirs = sorted(set(recipe_dirs().values()))
+    return {p.stem: p for d in dirs if d.is_dir() for p in sorted(d.glob("*.yaml"))}
 
 
 def find_recipe(name_or_path: str | Path) -> Path:
@@ -129,31 +132,41 @@ def load_recipe(name_or_path: str | Path) -> Recipe:
     unknown = sorted(set(d) - _KEYS)
     if unknown:
         raise InputFileError(path, f"unknown keys {unknown}", f"only {', '.join(sorted(_KEYS))}", field=unknown[0])
-    spec = _method(path, d.get("method"))
-    values = _values(path, d, spec)
+    command, training = _training(path, d.get("method"))
+    values = _values(path, d, command, training)
     seed = d.get("seed")
     if seed is not None and not isinstance(seed, int):
         raise InputFileError(path, f"seed {seed!r}", "an integer (the config's seed) or null", field="seed")
     corpus = d.get("corpus")
     if corpus is not None and not (isinstance(corpus, dict) and isinstance(corpus.get("name"), str)):
         raise InputFileError(path, f"corpus {corpus!r}", "null or a mapping with name (and manifest_sha1)", field="corpus")
-    return Recipe(path=path, name=str(d.get("name") or path.stem), method=spec.name, values=values, seed=seed,
+    return Recipe(path=path, name=str(d.get("name") or path.stem), method=command, values=values, seed=seed,
                   corpus=corpus, sha1=hashlib.sha1(raw).hexdigest())
 
 
-def _method(path: Path, name: Any) -> MethodSpec:
-    from wearpose.estimators.registry import get_method, list_methods  # start-up: registry adds ~35 ms (63 modules) to import this module
+def training_for(name: Any, path: Path = Path("<recipe>")) -> Training:
+    """The :class:`~wearpose.estimators.method.Training` of ``wearpose train <name>``.
 
-    trainable = list_methods(trainable=True)
-    if name not in trainable:
-        raise InputFileError(path, f"method {name!r}", f"one of {', '.join(trainable)}", field="method")
-    return get_method(name)
+    Raises:
+        InputFileError: no such training command (naming ``path``'s ``method`` field and the
+            declared commands).
+    """
+    return _training(path, name)[1]
 
 
-def _values(path: Path, d: Mapping[str, Any], spec: MethodSpec) -> dict[str, Any]:
-    """The method's options: declared defaults, then the recipe's sections and ``init_from``."""
-    assert spec.training is not None
-    declared = {o.name: o for o in spec.training.all_options() if o.name != "as_json"}
+def _training(path: Path, name: Any) -> tuple[str, Training]:
+    from wearpose.estimators.registry import list_trainings  # start-up: registry adds ~35 ms (63 modules) to import this module
+
+    trainings = list_trainings()
+    if name not in trainings:
+        raise InputFileError(path, f"method {name!r}", f"a wearpose train command: one of {', '.join(trainings)}",
+                             field="method")
+    return str(name), trainings[name]
+
+
+def _values(path: Path, d: Mapping[str, Any], command: str, training: Training) -> dict[str, Any]:
+    """The command's options: declared defaults, then the recipe's sections and ``init_from``."""
+    declared = {o.name: o for o in training.all_options() if o.name != "as_json"}
     values: dict[str, Any] = {n: o.default for n, o in declared.items()}
     seen: dict[str, str] = {}
     sections = [(s, d.get(s) or {}) for s in OPTION_SECTIONS]
@@ -167,7 +180,7 @@ def _values(path: Path, d: Mapping[str, Any], spec: MethodSpec) -> dict[str, Any
                                  field=section)
         for k, v in opts.items():
             if k not in declared:
-                raise InputFileError(path, f"{k!r} is not an option of wearpose train {spec.name}",
+                raise InputFileError(path, f"{k!r} is not an option of wearpose train {command}",
                                      f"one of {', '.join(declared)}", field=f"{section}.{k}")
             if k in seen:
                 raise InputFileError(path, f"{k!r} is given in {seen[k]} and {section}", "each option once",
@@ -240,16 +253,30 @@ def check_seed(recipe: Recipe, config: Mapping[str, Any] | None) -> None:
 
 def selection_metric(method: str) -> str:
     """The validation figure ``wearpose train <method>`` keeps ``best.pt`` by (lower is better):
-    the ``val_metric`` of the training task in the ``train`` module beside the method's training
-    entry (every trainable method's package has one)."""
-    spec = _method(Path("<recipe>"), method)
-    assert spec.training is not None
-    mod = importlib.import_module(spec.training.entry.split(":")[0].rsplit(".", 1)[0] + ".train")
+    the training's declared ``val_metric``, else the ``val_metric`` of the training task in the
+    ``train`` module beside its training entry (every trainable method's package has one)."""
+    training = training_for(method)
+    if training.val_metric is not None:
+        return training.val_metric
+    mod = importlib.import_module(training.entry.split(":")[0].rsplit(".", 1)[0] + ".train")
     found = {c.val_metric for c in vars(mod).values() if isinstance(c, type) and c.__module__ == mod.__name__
              and isinstance(getattr(c, "val_metric", None), str)}
     if len(found) != 1:
         raise ConfigError(f"{mod.__name__}: expected one training task with a val_metric, found {sorted(found)}")
     return found.pop()
+
+
+def _kept(training: Training, path: str | Path) -> tuple[Mapping[str, Any], Mapping[str, Any], str]:
+    """A kept checkpoint of ``training`` as ``(weights, meta, data_fingerprint)``: its declared
+    reader, else :func:`~wearpose.estimators.checkpoint.load_checkpoint`."""
+    if training.reader is not None:
+        from wearpose.estimators.method import resolve
+
+        return resolve(training.reader)(path)
+    from wearpose.estimators.checkpoint import load_checkpoint  # start-up: torch only when comparing
+
+    ck = load_checkpoint(path)
+    return ck.weights, ck.meta, ck.data_fingerprint
 
 
 def reproduction(recipe: str | Path, rerun: str | Path, reference: str | Path, tolerance: float = 0.02) -> dict[str, Any]:
@@ -258,24 +285,22 @@ def reproduction(recipe: str | Path, rerun: str | Path, reference: str | Path, t
     every numeric ``val_*``, relative difference to the reference), the largest absolute
     difference between their weights (0: bit-identical; None: different tensor sets) and their
     data fingerprints. ``passes``: the method's :func:`selection_metric` within ``tolerance``."""
-    from wearpose.estimators.checkpoint import load_checkpoint  # start-up: torch only when comparing
-
     r = load_recipe(recipe)
-    a, b = load_checkpoint(rerun), load_checkpoint(reference)
+    training = training_for(r.method, r.path)
+    (wa, ma, fa), (wb, mb, fb) = _kept(training, rerun), _kept(training, reference)
     key = selection_metric(r.method)
     num = lambda m, k: isinstance(m.get(k), (int, float)) and not isinstance(m.get(k), bool)  # noqa: E731
-    figures = {k: {"rerun": a.meta[k], "reference": b.meta[k],
-                   "relative": (a.meta[k] - b.meta[k]) / abs(b.meta[k]) if b.meta[k] else None}
-               for k in sorted(set(a.meta) & set(b.meta)) if k.startswith("val_") and num(a.meta, k) and num(b.meta, k)}
-    same = set(a.weights) == set(b.weights) and all(a.weights[k].shape == b.weights[k].shape for k in a.weights)
-    diff = max((float((a.weights[k].double() - b.weights[k].double()).abs().max()) for k in a.weights
-                if a.weights[k].numel()), default=0.0) if same else None
+    figures = {k: {"rerun": ma[k], "reference": mb[k], "relative": (ma[k] - mb[k]) / abs(mb[k]) if mb[k] else None}
+               for k in sorted(set(ma) & set(mb)) if k.startswith("val_") and num(ma, k) and num(mb, k)}
+    same = set(wa) == set(wb) and all(wa[k].shape == wb[k].shape for k in wa)
+    diff = max((float((wa[k].double() - wb[k].double()).abs().max()) for k in wa if wa[k].numel()),
+               default=0.0) if same else None
     head = figures.get(key, {}).get("relative")
     return {"recipe": r.name, "method": r.method, "recipe_sha1": r.sha1, "rerun": str(rerun), "reference": str(reference),
-            "epoch": {"rerun": a.meta.get("epoch"), "reference": b.meta.get("epoch")}, "headline": key,
+            "epoch": {"rerun": ma.get("epoch"), "reference": mb.get("epoch")}, "headline": key,
             "figures": figures, "passes": head is not None and abs(head) <= tolerance,
-            "max_abs_weight_difference": diff, "same_data": a.data_fingerprint == b.data_fingerprint}
+            "max_abs_weight_difference": diff, "same_data": fa == fb}
 
 
 __all__ = ["Recipe", "load_recipe", "find_recipe", "shipped_recipes", "recipe_dirs", "check_corpus", "check_seed",
-           "selection_metric", "reproduction", "FORMAT", "VERSION"]
+           "selection_metric", "reproduction", "training_for", "FORMAT", "VERSION"]

@@ -21,17 +21,21 @@ Presets: ``paper`` (2 x 2 x 512, 4 layers per block, N-BEATS' default depth: 5.0
 Training data (:func:`forecast_windows`): both wrists' trajectories relative to the head-worn
 source (the MI-Poser setting), from the corpus train split at 120 Hz, windows of 180 samples.
 The corpus motion is interference-free by construction; a white measurement noise (EM-like,
-``input_noise``) is added to the input windows only.
+``input_noise``) is added to the input windows only. The caller may hand :func:`train` another
+train source (a store and clip ids: ``wearpose train nbeats`` passes the training mix of
+:mod:`wearpose.estimators.trainmix`, mirror copies and procedural clips, which this layer does
+not import); validation and test windows always come from the corpus splits.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import torch
@@ -181,6 +185,18 @@ def load_forecaster(path: str | Path) -> tuple[NBeats, dict[str, Any]]:
     return model, ck
 
 
+def kept_checkpoint(path: str | Path) -> tuple[dict[str, torch.Tensor], dict[str, Any], str]:
+    """A kept forecaster checkpoint as ``(weights, meta, data_fingerprint)``, for comparing a
+    recipe's rerun with the weights it made (:func:`wearpose.estimators.recipe.reproduction`);
+    the fingerprint is the SHA-256 of the train data's description in ``meta`` (clips per
+    source, windows, the mix's settings)."""
+    _, ck = load_forecaster(path)
+    meta = dict(ck.get("meta") or {})
+    data = {k: meta.get(k) for k in ("train_clips", "train_windows", "clips_per_source")}
+    data["mix"] = {k: v for k, v in (meta.get("mix") or {}).items() if k != "description"}
+    return ck["weights"], meta, hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+
+
 def clip_trajectories(motion: Any, body: Any, cfg: NBeatsConfig) -> list[np.ndarray]:
     """Wrist positions relative to the head-worn source at ``cfg.fps``: a list of ``(T, 3)`` float32."""
     tr = body_trajectories(motion, body, cfg.sites, source="head", fps=cfg.fps)
@@ -196,10 +212,18 @@ def forecast_windows(trajs: list[np.ndarray], cfg: NBeatsConfig) -> np.ndarray:
     return np.concatenate(out, 0).astype(np.float32) if out else np.zeros((0, L, 3), np.float32)
 
 
-def split_windows(split: str, cfg: NBeatsConfig, limit: int | None = None) -> tuple[np.ndarray, list[str]]:
-    """Windows of every clip of a corpus split (``limit`` clips at most, spread over the split)."""
-    store = CorpusStore()
-    clips = sorted(store.clips(split=split))
+def split_windows(split: str, cfg: NBeatsConfig, limit: int | None = None, store: Any = None,
+                  ids: Sequence[str] | None = None) -> tuple[np.ndarray, list[str]]:
+    """Windows of every clip of a corpus split (``limit`` clips at most, spread over the split).
+
+    Args:
+        store: what clips are loaded from (``load(id) -> MotionSequence``; default: the prepared
+            corpus, :class:`~wearpose.motion.CorpusStore`).
+        ids: the clips to window (default: ``store``'s clips of ``split``); ``limit`` applies to
+            either.
+    """
+    store = CorpusStore() if store is None else store
+    clips = sorted(store.clips(split=split)) if ids is None else list(ids)
     if limit is not None and len(clips) > limit:
         clips = clips[:: max(1, len(clips) // limit)][:limit]
     body = BodyModel()
@@ -251,13 +275,25 @@ def baseline_errors(windows: np.ndarray, cfg: NBeatsConfig, vel_frames: int = 3)
 
 
 def train(cfg: NBeatsConfig, out: Path, *, resume: bool = False, threads: int = 1, command: str = "",
-          max_train_clips: int | None = None, checkpoint_every_s: float = 180.0, log=print) -> dict[str, Any]:
-    """Train on the corpus train split, select on the val split; writes ``last.pt`` and ``best.pt``."""
+          max_train_clips: int | None = None, checkpoint_every_s: float = 180.0, log=print, store: Any = None,
+          train_source: tuple[Any, Sequence[str]] | None = None,
+          provenance: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Train on the corpus train split, select on the val split; writes ``last.pt`` and ``best.pt``.
+
+    Args:
+        store: the corpus store the splits come from (default: the prepared corpus; a lab's
+            subset for ``--source``).
+        train_source: ``(store, ids)`` of the train clips instead of ``store``'s train split (the
+            training mix, module doc); ``max_train_clips`` applies to it.
+        provenance: kept in every checkpoint's ``meta`` as given (the recipe, the mix's
+            settings and card sentence).
+    """
     torch.set_num_threads(threads)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
-    tr, train_clips = split_windows("train", cfg, max_train_clips)
-    va, _ = split_windows("val", cfg, cfg.val_clips)
+    src_store, src_ids = train_source if train_source is not None else (store, None)
+    tr, train_clips = split_windows("train", cfg, max_train_clips, store=src_store, ids=src_ids)
+    va, _ = split_windows("val", cfg, cfg.val_clips, store=store)
     log(f"data: {len(tr)} train windows from {len(train_clips)} clips, {len(va)} val windows ({time.time() - t0:.0f} s)")
     torch.manual_seed(cfg.seed)
     model = NBeats(cfg)
@@ -276,7 +312,7 @@ def train(cfg: NBeatsConfig, out: Path, *, resume: bool = False, threads: int = 
         epoch, best = st["epoch"], st["best"]
         log(f"resumed at epoch {epoch} (best val MAE {best:.3f} cm)")
     meta_base = {"train_clips": len(train_clips), "train_windows": int(len(tr)), "val_windows": int(len(va)),
-                 "train_command": command, "splits": {"train": "train", "select": "val"}}
+                 "train_command": command, "splits": {"train": "train", "select": "val"}, **(provenance or {})}
     history: list[dict[str, Any]] = []
     while epoch < cfg.epochs:
         model.train()
@@ -329,7 +365,11 @@ def ship(checkpoint: Path, name: str, test: dict[str, Any] | None = None) -> Pat
         "training_data": {"split": "train", "clips": meta.get("train_clips"), "windows": meta.get("train_windows"),
                           "licences": licences,
                           "trajectories": "both wrists relative to a head-worn EM source (body model sites, 120 Hz), "
-                                          "interference-free (ground-truth motion), input windows with 2 mm white noise"},
+                                          "interference-free (ground-truth motion), input windows with "
+                                          f"{1000 * float(ck['config'].get('input_noise', 0.0)):g} mm white noise",
+                          **({"mix": meta["mix"]} if meta.get("mix") else {}),
+                          "clips_per_source": meta.get("clips_per_source"), "corpus": store.provenance().get("corpus")},
+        **({"recipe": meta["recipe"]} if meta.get("recipe") else {}),
         "licence": ("non-commercial use only: trained on CC BY-NC 4.0 motion (Bandai Namco) and CMU mocap "
                     "(research terms)") if "CC-BY-NC-4.0" in licences else "see training_data.licences",
         "validation": {k: v for k, v in meta.items() if k.startswith("val_") or k == "epoch"},

@@ -74,7 +74,11 @@ METHOD = MethodSpec(
         defaults={"out": Path("runs/nbeats_cpu"), "threads": 1},
         help={"config": "Preset: tiny (smoke test), cpu (2 x 2 x 256, shipped as nbeats_cpu), paper (2 x 2 x 512).",
               "out": "Run directory.", "threads": "torch CPU threads."},
-        omit=frozenset({"device", "limit", "checkpoint_every"}),
+        # the mix applies to the motion: no simulated sensors to jitter, no estimator to start from
+        omit=frozenset({"device", "limit", "checkpoint_every", "init_from", "site_jitter"}),
+        mix=True,
+        val_metric="val_mae_cm",
+        reader="wearpose.interference.nbeats:kept_checkpoint",
     )},
     demos={"miposer": "wearpose.viewer.demos.miposer:run_demo"},
 )

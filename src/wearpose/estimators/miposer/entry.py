@@ -48,20 +48,23 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
 
 def train_nbeats_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]:
     """``wearpose train nbeats``: MIM's N-BEATS trajectory forecaster
-    (:func:`wearpose.interference.nbeats.train`) with the ``--config`` preset (``--epochs``
-    overriding it) on at most ``--max-train-clips`` train clips; or, with ``--ship CHECKPOINT``,
+    (:func:`wearpose.interference.nbeats.train`) with the ``--config`` preset (``--epochs`` and
+    ``--seed`` overriding it) on the train split of ``--source``'s clips (all labs by default),
+    at most ``--max-train-clips`` of them, plus the training mix (``--mirror``, ``--speed-copies``,
+    ``--procedural``, ...; :mod:`wearpose.estimators.trainmix`); or, with ``--ship CHECKPOINT``,
     no training: that checkpoint measured on the test split and shipped as package weights
     ``--name`` (:func:`~wearpose.interference.nbeats.ship_tested`).
 
     Returns:
-        ``{"method": "nbeats", "best_val_mae_cm", "epochs", "out_dir", "summary"}``, or with
-        ``--ship`` ``{"method": "nbeats", "shipped", "test", "summary"}`` (``summary``: the
+        ``{"method": "nbeats", "best_val_mae_cm", "epochs", "out_dir", "config", "summary"}``, or
+        with ``--ship`` ``{"method": "nbeats", "shipped", "test", "summary"}`` (``summary``: the
         line printed when done).
     """
     import torch  # start-up: torch adds ~1.3 s to importing this module
 
     # start-up: wearpose.interference (with torch) adds ~2.2 s to importing this module
     from wearpose.interference import nbeats
+    from wearpose.motion import CorpusStore
 
     torch.set_num_threads(run.threads or 1)
     if opts["ship"] is not None:
@@ -69,14 +72,46 @@ def train_nbeats_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[st
         return {"method": "nbeats", "summary": f"shipped {res['shipped']} (test MAE {res['test']['mae_cm']:.3f} cm)",
                 **res}
     cfg = nbeats.NBeatsConfig.preset(run.config)
-    if run.epochs is not None:
-        cfg = dataclasses.replace(cfg, epochs=run.epochs)
+    cfg = dataclasses.replace(cfg, **{k: v for k, v in (("epochs", run.epochs), ("seed", run.seed)) if v is not None})
     out = Path(run.out) if run.out is not None else Path("runs/nbeats_cpu")
     log = (lambda s: None) if run.quiet else (lambda s: print(s, flush=True))
+    store = run.corpus_store() or CorpusStore()
+    source, provenance = _nbeats_train_source(store, cfg.seed, run, opts["max_train_clips"])
     res = nbeats.train(cfg, out, resume=run.resume, threads=run.threads or 1, command=run.train_command,
-                       max_train_clips=opts["max_train_clips"], log=log)
-    return {"method": "nbeats", "out_dir": str(out), **res,
+                       log=log, store=store, train_source=source,
+                       provenance={**provenance, "recipe": dict(run.recipe) if run.recipe else None})
+    return {"method": "nbeats", "out_dir": str(out), "config": cfg.to_dict(), **res,
             "summary": f"best val MAE {res['best_val_mae_cm']:.3f} cm after {res['epochs']} epochs; checkpoints in {out}"}
+
+
+def _nbeats_train_source(store: Any, seed: int, run: TrainRun, limit: int | None) -> tuple[Any, dict[str, Any]]:
+    """The forecaster's train clips: ``store``'s train split (``limit`` corpus clips at most,
+    spread over it) and the run's training mix (:class:`~wearpose.estimators.trainmix.TrainingMix`)
+    -> ``((store, ids), what the checkpoint keeps of them)``: the clips per source and per kind
+    (corpus, augmented, procedural), and with a mix its settings and the card's sentence. The
+    mix applies to the motion only: the forecaster reads wrist trajectories, no simulated
+    sensors (the command takes no ``--site-jitter``)."""
+    from wearpose.estimators.trainconfig import TrainConfig
+    from wearpose.estimators.trainmix import TrainingMix, training_source
+
+    mix_cfg = TrainConfig().override(**{**run.config_overrides(), "seed": seed})
+    mix = TrainingMix.from_config(mix_cfg)
+    ids = sorted(store.clips(split="train"))
+    if limit is not None and len(ids) > limit:
+        ids = ids[:: max(1, len(ids) // limit)][:limit]
+    per_source: dict[str, int] = {}
+    for c in ids:
+        src = store.entry(c).get("source", "?")
+        per_source[src] = per_source.get(src, 0) + 1
+    tstore, all_ids, fingerprint = training_source("train", store, ids, mix_cfg, None, namespace="nbeats")
+    extra = len(all_ids) - len(ids)  # augmented copies, then the procedural clips (TrainingMix.extra_ids)
+    procedural = mix.procedural_per_family * len(mix.families) if extra else 0
+    provenance: dict[str, Any] = {"clips_per_source": dict(sorted(per_source.items())),
+                                  "train_clips_by_kind": {"corpus": len(ids), "augmented": extra - procedural,
+                                                          "procedural": procedural}}
+    if fingerprint:
+        provenance["mix"] = {**fingerprint["mix"], "description": mix.describe()}
+    return (tstore, all_ids), provenance
 
 
 def protocol(est: Any, store: Any, split: str, clips: int | None, seed: int, noise: str,
