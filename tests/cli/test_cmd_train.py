@@ -75,11 +75,15 @@ OWN_ADDED: dict[str, dict[str, Any]] = {"empose": {"--lr": None, "--lambda-shape
 #: The N-BEATS forecaster took the training mix with its recipe (issue 24.5), all of it but what
 #: has no meaning for wrist trajectories: --site-jitter (no simulated sensors) and --init-from.
 NBEATS_MIX = {k: v for k, v in MIX_ADDED.items() if k not in ("--site-jitter", "--init-from")}
+#: The two-stage EM-POSE took the training mix and the seed too (its recipe, issue 24.5); its own
+#: --init warm-starts it, so it has no --init-from.
+TWOSTAGE_MIX = {k: v for k, v in MIX_ADDED.items() if k != "--init-from"}
 
 
 @pytest.mark.parametrize("method", sorted(BEFORE))
 def test_every_former_option_keeps_its_name_and_default(method: str) -> None:
-    mix = MIX_ADDED if method in ("empose", "pip", "birae", "miposer") else NBEATS_MIX if method == "nbeats" else {}
+    mix = (MIX_ADDED if method in ("empose", "pip", "birae", "miposer") else
+           {"nbeats": NBEATS_MIX, "empose-twostage": TWOSTAGE_MIX}.get(method, {}))
     assert _options(method) == {**BEFORE[method], **ADDED, **mix, **OWN_ADDED.get(method, {})}
 
 
@@ -123,8 +127,12 @@ def test_empose_twostage_requires_out_and_warm_starts_from_its_own_run(corpus_st
     assert first["method"] == "empose-twostage" and first["config"]["ik"] == "lgd" and first["steps"] == 2, first
     warm = _train(["empose-twostage", "--config", "tiny", "--ik", "closed", "--mapper-input", "site", "--init",
                    str(tmp_path / "a" / "last.pt"), "--limit", "2", "--limit-val", "1", "--max-steps", "1",
-                   "--fk-weight", "50", "--threads", "1", "--out", str(tmp_path / "b")])
+                   "--fk-weight", "50", "--mirror", "--procedural", "1", "--families", "squat", "--seed", "3",
+                   "--threads", "1", "--out", str(tmp_path / "b")])
     assert warm["config"]["ik"] == "closed" and warm["config"]["mapper_input"] == "site", warm
+    # the training mix and the seed reach the two-stage config as they reach EM-POSE's
+    assert warm["config"]["aug_mirror"] and warm["config"]["procedural_per_family"] == 1, warm
+    assert warm["config"]["procedural_families"] == ["squat"] and warm["config"]["seed"] == 3, warm
     from wearpose.estimators.checkpoint import load_checkpoint
     from wearpose.estimators.empose import twostage
 

@@ -9,7 +9,8 @@ A recipe (``format: wearpose.recipe``, ``version: 1``)::
     budget: {epochs: 5}              # options that set the training length
     augmentation: {}                 # options that set the augmentation (PIP: mirror, speed_copies)
     init_from: null                  # the checkpoint the run starts from (fine-tuning): a path, or
-                                     # archive:<name> for archived weights (wearpose/weights/archive)
+                                     # archive:<name> for archived weights (wearpose/weights/archive;
+                                     # so may any other file option, e.g. empose-twostage's init)
     seed: 0                          # the config's seed (the run's --seed; checked against its config)
     corpus: {name: data-v2, manifest_sha1: 94395d87...}   # the prepared store must hold this corpus
 
@@ -186,13 +187,16 @@ def _values(path: Path, d: Mapping[str, Any], command: str, training: Training) 
                 raise InputFileError(path, f"{k!r} is given in {seen[k]} and {section}", "each option once",
                                      field=f"{section}.{k}")
             seen[k] = section
+            if declared[k].value_type is Path and section != "init_from":  # archive:<name> for any file option
+                v = _init_from(path, v, f"{section}.{k}")
             values[k] = _typed(path, f"{section}.{k}", v, declared[k].value_type)
     return values
 
 
-def _init_from(path: Path, v: Any) -> Any:
-    """``init_from``: ``archive:<name>`` is archived shipped weights
-    (:func:`wearpose.weights.archived_path`, the same file on every checkout); anything else a path."""
+def _init_from(path: Path, v: Any, field: str = "init_from") -> Any:
+    """``init_from``, or any other file option (``options.init`` of ``empose-twostage``):
+    ``archive:<name>`` is archived shipped weights (:func:`wearpose.weights.archived_path`, the
+    same file on every checkout); anything else a path."""
     if not (isinstance(v, str) and v.startswith("archive:")):
         return v
     from wearpose.weights import archived_path  # start-up: keeps the weights module out of reading declarations
@@ -200,7 +204,7 @@ def _init_from(path: Path, v: Any) -> Any:
     try:
         return str(archived_path(v.split(":", 1)[1]))
     except ConfigError as exc:
-        raise InputFileError(path, str(exc), "archive:<name> of a file in wearpose/weights/archive", field="init_from") from None
+        raise InputFileError(path, str(exc), "archive:<name> of a file in wearpose/weights/archive", field=field) from None
 
 
 def _typed(path: Path, where: str, v: Any, kind: type) -> Any:

@@ -89,6 +89,10 @@ METHOD = MethodSpec(
                 TrainOption("fk_weight", None, "ik=closed: FK_JOINT_WEIGHT (default 100).", float),
             ),
             help={"out": "Run directory (required).", "resume": "Continue <out>/last.pt (--init is then ignored)."},
+            # the training mix and the seed as for EM-POSE (the same data path); its own --init
+            # warm-starts mapper and Adam moments, so the shared --init-from is left out
+            omit=frozenset({"init_from"}),
+            mix=True,
         ),
         "poseprior": Training(
             entry=f"{_P}.optimization:train_from_options",
