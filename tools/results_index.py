@@ -69,9 +69,17 @@ NOTES = {
     **{k: "recipe imuposer_cpu_v2, run and not shipped (v3, 7 epochs, lower on validation: 57.6 against 58.8 mm)"
        for k in ("generalisation_imuposer_v2_test", "generalisation_imuposer_v2_unseen_motion",
                  "generalisation_imuposer_v2_heldout_bodies")},
-    **{k: "recipe empose12_cpu_v7, run and not shipped (test 14.7 mm against the shipped v6's 13.4; docs/empose.md)"
+    **{k: "recipe empose12_cpu_v7, run and not shipped (test 14.7 mm against v6's 13.4; docs/empose.md); its "
+          "v6 / empose12_cpu is archive:empose12_cpu_v6, shipped until v8"
        for k in ("generalisation_empose12_v7_test", "generalisation_empose12_chain_v7_asf_takes")},
-    "recipe_reproduction": "its empose12_cpu_v5 row's reference, 'shipped empose12_cpu', is now archive:empose12_cpu_v5",
+    "recipe_reproduction": "its empose12_cpu_v5 row's reference, 'shipped empose12_cpu', is now archive:empose12_cpu_v5; "
+                           "its empose12_cpu_v6 row's, archive:empose12_cpu_v6",
+    **{k: "its v6 / empose12_cpu is empose12_cpu v6 (archive:empose12_cpu_v6), shipped until v8 on 2026-12-05"
+       for k in ("generalisation_empose12_v8_test", "generalisation_empose12_v8_unseen_motion",
+                 "generalisation_empose12_v8_heldout_bodies", "generalisation_empose12_chain_v8_asf_takes",
+                 "generalisation_empose12_unseen_lab_v6_bandai", "generalisation_empose12_unseen_lab_v6_cmu_daz",
+                 "generalisation_empose12_unseen_lab_v6_bandai_refine_gn3",
+                 "generalisation_empose12_unseen_lab_v6_cmu_daz_refine_gn3", "floor_contact_empose_val")},
     "latency_empose6_cpu": "empose6_cpu v1 (archive:empose6_cpu_v1); v3 has the same architecture, so the same cost",
     "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals')",
     "empose_table3_rep": "a second training of four Table 3 rows: the run-to-run spread",

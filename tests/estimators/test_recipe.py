@@ -175,6 +175,20 @@ def test_archive_init_from_and_seed_set_the_run(tmp_path: Path) -> None:
     assert Path(r.values["init_from"]).is_file() and r.values["seed"] == 4 and r.seed == 4
 
 
+def test_archive_names_any_file_option(tmp_path: Path) -> None:
+    """``archive:<name>`` works for a training's own file options too (empose-twostage's --init),
+    and an unknown name is refused naming the field."""
+    from wearpose.weights import WEIGHTS_DIR
+
+    r = load_recipe("empose12_twostage_cpu_v2")
+    assert Path(r.values["init"]) == WEIGHTS_DIR / "archive" / "empose12_twostage_cpu_v1.pt"
+    assert r.method == "empose-twostage" and r.values["mirror"] and r.values["rest_offset"] == 30
+    f = tmp_path / "t.yaml"
+    f.write_text(HEADER + "method: empose-twostage\noptions: {init: archive:no_such_weights}\n")
+    with pytest.raises(InputFileError, match="options.init"):
+        load_recipe(f)
+
+
 def test_empose12_cpu_recipe_is_the_v1_cards_command_and_corpus() -> None:
     """The recipe written after the fact for EM-POSE 12 v1 (shipped until version 5, now in the
     archive) says what its card says."""
@@ -190,16 +204,24 @@ def test_empose12_cpu_recipe_is_the_v1_cards_command_and_corpus() -> None:
 
 
 def test_shipped_empose12_cpu_card_names_the_recipe_that_reproduces_it() -> None:
-    """The shipped EM-POSE 12 (version 6) was trained by `wearpose train --recipe empose12_cpu_v6`
+    """The shipped EM-POSE 12 (version 8) was trained by `wearpose train --recipe empose12_cpu_v8`
     (name, file hash, corpus and command: test_every_shipped_weight_names_the_recipe_file_that_made_it);
-    its card carries that recipe as resolved: corpus v2, 5 epochs, the mix without random wearers;
-    version 5 (no mix) is archived with its own recipe's card."""
+    its card carries that recipe as resolved: corpus v2, 5 epochs, the mix without random wearers,
+    capture-chain offsets on the collars, neck and elbows only; versions 6 (v8 without the offsets)
+    and 5 (no mix) are archived with their own recipes' cards."""
     card = json.loads(weight_path("empose12_cpu").with_suffix(".json").read_text())
-    r = load_recipe("empose12_cpu_v6")
+    r = load_recipe("empose12_cpu_v8")
     assert card["recipe"]["seed"] == r.seed and r.corpus["name"] == "data-v2"
     assert card["recipe"]["options"]["epochs"] == r.values["epochs"] == 5 and r.values["mirror"]
     assert r.values["procedural"] == 20 and r.values["mix_copies"] == 1 and r.values["shapes"] in (None, "corpus")
+    assert r.values["rest_offset"] == 30 and set(r.values["rest_offset_joints"].split(",")) == {
+        "left_collar", "right_collar", "neck", "left_elbow", "right_elbow"}
     assert card["validation"]["epoch"] <= 5
+    v6 = json.loads((WEIGHTS_DIR / "archive" / "empose12_cpu_v6.json").read_text())
+    r6 = load_recipe("empose12_cpu_v6")
+    assert v6["recipe"]["sha1"] == r6.sha1 and r6.values["rest_offset"] is None
+    assert {k: v for k, v in r.values.items() if not k.startswith("rest_offset")} == {
+        k: v for k, v in r6.values.items() if not k.startswith("rest_offset")}
     v5 = json.loads((WEIGHTS_DIR / "archive" / "empose12_cpu_v5.json").read_text())
     r5 = load_recipe("empose12_cpu_v5")
     assert v5["recipe"]["sha1"] == r5.sha1 and r5.values["epochs"] == 14 and not r5.values["mirror"]
@@ -212,7 +234,7 @@ def test_shipped_empose12_cpu_card_names_the_recipe_that_reproduces_it() -> None
 WITHOUT_RECIPE = {"birae3_cpu", "empose12_twostage_cpu", "nbeats_cpu"}
 
 #: The recipe (``src/wearpose/estimators/<method>/recipes/<name>.yaml``) that made each shipped weight.
-SHIPPED_RECIPES = {"empose12_cpu": "empose12_cpu_v6", "empose6_cpu": "empose6_cpu_v3", "pip_cpu": "pip_cpu",
+SHIPPED_RECIPES = {"empose12_cpu": "empose12_cpu_v8", "empose6_cpu": "empose6_cpu_v3", "pip_cpu": "pip_cpu",
                    "birae6_cpu": "birae6_cpu_v2", "miposer_cpu": "miposer_cpu_v2", "miposer1_cpu": "miposer1_cpu_v2",
                    "imuposer_cpu": "imuposer_cpu_v3"}
 
