@@ -273,3 +273,31 @@ def test_nbeats_training_pipeline_tiny(tmp_path, corpus_store):
     assert (tmp_path / "best.pt").exists() and np.isfinite(res["best_val_mae_cm"])
     model, ck = load_forecaster(tmp_path / "best.pt")
     assert ck["config"]["width"] == 32
+
+
+@pytest.mark.corpus
+def test_forecasters_side_by_side_pool_their_groups(corpus_store):
+    """``evaluate_on_store``: per-source figures pool to the overall one (window-weighted), every
+    model sees the same windows as the baselines, and forecasters of different windows are
+    refused."""
+    import dataclasses
+
+    import torch
+
+    from wearpose.errors import ConfigError
+    from wearpose.interference.nbeats import NBeats, NBeatsConfig, evaluate_on_store
+    from wearpose.motion import CorpusStore
+
+    cfg = NBeatsConfig.preset("tiny")
+    torch.manual_seed(0)
+    a, b = NBeats(cfg), NBeats(dataclasses.replace(cfg, seed=1))
+    res = evaluate_on_store({"a": a, "b": b}, CorpusStore(), "test")
+    for m in res["models"].values():
+        groups = m["groups"].values()
+        assert sum(g["windows"] for g in groups) == m["all"]["windows"] > 0
+        pooled = sum(g["mae_cm"] * g["windows"] for g in groups) / m["all"]["windows"]
+        assert pooled == pytest.approx(m["all"]["mae_cm"], rel=1e-6)
+    assert res["models"]["a"]["all"]["mae_cm"] != res["models"]["b"]["all"]["mae_cm"]
+    assert set(res["baselines"]["groups"]) == set(res["models"]["a"]["groups"])
+    with pytest.raises(ConfigError, match="windows differ"):
+        evaluate_on_store({"a": a, "short": NBeats(dataclasses.replace(cfg, output_len=30))}, CorpusStore(), "test")

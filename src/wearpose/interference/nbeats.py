@@ -259,6 +259,44 @@ def evaluate_forecaster(model: NBeats, windows: np.ndarray, batch: int = 1024) -
     return {"mae_cm": 100 * mae / n, "mean_err_cm": 100 * e3 / n, "err_at_horizon_cm": 100 * e_end / n, "windows": n}
 
 
+def evaluate_on_store(models: Mapping[str, NBeats], store: Any, split: str = "test",
+                      group_by: str = "source") -> dict[str, Any]:
+    """Every forecaster in ``models`` (all of one ``input_len`` / ``output_len`` / ``fps``) on the
+    windows of ``store``'s ``split`` clips: overall and per group of clips (the clips' ``source``,
+    or ``subject``: a procedural store's family), with the hold-last and constant-velocity
+    forecasts (:func:`baseline_errors`) beside them. Metrics as :func:`evaluate_forecaster`
+    (cm; ``windows``: how many).
+
+    Returns:
+        ``{"split", "clips", "group_by", "models": {name: {"all": metrics, "groups": {group:
+        metrics}}}, "baselines": {"all": ..., "groups": ...}}``.
+
+    Raises:
+        ConfigError: the models disagree on the window, or the split has no clip long enough.
+    """
+    cfgs = {(m.cfg.input_len, m.cfg.output_len, m.cfg.fps, m.cfg.sites) for m in models.values()}
+    if len(cfgs) != 1:
+        raise ConfigError(f"evaluate_on_store: the forecasters' windows differ ({sorted(map(str, cfgs))}); "
+                          "compare forecasters of one input_len, output_len, fps and sites")
+    cfg = next(iter(models.values())).cfg
+    ids = sorted(store.clips(split=split))
+    groups: dict[str, list[str]] = {}
+    for c in ids:
+        groups.setdefault(str(store.entry(c).get(group_by, "?")), []).append(c)
+    windows = {g: split_windows(split, cfg, store=store, ids=members)[0] for g, members in sorted(groups.items())}
+    every = np.concatenate([w for w in windows.values() if len(w)], 0) if any(len(w) for w in windows.values()) else None
+    if every is None:
+        raise ConfigError(f"evaluate_on_store: no clip of split {split!r} is {cfg.input_len + cfg.output_len} "
+                          f"samples long at {cfg.fps:g} Hz")
+    out: dict[str, Any] = {"split": split, "clips": len(ids), "group_by": group_by, "models": {}}
+    for name, model in models.items():
+        out["models"][name] = {"all": evaluate_forecaster(model, every),
+                               "groups": {g: evaluate_forecaster(model, w) for g, w in windows.items() if len(w)}}
+    base = {"all": baseline_errors(every, cfg), "groups": {g: baseline_errors(w, cfg) for g, w in windows.items() if len(w)}}
+    out["baselines"] = {"all": base["all"], "groups": base["groups"]}
+    return out
+
+
 def baseline_errors(windows: np.ndarray, cfg: NBeatsConfig, vel_frames: int = 3) -> dict[str, dict[str, float]]:
     """The same errors for two naive forecasts: hold the last position, and constant velocity
     (differenced over ``vel_frames``), to put the forecaster's figures in context."""
