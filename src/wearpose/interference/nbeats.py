@@ -35,7 +35,7 @@ import math
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import torch
@@ -213,7 +213,8 @@ def forecast_windows(trajs: list[np.ndarray], cfg: NBeatsConfig) -> np.ndarray:
 
 
 def split_windows(split: str, cfg: NBeatsConfig, limit: int | None = None, store: Any = None,
-                  ids: Sequence[str] | None = None) -> tuple[np.ndarray, list[str]]:
+                  ids: Sequence[str] | None = None,
+                  progress: Callable[[int, int], None] | None = None) -> tuple[np.ndarray, list[str]]:
     """Windows of every clip of a corpus split (``limit`` clips at most, spread over the split).
 
     Args:
@@ -221,6 +222,7 @@ def split_windows(split: str, cfg: NBeatsConfig, limit: int | None = None, store
             corpus, :class:`~wearpose.motion.CorpusStore`).
         ids: the clips to window (default: ``store``'s clips of ``split``); ``limit`` applies to
             either.
+        progress: ``progress(done, total)`` after each clip.
     """
     store = CorpusStore() if store is None else store
     clips = sorted(store.clips(split=split)) if ids is None else list(ids)
@@ -228,8 +230,10 @@ def split_windows(split: str, cfg: NBeatsConfig, limit: int | None = None, store
         clips = clips[:: max(1, len(clips) // limit)][:limit]
     body = BodyModel()
     trajs: list[np.ndarray] = []
-    for cid in clips:
+    for i, cid in enumerate(clips):
         trajs += clip_trajectories(store.load(cid), body, cfg)
+        if progress is not None:
+            progress(i + 1, len(clips))
     return forecast_windows(trajs, cfg), clips
 
 
@@ -330,7 +334,8 @@ def train(cfg: NBeatsConfig, out: Path, *, resume: bool = False, threads: int = 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     src_store, src_ids = train_source if train_source is not None else (store, None)
-    tr, train_clips = split_windows("train", cfg, max_train_clips, store=src_store, ids=src_ids)
+    every = lambda i, n: log(f"train windows: {i}/{n} clips ({time.time() - t0:.0f} s)") if i % 500 == 0 else None  # noqa: E731
+    tr, train_clips = split_windows("train", cfg, max_train_clips, store=src_store, ids=src_ids, progress=every)
     va, _ = split_windows("val", cfg, cfg.val_clips, store=store)
     log(f"data: {len(tr)} train windows from {len(train_clips)} clips, {len(va)} val windows ({time.time() - t0:.0f} s)")
     torch.manual_seed(cfg.seed)
