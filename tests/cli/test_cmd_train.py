@@ -71,7 +71,8 @@ MIX_ADDED: dict[str, Any] = {"--seed": None, "--init-from": None, "--mirror": Fa
                              "--procedural": None, "--shapes": None, "--families": None}
 #: Own options the methods gained since: --lr for EM-POSE and MI-Poser (fine-tuning recipes);
 #: EM-POSE's --lambda-shape (issue 24: with wearers of every size the shape loss outweighs the pose loss).
-OWN_ADDED: dict[str, dict[str, Any]] = {"empose": {"--lr": None, "--lambda-shape": None}, "miposer": {"--lr": None}}
+OWN_ADDED: dict[str, dict[str, Any]] = {"empose": {"--lr": None, "--lambda-shape": None}, "miposer": {"--lr": None},
+                                        "nbeats": {"--notes": None}}
 #: The N-BEATS forecaster took the training mix with its recipe (issue 24.5), all of it but what
 #: has no meaning for wrist trajectories: --site-jitter (no simulated sensors) and --init-from.
 NBEATS_MIX = {k: v for k, v in MIX_ADDED.items() if k not in ("--site-jitter", "--init-from")}
@@ -159,9 +160,10 @@ def test_nbeats_trains_then_ships_with_its_test_figures(corpus_store: Path, tmp_
     assert r["method"] == "nbeats" and r["epochs"] == 1 and r["best_val_mae_cm"] > 0, r
     monkeypatch.setattr(wearpose.weights, "WEIGHTS_DIR", tmp_path / "w")
     (tmp_path / "w").mkdir()
-    s = _train(["nbeats", "--ship", str(tmp_path / "n" / "best.pt"), "--name", "nb_test"])
+    s = _train(["nbeats", "--ship", str(tmp_path / "n" / "best.pt"), "--name", "nb_test", "--notes", "Version 0."])
     assert s["shipped"] == str(tmp_path / "w" / "nb_test.pt") and s["test"]["mae_cm"] > 0, s
     import json
 
     card = json.loads((tmp_path / "w" / "nb_test.json").read_text())
     assert card["train_command"].startswith("wearpose train nbeats") and card["test"]["mae_cm"] == s["test"]["mae_cm"]
+    assert card["notes"].startswith("Version 0. MI-Poser reports")

@@ -391,8 +391,9 @@ def train(cfg: NBeatsConfig, out: Path, *, resume: bool = False, threads: int = 
     return {"best_val_mae_cm": best, "epochs": epoch}
 
 
-def ship(checkpoint: Path, name: str, test: dict[str, Any] | None = None) -> Path:
-    """Copy a forecaster checkpoint into ``wearpose/weights/<name>.pt`` (no optimiser state) with its card."""
+def ship(checkpoint: Path, name: str, test: dict[str, Any] | None = None, notes: str | None = None) -> Path:
+    """Copy a forecaster checkpoint into ``wearpose/weights/<name>.pt`` (no optimiser state) with its
+    card; ``notes`` go first in the card's ``notes`` (what this version is, where it is worse)."""
     ck = torch.load(checkpoint, map_location="cpu", weights_only=False)
     ck["train_state"] = None
     out = weights.WEIGHTS_DIR / f"{name}.pt"
@@ -419,14 +420,14 @@ def ship(checkpoint: Path, name: str, test: dict[str, Any] | None = None) -> Pat
         "test": test or {},
         "size_bytes": out.stat().st_size,
         "shipped_with": f"wearpose train nbeats --ship {checkpoint} --name {name}",
-        "notes": "MI-Poser reports 1.26 cm validation MAE on its own ~40 min of free sensor motion; ours is on "
-                 "corpus motion (dance, sports, walking included), a harder set.",
+        "notes": (f"{notes} " if notes else "") + "MI-Poser reports 1.26 cm validation MAE on its own ~40 min of "
+                 "free sensor motion; ours is on corpus motion (dance, sports, walking included), a harder set.",
     }
     out.with_suffix(".json").write_text(json.dumps(card, indent=2))
     return out
 
 
-def ship_tested(checkpoint: Path, name: str) -> dict[str, Any]:
+def ship_tested(checkpoint: Path, name: str, notes: str | None = None) -> dict[str, Any]:
     """Measure ``checkpoint`` on the corpus test split's windows (MAE and the constant /
     constant-velocity baselines, :func:`evaluate_forecaster`, :func:`baseline_errors`), then
     :func:`ship` it as ``name`` with those figures on its card.
@@ -437,4 +438,4 @@ def ship_tested(checkpoint: Path, name: str) -> dict[str, Any]:
     model, _ = load_forecaster(checkpoint)
     windows, _ = split_windows("test", model.cfg)
     test = {"split": "test", **evaluate_forecaster(model, windows), "baselines": baseline_errors(windows, model.cfg)}
-    return {"shipped": str(ship(checkpoint, name, test)), "test": test}
+    return {"shipped": str(ship(checkpoint, name, test, notes)), "test": test}

@@ -69,6 +69,8 @@ METHOD = MethodSpec(
             TrainOption("ship", None, "Ship this checkpoint as package weights (measured on the test split) instead "
                                       "of training.", Path),
             TrainOption("name", "nbeats_cpu", "Name of the shipped weights (with --ship)."),
+            TrainOption("notes", None, "With --ship: the card's notes (what this version is, where it is worse).",
+                        str),
             TrainOption("max_train_clips", None, "Use only the first N training clips.", int, min=1),
         ),
         defaults={"out": Path("runs/nbeats_cpu"), "threads": 1},

@@ -68,7 +68,7 @@ def train_nbeats_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[st
 
     torch.set_num_threads(run.threads or 1)
     if opts["ship"] is not None:
-        res = nbeats.ship_tested(opts["ship"], opts["name"])
+        res = nbeats.ship_tested(opts["ship"], opts["name"], opts["notes"])
         return {"method": "nbeats", "summary": f"shipped {res['shipped']} (test MAE {res['test']['mae_cm']:.3f} cm)",
                 **res}
     cfg = nbeats.NBeatsConfig.preset(run.config)
