@@ -84,7 +84,10 @@ NOTES = {
           "(docs/interference.md)"
        for k in ("interference_correction", "interference_correction_windows")},
     "latency_empose6_cpu": "empose6_cpu v1 (archive:empose6_cpu_v1); v3 has the same architecture, so the same cost",
-    "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals')",
+    "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals'), with the v1 "
+                           "weights (archive:empose12_cpu_v1, archive:empose12_twostage_cpu_v1); not rerun",
+    "empose_table10_lgdik": "the paper's LGD IK behind the v1 two-stage mapper (archive:empose12_twostage_cpu_v1); "
+                            "not rerun with v3",
     "empose_table3_rep": "a second training of four Table 3 rows: the run-to-run spread",
     "physics_val_kres0.1": "made before contact_no_lift; with physics_val_literal_weights the evidence "
                            "PhysicsConfig.weights_in_norm's docstring cites",
