@@ -8,6 +8,7 @@ Run each model's test-split evaluation first, writing ``DIR/<model>.json``::
     wearpose evaluate miposer1_cpu --frame-stride 4 --threads 1 --out DIR/miposer1_cpu
     wearpose evaluate imuposer_cpu --frame-stride 4 --threads 1 --out DIR/imuposer_cpu
     python benchmarks/empose_table10.py --ckpt 2-stage=src/wearpose/weights/empose12_twostage_cpu.pt --out DIR/table10_twostage
+    python benchmarks/nbeats_eval.py nbeats_cpu=nbeats_cpu --out DIR/nbeats_cpu
 
 then ``python benchmarks/card_reproduction.py DIR``: a table of each card's headline test figures
 beside the re-measured ones (relative difference), written to
@@ -30,6 +31,8 @@ FIGURES: dict[str, list[tuple[str, tuple[str, ...], tuple[str, ...]]]] = {
            ("MPJAE deg", ("mpjae_deg",), ("mpjae_deg",))] for m in ("empose12_cpu", "empose6_cpu")},
     "empose12_twostage_cpu": [(f"{s}: MPJPE mm", ("sets", s, "mpjpe_mm"), ("sets", s, "mpjpe_mm"))
                               for s in ("all", "avail", "miss")],
+    # MIM's forecaster: its card's test block is nbeats.ship_tested's, the benchmark's "all" the same windows
+    "nbeats_cpu": [(f"test {k}", (k,), ("all", k)) for k in ("mae_cm", "mean_err_cm", "err_at_horizon_cm")],
     "pip_cpu": [(k, (k,), ("metrics", k)) for k in (
         "sip_error_deg", "angular_error_deg", "positional_error_cm", "mesh_error_cm", "jitter_abs_km_s3",
         "translation_error_cm")],
