@@ -172,7 +172,7 @@ def _values(path: Path, d: Mapping[str, Any], command: str, training: Training) 
     seen: dict[str, str] = {}
     sections = [(s, d.get(s) or {}) for s in OPTION_SECTIONS]
     if d.get("init_from") is not None:
-        sections.append(("init_from", {"init_from": _init_from(path, d["init_from"])}))
+        sections.append(("init_from", {"init_from": _archived_or_path(path, d["init_from"])}))
     if isinstance(d.get("seed"), int) and "seed" in declared:  # a bad seed is named by load_recipe
         sections.append(("seed", {"seed": d["seed"]}))
     for section, opts in sections:
@@ -188,12 +188,12 @@ def _values(path: Path, d: Mapping[str, Any], command: str, training: Training) 
                                      field=f"{section}.{k}")
             seen[k] = section
             if declared[k].value_type is Path and section != "init_from":  # archive:<name> for any file option
-                v = _init_from(path, v, f"{section}.{k}")
+                v = _archived_or_path(path, v, f"{section}.{k}")
             values[k] = _typed(path, f"{section}.{k}", v, declared[k].value_type)
     return values
 
 
-def _init_from(path: Path, v: Any, field: str = "init_from") -> Any:
+def _archived_or_path(path: Path, v: Any, field: str = "init_from") -> Any:
     """``init_from``, or any other file option (``options.init`` of ``empose-twostage``):
     ``archive:<name>`` is archived shipped weights (:func:`wearpose.weights.archived_path`, the
     same file on every checkout); anything else a path."""
