@@ -76,6 +76,7 @@ METHOD = MethodSpec(
             Trains the empose-twostage weights; wearpose train empose --model twostage trains the default (LGD IK) from scratch.
 
             Example: wearpose train empose-twostage --ik closed --init runs/twostage12_long/best.pt --epochs 8 --lr 2e-4 --threads 1 --out runs/twostage12_closed
+            The shipped empose12_twostage_cpu: wearpose train --recipe empose12_twostage_cpu_v3
             """,
             done="done: best val MPJPE {best:.1f} mm; checkpoints in {out_dir}",
             options=(

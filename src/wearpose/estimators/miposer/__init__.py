@@ -62,6 +62,7 @@ METHOD = MethodSpec(
         Wrist trajectories relative to the head-worn source at 120 Hz, 1 s in, 0.5 s out (wearpose.interference.nbeats).
 
         Example: wearpose train nbeats --config cpu --threads 1 --out runs/nbeats_cpu
+        The shipped nbeats_cpu: wearpose train --recipe nbeats_cpu_v2 --out runs/nbeats_cpu
         Ship it: wearpose train nbeats --ship runs/nbeats_cpu/best.pt --name nbeats_cpu
         """,
         done="done: {summary}",
