@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from wearpose.errors import ConfigError, InputFileError
-from wearpose.estimators.method import Training
+from wearpose.estimators.method import Training, resolve
 import yaml
 
 FORMAT = "wearpose.recipe"
@@ -274,8 +274,6 @@ def _kept(training: Training, path: str | Path) -> tuple[Mapping[str, Any], Mapp
     """A kept checkpoint of ``training`` as ``(weights, meta, data_fingerprint)``: its declared
     reader, else :func:`~wearpose.estimators.checkpoint.load_checkpoint`."""
     if training.reader is not None:
-        from wearpose.estimators.method import resolve
-
         return resolve(training.reader)(path)
     from wearpose.estimators.checkpoint import load_checkpoint  # start-up: torch only when comparing
 

@@ -10,6 +10,7 @@ from typing import Any, Callable, Mapping
 
 from wearpose.estimators.method import OptionError, TrainRun, finite_metrics
 from wearpose.estimators.miposer.config import MiposerConfig
+from wearpose.estimators.trainconfig import TrainConfig
 
 
 def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]:
@@ -64,7 +65,7 @@ def train_nbeats_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[st
 
     # start-up: wearpose.interference (with torch) adds ~2.2 s to importing this module
     from wearpose.interference import nbeats
-    from wearpose.motion import CorpusStore
+    from wearpose.motion import CorpusStore  # start-up: loaded with nbeats above; named here for the store
 
     torch.set_num_threads(run.threads or 1)
     if opts["ship"] is not None:
@@ -91,7 +92,7 @@ def _nbeats_train_source(store: Any, seed: int, run: TrainRun, limit: int | None
     (corpus, augmented, procedural), and with a mix its settings and the card's sentence. The
     mix applies to the motion only: the forecaster reads wrist trajectories, no simulated
     sensors (the command takes no ``--site-jitter``)."""
-    from wearpose.estimators.trainconfig import TrainConfig
+    # start-up: the training mix loads torch and the motion stack (~1.6 s); the entry module stays torch-free
     from wearpose.estimators.trainmix import TrainingMix, training_source
 
     mix_cfg = TrainConfig().override(**{**run.config_overrides(), "seed": seed})
