@@ -212,6 +212,12 @@ def forecast_windows(trajs: list[np.ndarray], cfg: NBeatsConfig) -> np.ndarray:
     return np.concatenate(out, 0).astype(np.float32) if out else np.zeros((0, L, 3), np.float32)
 
 
+def spread(ids: Sequence[str], limit: int | None) -> list[str]:
+    """At most ``limit`` of ``ids``, evenly spaced over them (all of them when ``limit`` is None)."""
+    ids = list(ids)
+    return ids if limit is None or len(ids) <= limit else ids[:: max(1, len(ids) // limit)][:limit]
+
+
 def split_windows(split: str, cfg: NBeatsConfig, limit: int | None = None, store: Any = None,
                   ids: Sequence[str] | None = None,
                   progress: Callable[[int, int], None] | None = None) -> tuple[np.ndarray, list[str]]:
@@ -225,9 +231,7 @@ def split_windows(split: str, cfg: NBeatsConfig, limit: int | None = None, store
         progress: ``progress(done, total)`` after each clip.
     """
     store = CorpusStore() if store is None else store
-    clips = sorted(store.clips(split=split)) if ids is None else list(ids)
-    if limit is not None and len(clips) > limit:
-        clips = clips[:: max(1, len(clips) // limit)][:limit]
+    clips = spread(sorted(store.clips(split=split)) if ids is None else list(ids), limit)
     body = BodyModel()
     trajs: list[np.ndarray] = []
     for i, cid in enumerate(clips):

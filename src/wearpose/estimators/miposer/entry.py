@@ -94,12 +94,12 @@ def _nbeats_train_source(store: Any, seed: int, run: TrainRun, limit: int | None
     sensors (the command takes no ``--site-jitter``)."""
     # start-up: the training mix loads torch and the motion stack (~1.6 s); the entry module stays torch-free
     from wearpose.estimators.trainmix import TrainingMix, training_source
+    # start-up: as above (with torch)
+    from wearpose.interference.nbeats import spread
 
     mix_cfg = TrainConfig().override(**{**run.config_overrides(), "seed": seed})
     mix = TrainingMix.from_config(mix_cfg)
-    ids = sorted(store.clips(split="train"))
-    if limit is not None and len(ids) > limit:
-        ids = ids[:: max(1, len(ids) // limit)][:limit]
+    ids = spread(sorted(store.clips(split="train")), limit)
     per_source: dict[str, int] = {}
     for c in ids:
         src = store.entry(c).get("source", "?")
