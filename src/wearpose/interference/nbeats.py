@@ -291,18 +291,17 @@ def evaluate_on_store(models: Mapping[str, NBeats], store: Any, split: str = "te
     groups: dict[str, list[str]] = {}
     for c in ids:
         groups.setdefault(str(store.entry(c).get(group_by, "?")), []).append(c)
-    windows = {g: split_windows(split, cfg, store=store, ids=members)[0] for g, members in sorted(groups.items())}
-    every = np.concatenate([w for w in windows.values() if len(w)], 0) if any(len(w) for w in windows.values()) else None
-    if every is None:
+    windows = {g: w for g, members in sorted(groups.items())
+               if len(w := split_windows(split, cfg, store=store, ids=members)[0])}  # groups of short clips only: none
+    if not windows:
         raise ConfigError(f"evaluate_on_store: no clip of split {split!r} is {cfg.input_len + cfg.output_len} "
                           f"samples long at {cfg.fps:g} Hz")
-    out: dict[str, Any] = {"split": split, "clips": len(ids), "group_by": group_by, "models": {}}
-    for name, model in models.items():
-        out["models"][name] = {"all": evaluate_forecaster(model, every),
-                               "groups": {g: evaluate_forecaster(model, w) for g, w in windows.items() if len(w)}}
-    base = {"all": baseline_errors(every, cfg), "groups": {g: baseline_errors(w, cfg) for g, w in windows.items() if len(w)}}
-    out["baselines"] = {"all": base["all"], "groups": base["groups"]}
-    return out
+    every = np.concatenate(list(windows.values()), 0)
+    models_out = {name: {"all": evaluate_forecaster(model, every),
+                         "groups": {g: evaluate_forecaster(model, w) for g, w in windows.items()}}
+                  for name, model in models.items()}
+    baselines = {"all": baseline_errors(every, cfg), "groups": {g: baseline_errors(w, cfg) for g, w in windows.items()}}
+    return {"split": split, "clips": len(ids), "group_by": group_by, "models": models_out, "baselines": baselines}
 
 
 def baseline_errors(windows: np.ndarray, cfg: NBeatsConfig, vel_frames: int = 3) -> dict[str, dict[str, float]]:

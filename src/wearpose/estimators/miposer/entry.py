@@ -5,6 +5,7 @@ training run) and the evaluation protocols of MI-Poser and its IMUPoser baseline
 from __future__ import annotations
 
 import dataclasses
+from collections import Counter
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -94,21 +95,19 @@ def _nbeats_train_source(store: Any, seed: int, run: TrainRun, limit: int | None
     sensors (the command takes no ``--site-jitter``)."""
     # start-up: the training mix loads torch and the motion stack (~1.6 s); the entry module stays torch-free
     from wearpose.estimators.trainmix import TrainingMix, training_source
+    from wearpose.motion.procedural import PREFIX  # start-up: as above (the motion stack)
     # start-up: as above (with torch)
     from wearpose.interference.nbeats import spread
 
     mix_cfg = TrainConfig().override(**{**run.config_overrides(), "seed": seed})
     mix = TrainingMix.from_config(mix_cfg)
     ids = spread(sorted(store.clips(split="train")), limit)
-    per_source: dict[str, int] = {}
-    for c in ids:
-        src = store.entry(c).get("source", "?")
-        per_source[src] = per_source.get(src, 0) + 1
+    per_source = Counter(store.entry(c).get("source", "?") for c in ids)
     tstore, all_ids, fingerprint = training_source("train", store, ids, mix_cfg, None, namespace="nbeats")
-    extra = len(all_ids) - len(ids)  # augmented copies, then the procedural clips (TrainingMix.extra_ids)
-    procedural = mix.procedural_per_family * len(mix.families) if extra else 0
+    procedural = sum(c.startswith(PREFIX) for c in all_ids)  # the rest of the added ids are augmented copies
     provenance: dict[str, Any] = {"clips_per_source": dict(sorted(per_source.items())),
-                                  "train_clips_by_kind": {"corpus": len(ids), "augmented": extra - procedural,
+                                  "train_clips_by_kind": {"corpus": len(ids),
+                                                          "augmented": len(all_ids) - len(ids) - procedural,
                                                           "procedural": procedural}}
     if fingerprint:
         provenance["mix"] = {**fingerprint["mix"], "description": mix.describe()}
