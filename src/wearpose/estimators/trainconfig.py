@@ -11,8 +11,8 @@ fields by name, never by position).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import ClassVar
+from dataclasses import dataclass, replace
+from typing import ClassVar, Self
 
 from wearpose.errors import ConfigError
 from wearpose.estimators.configio import ConfigIO
@@ -92,6 +92,12 @@ class TrainConfig(ConfigIO):
         if self.train_shapes not in self.TRAIN_SHAPES:
             raise ConfigError(f"{name}.train_shapes: expected one of "
                               f"{', '.join(repr(s) for s in self.TRAIN_SHAPES)}, got {self.train_shapes!r}")
+
+    def without_mix(self) -> Self:
+        """This config with the training mix off: the train split is its corpus clips as they
+        are (no copies, procedural clips, wearers, site jitter or rest offsets)."""
+        return replace(self, aug_mirror=False, aug_speed_copies=0, aug_heading_copies=0, aug_mix_copies=0,
+                       aug_site_jitter_m=0.0, aug_rest_offset_deg=0.0, procedural_per_family=0, train_shapes="corpus")
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -303,6 +303,36 @@ def test_init_from_continues_a_checkpoint_and_zero_epochs_skip_a_phase(trained, 
                                            threads=1, epochs_clean=0, epochs_aug=0, init_from=src)
 
 
+def test_sigma_phase_refits_the_log_variance_head_alone_on_the_corpus_clips(trained, tmp_path: Path) -> None:
+    """``epochs_sigma``: only ``logvar.*`` moves, on the train split without the mix; kept by val NLL."""
+    import json
+
+    est, tmp, store = trained
+    src = tmp / "run" / "best.pt"
+    ref = BiraeEstimator.load(src).model.state_dict()
+    fresh = BiraeEstimator(tiny(aug_mirror=True, epochs_sigma=2, lr_sigma=3e-2))
+    res = fresh.fit(tmp_path / "sig", store=store, cache_root=tmp / "cache", quiet=True, threads=1,
+                    epochs_clean=0, epochs_aug=0, init_from=src)
+    assert res["best_checkpoint"] == str(tmp_path / "sig" / "best.pt")
+    kept = BiraeEstimator.load(tmp_path / "sig" / "best.pt")
+    assert kept.meta["phase"] == "sigma" and math.isfinite(kept.meta["val_nll"])
+    moved = {k for k, v in kept.model.state_dict().items() if not torch.equal(v, ref[k])}
+    assert moved == {"logvar.weight", "logvar.bias"}
+    assert all(p.requires_grad for p in fresh.model.parameters())  # the freeze ends with the phase
+    rows = [json.loads(x) for x in (tmp_path / "sig" / "sigma" / "log.jsonl").read_text().splitlines()]
+    start = next(r for r in rows if r["type"] == "start")
+    epochs = [r for r in rows if r["type"] == "epoch"]
+    assert len(epochs) == 2 and kept.meta["val_nll"] == min(r["val_nll"] for r in epochs)
+    # the phase's windows come from the 4 corpus clips, not from them and their 4 mirror images
+    cfg = fresh.config
+    own, mixed = (build_split("train", c, store=store, cache_root=tmp / "cache") for c in (cfg.without_mix(), cfg))
+    assert len(mixed.clip_ids) == 2 * len(own.clip_ids) == 8
+    batches = [math.ceil(len(d.windows(cfg.seq_len, cfg.min_len)) / cfg.batch_size) for d in (own, mixed)]
+    assert start["batches_per_epoch"] == batches[0] < batches[1]
+    with pytest.raises(ConfigError, match="epochs_sigma"):
+        tiny(epochs_sigma=-1)
+
+
 def test_training_chain_follows_init_from_and_counts_kept_steps(trained, tmp_path: Path) -> None:
     import json
     import shutil

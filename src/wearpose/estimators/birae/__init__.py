@@ -34,6 +34,7 @@ METHOD = MethodSpec(
     training=Training(
         mix=True,
         entry="wearpose.estimators.birae.entry:train_from_options",
+        val_metric="val_mpjae_deg",  # the sigma phase keeps by val_nll; the mean's figure is the headline
         doc="""Train BiRAE: clean synthetic orientations first, then noise/impulse/yaw-drift augmented.
 
         Example: wearpose train birae --rep 3param --config cpu --threads 1 --out runs/birae3_cpu
@@ -43,6 +44,8 @@ METHOD = MethodSpec(
             TrainOption("rep", "6param", "Input representation: 6param, 3param, 3param_rate, zhou6d."),
             TrainOption("epochs_clean", None, "Override the clean-phase epochs.", int),
             TrainOption("epochs_aug", None, "Override the augmented-phase epochs.", int),
+            TrainOption("epochs_sigma", None, "Epochs of a third phase: the log-variance head alone on the "
+                        "corpus's own clips, the training mix left out (default 0: none).", int, min=0),
             TrainOption("hidden", None, "Override the Bi-LSTM width.", int, min=1),
             TrainOption("width", None, "Override the input FC width.", int),
             TrainOption("batch_size", None, "Override the batch size.", int, min=1),

@@ -50,7 +50,11 @@ class BiraeConfig(TrainConfig):
     ``min_len`` shortest clip kept (frames); ``aug_*`` augmentation of the second phase (white
     orientation noise std, impulse probability per frame and std, yaw-rate bias std in deg/s);
     ``train_clips`` / ``val_clips`` first N clips of the split (0 = all).
-    Optimisation: ``epochs_clean`` then ``epochs_aug``, ``lr_decay`` / ``lr_decay_steps``, and
+    Optimisation: ``epochs_clean`` then ``epochs_aug``, then ``epochs_sigma`` (0: no third phase;
+    the log-variance head alone refitted on the corpus's own clips, the mix left out:
+    :func:`~wearpose.estimators.birae.train.train_birae`) at ``lr_sigma`` (one linear layer refitted
+    on frozen features takes a larger step than the whole network's fine-tuning),
+    ``lr_decay`` / ``lr_decay_steps``, and
     :class:`~wearpose.estimators.trainconfig.TrainConfig`'s ``seed``, ``val_clips``, ``lr``,
     ``lr_schedule`` (``exp`` = x``lr_decay`` every ``lr_decay_steps``; ``cosine``;
     ``constant``), ``lr_min_factor``, ``batch_size``, ``grad_clip``.
@@ -85,6 +89,8 @@ class BiraeConfig(TrainConfig):
     batch_size: int = 16
     epochs_clean: int = 1000
     epochs_aug: int = 1000
+    epochs_sigma: int = 0
+    lr_sigma: float = 1e-3
     mc_samples: int = 20
     window: tuple[int, int] = (130, 30)
 
@@ -94,6 +100,10 @@ class BiraeConfig(TrainConfig):
             raise ConfigError(f"BiraeConfig.rep: expected one of {REPS}, got {self.rep!r}")
         if self.loss not in ("nll", "decoupled"):
             raise ConfigError(f"BiraeConfig.loss: expected nll or decoupled, got {self.loss!r}")
+        if not self.lr_sigma > 0:
+            raise ConfigError(f"BiraeConfig.lr_sigma: expected a learning rate > 0, got {self.lr_sigma!r}")
+        if self.epochs_sigma < 0:
+            raise ConfigError(f"BiraeConfig.epochs_sigma: expected a whole number >= 0, got {self.epochs_sigma!r}")
         if min(self.width, self.hidden, self.layers, self.seq_len, self.batch_size, self.mc_samples) < 1:
             raise ConfigError("BiraeConfig: width, hidden, layers, seq_len, batch_size and mc_samples must be >= 1")
         if not 0.0 <= self.dropout < 1.0:

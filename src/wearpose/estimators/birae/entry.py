@@ -30,7 +30,7 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     if rep not in REPS:
         raise OptionError("--rep", f"unknown representation {rep!r}; expected one of {', '.join(REPS)}")
     cfg = BiraeConfig.preset(run.config, rep).override(
-        **{k: opts[k] for k in ("hidden", "width", "batch_size", "train_clips", "lr")}, **run.config_overrides())
+        **{k: opts[k] for k in ("hidden", "width", "batch_size", "train_clips", "lr", "epochs_sigma")}, **run.config_overrides())
     out = run.out or Path("runs") / f"birae_{rep}_{run.config}"
     res = train_birae(BiraeEstimator(cfg), out, resume=run.resume, threads=run.threads, device=run.device,
                       epochs_clean=opts["epochs_clean"], epochs_aug=opts["epochs_aug"],
