@@ -43,6 +43,10 @@ def test_tiny_cli_run_on_the_corpus(tmp_path: Path, corpus_store: Path) -> None:
     out = _train(["empose", "--config", "tiny", "--limit", "3", "--epochs", "1", "--threads", "1",
                   "--out", str(tmp_path / "run")])
     assert out["method"] == "empose" and out["steps"] >= 1 and (tmp_path / "run" / "best.pt").is_file()
+    # the config kept with the weights (and shown on their card) says the run's length, not the preset's
+    from wearpose.estimators.checkpoint import load_checkpoint
+
+    assert out["config"]["epochs"] == 1 == load_checkpoint(tmp_path / "run" / "best.pt").config["epochs"]
 
 
 def test_train_rejects_unknown_or_misplaced_ablation(tmp_path: Path) -> None:
@@ -87,6 +91,26 @@ def test_tiny_run_on_one_source_records_it(tmp_path: Path, corpus_store: Path) -
             "--out", str(tmp_path / "run")])
     meta = load_checkpoint(tmp_path / "run" / "best.pt").meta
     assert meta["train_sources"] == ["cmu_daz"] and meta["train_clips"] == 2, meta
+
+
+@pytest.mark.parametrize("method, module, entry", [("empose", "wearpose.estimators.empose.train", "train_empose"),
+                                                   ("pip", "wearpose.estimators.pip.train", "train_pip")])
+def test_epochs_reach_the_config_the_card_shows(method: str, module: str, entry: str, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--epochs`` is the config's ``epochs`` (a card said the preset's 20 for a 5-epoch run);
+    unset keeps the preset's."""
+    import importlib
+
+    seen: list[int] = []
+
+    def fake_train(est: object, out: Path, **kw: object) -> dict:
+        seen.append(est.config.epochs)  # type: ignore[attr-defined]
+        return {"steps": 0}
+
+    monkeypatch.setattr(importlib.import_module(module), entry, fake_train)
+    preset = _train([method, "--config", "tiny", "--out", str(tmp_path / "r")])["config"]["epochs"]
+    out = _train([method, "--config", "tiny", "--epochs", str(preset + 2), "--out", str(tmp_path / "r")])
+    assert seen == [preset, preset + 2] and out["config"]["epochs"] == preset + 2
 
 
 def test_lambda_shape_reaches_the_config(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

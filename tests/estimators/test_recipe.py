@@ -49,6 +49,8 @@ def test_shipped_recipes_load_and_miposer_cpu_is_its_cards_command() -> None:
     assert r.corpus == {"name": card["training_data"]["corpus"]["name"],
                         "manifest_sha1": card["training_data"]["corpus"]["manifest_sha1"]}
     assert r.record()["options"]["epochs"] == 5 and len(r.sha1) == 40
+    # a shipped recipe is kept by its place in the package, not by the working copy it ran from
+    assert r.record()["file"] == "wearpose/estimators/miposer/recipes/miposer_cpu.yaml"
 
 
 @pytest.mark.parametrize("body, field, problem", [

@@ -74,9 +74,20 @@ class Recipe:
     def record(self) -> dict[str, Any]:
         """What a checkpoint and a card keep of the recipe: name, file, its SHA-1, method, the
         resolved options, seed and corpus."""
-        return {"name": self.name, "file": str(self.path), "sha1": self.sha1, "method": self.method,
+        return {"name": self.name, "file": shown_path(self.path), "sha1": self.sha1, "method": self.method,
                 "options": {k: (str(v) if isinstance(v, Path) else v) for k, v in self.values.items()},
                 "seed": self.seed, "corpus": self.corpus}
+
+
+def shown_path(path: Path) -> str:
+    """``path`` as a checkpoint and card keep it: a shipped recipe relative to the installed
+    package (``wearpose/estimators/<method>/recipes/<name>.yaml``, the same on every machine; the
+    working copy it ran from means nothing elsewhere), any other recipe file as given."""
+    package = Path(__file__).resolve().parents[2]  # the folder holding wearpose/
+    try:
+        return Path(path).resolve().relative_to(package).as_posix()
+    except ValueError:
+        return str(path)
 
 
 def recipe_dirs() -> dict[str, Path]:
@@ -304,5 +315,5 @@ def reproduction(recipe: str | Path, rerun: str | Path, reference: str | Path, t
             "max_abs_weight_difference": diff, "same_data": fa == fb}
 
 
-__all__ = ["Recipe", "load_recipe", "find_recipe", "shipped_recipes", "recipe_dirs", "check_corpus", "check_seed",
+__all__ = ["Recipe", "load_recipe", "shown_path", "find_recipe", "shipped_recipes", "recipe_dirs", "check_corpus", "check_seed",
            "selection_metric", "reproduction", "training_for", "FORMAT", "VERSION"]
