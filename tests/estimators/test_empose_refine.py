@@ -369,3 +369,67 @@ def test_refinement_without_offsets_is_refused_naming_the_fix(body: BodyModel) -
     est.reset()
     est.set_offsets(torch.eye(3).expand(len(est.sensor_names), 3, 3), torch.zeros(len(est.sensor_names), 3))
     assert est.step(next(iter(iter_frames(rec, est.sensor_names)))).extras["refined"]  # given offsets: it runs
+
+
+def _angle(A: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
+    """Geodesic angle (rad) between rotations ``(..., 3, 3)``."""
+    M = A.transpose(-1, -2) @ B
+    return torch.acos(((M.diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2).clamp(-1, 1))
+
+
+def test_recording_turn_finds_a_constant_offset_of_the_learned_pose(body: BodyModel) -> None:
+    """Noise-free measurements; the "learned" pose is the truth with the knees and elbows turned by
+    a constant 0.3 rad in their own frames. The prior-free solve finds the truth, so the turn is
+    that offset undone on those joints (within 0.01 rad), the identity on the others, the turned
+    pose is the truth there, and summing chunk by chunk is the same as at once."""
+    from wearpose.estimators.empose.model import PRED_JOINTS
+
+    est = EmposeEstimator(tiny_cfg(), body=body)
+    kernel = est.sensors.lean()
+    clip = _clip(body, T=8)
+    T = clip["pose"].shape[0]
+    off = axis_angle_to_matrix(torch.tensor([0.3, -0.1, 0.2]))
+    moved = (4, 5, 18, 19)  # knees, elbows
+    learned = clip["pose"].clone()
+    learned[:, list(moved)] = learned[:, list(moved)] @ off
+    betas = clip["betas"].reshape(1, 10).expand(T, 10).contiguous()
+    args = (clip["position"], clip["orientation"], clip["off_R"], clip["off_t"])
+    whole = refine.turn_sums(kernel, learned, betas, *args, steps=8)
+    turn = refine.recording_turn([whole])
+    assert turn.shape == (len(PRED_JOINTS), 3, 3) and turn.dtype == torch.float64
+    for i, j in enumerate(PRED_JOINTS):
+        if j == 0:
+            continue  # the root: L_r cannot see it, the source sets it
+        want = off.T if j in moved else torch.eye(3)
+        assert float(_angle(turn[i].float(), want)) < 0.01, (j, float(_angle(turn[i].float(), want)))
+    fixed = refine.turned(learned, turn)
+    assert float(_angle(fixed[:, list(moved)], clip["pose"][:, list(moved)]).max()) < 0.01
+    halves = [refine.turn_sums(kernel, learned[s], betas[s], *(a[s] for a in args[:2]), *args[2:], steps=8)
+              for s in (slice(0, 3), slice(3, T))]
+    assert torch.allclose(refine.recording_turn(halves), turn, atol=1e-5)
+
+
+def test_prior_centred_on_the_recording_runs_offline_and_is_refused_online(body: BodyModel) -> None:
+    """``refine_centre="recording"``: reachable through ``--set``, checked; offline it refines every
+    frame to another answer than the default centre's; an online step (a stream's hello) is
+    refused before the first frame, naming both ways out."""
+    est = EmposeEstimator(tiny_cfg(), body=body)
+    clip = _clip(body, T=10, noise="default")
+    rec = recording_from_clip(clip, est.config)
+    apply_settings(est, {"refine_steps": "3", "refine_centre": "recording"})
+    assert est.config.refine_centre == "recording"
+    track = est.estimate(rec)
+    T = clip["pose"].shape[0]
+    assert track.local_rot.shape == (T, 24, 3, 3) and bool(track.extras["refined"].all())
+    assert bool(torch.isfinite(track.extras["rec_loss"]).all())
+    est.set_refine_centre("learned")
+    plain = est.estimate(rec)
+    assert not torch.equal(plain.local_rot, track.local_rot)  # a different prior, a different answer
+    est.set_refine_centre("recording")
+    with pytest.raises(ConfigError, match="refine_centre=learned"):
+        est.set_offsets(clip["off_R"], clip["off_t"])
+    est.reset()
+    with pytest.raises(ConfigError, match="offline"):
+        est.step(next(iter(iter_frames(rec, est.sensor_names))))
+    with pytest.raises(ConfigError, match="refine_centre"):
+        EmposeConfig.preset("tiny", 12).override(refine_centre="median")

@@ -27,8 +27,8 @@ from wearpose.estimators.trainconfig import SimulatedTrainConfig
 #: not restored when it is loaded (:meth:`~wearpose.estimators.empose.EmposeEstimator.from_checkpoint`), so every
 #: checkpoint gets today's defaults and ``--set`` / ``set_*`` change them (a checkpoint trained
 #: before a default changed kept the old one, e.g. the refinement's solver and weight).
-INFERENCE_FIELDS = ("refine_steps", "refine_threshold", "refine_weight", "refine_solver", "shape_fit_frames",
-                    "shape_fit_steps", "shape_fit_prior")
+INFERENCE_FIELDS = ("refine_steps", "refine_threshold", "refine_weight", "refine_solver", "refine_centre",
+                    "shape_fit_frames", "shape_fit_steps", "shape_fit_prior")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -73,7 +73,10 @@ class EmposeConfig(SimulatedTrainConfig):
     :func:`~wearpose.estimators.empose.refine.calibrate_threshold`; None = not calibrated, which
     refuses ``refine_steps > 0``); ``refine_weight`` the prior's weight (L_r per squared 6D unit;
     1e-3: docs/empose.md); ``refine_solver`` ``"gn"`` (Levenberg-Marquardt Gauss-Newton on the
-    residuals, :func:`~wearpose.estimators.empose.refine.gauss_newton`, default) or ``"lbfgs"``.
+    residuals, :func:`~wearpose.estimators.empose.refine.gauss_newton`, default) or ``"lbfgs"``;
+    ``refine_centre`` where the prior is centred, ``"learned"`` (each frame's learned estimate,
+    default) or ``"recording"`` (offline only: the learned estimate turned by one rotation per
+    joint for the whole recording, :func:`~wearpose.estimators.empose.refine.recording_turn`).
     Training ignores them, and a checkpoint does not restore them (:data:`INFERENCE_FIELDS`).
     Per-recording shape fit at inference (:mod:`wearpose.estimators.empose.shapefit`; issue
     24): ``shape_fit_frames`` frames with every sensor valid on which one body shape is fitted
@@ -113,6 +116,7 @@ class EmposeConfig(SimulatedTrainConfig):
     refine_threshold: float | None = 0.0
     refine_weight: float = 1e-3
     refine_solver: str = "gn"
+    refine_centre: str = "learned"
     shape_fit_frames: int = 0
     shape_fit_steps: int = 80
     shape_fit_prior: float = 1e-3
@@ -142,6 +146,8 @@ class EmposeConfig(SimulatedTrainConfig):
                               f"got {self.refine_threshold!r}")
         if not self.refine_weight >= 0.0:
             raise ConfigError(f"EmposeConfig.refine_weight: expected a weight >= 0, got {self.refine_weight!r}")
+        if self.refine_centre not in ("learned", "recording"):
+            raise ConfigError(f"EmposeConfig.refine_centre: expected 'learned' or 'recording', got {self.refine_centre!r}")
         if self.refine_solver not in ("lbfgs", "gn"):
             raise ConfigError(f"EmposeConfig.refine_solver: expected 'lbfgs' or 'gn', got {self.refine_solver!r}")
         for key in ("shape_fit_frames", "shape_fit_steps"):

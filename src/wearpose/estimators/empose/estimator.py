@@ -28,7 +28,9 @@ from wearpose.estimators.base import Estimator, PoseFrame, PoseTrack, SensorFram
 from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, NetworkCheckpointing, load_checkpoint
 from wearpose.estimators.empose.config import INFERENCE_FIELDS, EmposeConfig
 from wearpose.estimators.empose.model import LGDRNN, PRED_JOINTS, VirtualSensors, module_version, sensor_features
-from wearpose.estimators.empose.refine import Refined, refine_frames, require_threshold
+from wearpose.estimators.empose.refine import (
+    Refined, recording_turn, refine_frames, require_threshold, turn_sums, turned,
+)
 from wearpose.estimators.empose.shapefit import ShapeFit, fit_frames, fit_shape
 from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
 from wearpose.estimators.registry import register_estimator
@@ -182,8 +184,22 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         return R, t
 
     def set_offsets(self, R: torch.Tensor, t: torch.Tensor) -> None:
-        """Subject offsets for :meth:`step`: ``R`` ``(S, 3, 3)``, ``t`` ``(S, 3)`` m (kit order)."""
+        """Subject offsets for :meth:`step`: ``R`` ``(S, 3, 3)``, ``t`` ``(S, 3)`` m (kit order).
+
+        Raises:
+            ConfigError: the refinement's prior is centred on the recording
+                (``refine_centre="recording"``), which an online step does not have.
+        """
+        self._refuse_online_centre()
         self._offsets = (torch.as_tensor(R, dtype=torch.float32), torch.as_tensor(t, dtype=torch.float32))
+
+    def _refuse_online_centre(self) -> None:
+        """Online steps cannot centre the prior on the whole recording: refuse before the first
+        step (a server then refuses the subject at its hello), naming both ways out."""
+        if self.config.refine_steps > 0 and self.config.refine_centre == "recording":
+            raise ConfigError("online step: EM-POSE refine_centre='recording' turns the refinement's prior by the "
+                              "whole recording, which a step does not have; estimate the recording offline, or set "
+                              "refine_centre=learned (--set refine_centre=learned)")
 
     @property
     def input_spec(self) -> InputSpec:
@@ -231,11 +247,15 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
                                            train=False)[-1])
         ok = valid.all(1)
         fit = self._fit_shape(lasts, ok, p, R, offR, offt) if self.config.shape_fit_frames > 0 else None
+        turn = self._recording_turn(spans, lasts, ok, p, R, offR, offt, fit)
         rots, betas, rec, learned, gated = [], [], [], [], []
         for (a, b), last in zip(spans, lasts):
             lrot, lb, lrec = last["local_rot"].detach(), last["betas"].detach(), last["rec"].detach()
             if fit is not None:  # every frame's learned pose, scored with the fitted shape
                 lb = fit.betas.to(dev).expand(b - a, -1)
+            if turn is not None:  # the prior's centre: the learned pose turned by the recording's turn
+                lrot = turned(lrot, turn)
+            if fit is not None or turn is not None:
                 lrec = self._rec(lrot, lb, p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
             ref = self._refine(lrot, lb, lrec, p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
             rots.append(ref.local_rot)
@@ -254,6 +274,30 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
             beta = fit.betas.cpu()
             extras["shape_fit"] = fit.summary()
         return PoseTrack(local_rot, beta, None, ok, self.fps, extras=extras)
+
+    def _recording_turn(self, spans: list[tuple[int, int]], lasts: list[dict[str, torch.Tensor]], ok: torch.Tensor,
+                        p: torch.Tensor, R: torch.Tensor, offR: torch.Tensor, offt: torch.Tensor,
+                        fit: ShapeFit | None) -> torch.Tensor | None:
+        """The prior centre's turn ``(NUM_PRED, 3, 3)`` when the refinement is on with
+        ``refine_centre="recording"`` (:func:`~wearpose.estimators.empose.refine.recording_turn`
+        over the frames where ``ok`` ``(T,)``, every sensor valid, chunk by chunk as ``spans``;
+        ``lasts`` the learned outputs, ``fit`` the shape fit if on); None otherwise or when no
+        frame has every sensor."""
+        cfg = self.config
+        if cfg.refine_steps == 0 or cfg.refine_centre != "recording":
+            return None
+        dev, sums = self.device, []
+        for (a, b), last in zip(spans, lasts):
+            keep = ok[a:b]
+            n = int(keep.sum())
+            if n == 0:
+                continue
+            k = keep.to(dev)
+            lb = fit.betas.to(dev).expand(n, -1) if fit is not None else last["betas"].detach()[k]
+            sums.append(turn_sums(self.sensors.lean(), last["local_rot"].detach()[k], lb, p[a:b][keep].to(dev),
+                                  R[a:b][keep].to(dev), offR.to(dev), offt.to(dev), steps=cfg.refine_steps,
+                                  rec_weights=self.model.rec_weights))
+        return recording_turn(sums) if sums else None
 
     def _rec(self, local_rot: torch.Tensor, betas: torch.Tensor, p: torch.Tensor, R: torch.Tensor,
              offR: torch.Tensor, offt: torch.Tensor) -> torch.Tensor:
@@ -366,6 +410,13 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         """The weight of the refinement's pose prior (pull to the learned estimate)."""
         self._set_config(refine_weight=float(w))
 
+    def set_refine_centre(self, centre: str) -> None:
+        """Where the refinement's prior is centred: ``"learned"`` (each frame's learned estimate)
+        or ``"recording"`` (offline: turned by the recording's per-joint turn,
+        :func:`~wearpose.estimators.empose.refine.recording_turn`), e.g.
+        ``--set refine_centre=recording``."""
+        self._set_config(refine_centre=centre)
+
     def set_refine_solver(self, solver: str) -> None:
         """The refinement's solver: ``"lbfgs"`` or ``"gn"`` (Levenberg-Marquardt Gauss-Newton,
         :func:`~wearpose.estimators.empose.refine.gauss_newton`), e.g. ``--set refine_solver=gn``."""
@@ -454,6 +505,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         frame returns the fitted shape and is scored with it, before it the learned shape
         (extras ``shape_fitted`` bool, ``rec_loss_learned``)."""
         if self._offsets is None:
+            self._refuse_online_centre()
             self._offsets = self._offsets_from(None)
         (p, R), v = self._input(frame)
         if self.model.training:

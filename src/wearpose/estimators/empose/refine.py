@@ -28,7 +28,15 @@ pull the pose towards the measurements, starting from the learned estimate ``u_0
   root), so after the solve it is set from the source's own skin site (:func:`root_from_source`);
 - the gate: frames whose learned L_r exceeds ``EmposeConfig.refine_threshold``, a level
   calibrated as a high percentile of L_r on validation clips of the training distribution
-  (:func:`calibrate_threshold`). The other frames are returned untouched, bit for bit.
+  (:func:`calibrate_threshold`). The other frames are returned untouched, bit for bit;
+- the prior's centre (``EmposeConfig.refine_centre``): ``"learned"``, the learned estimate of the
+  frame, or ``"recording"`` (offline), the learned estimate turned by one constant rotation per
+  estimated joint for the whole recording (:func:`recording_turn`, applied by :func:`turned`).
+  On motion from another lab the learned estimate is off by a part that stays constant over a
+  recording (another capture chain's rest pose: docs/empose.md), and a prior centred on it
+  keeps that part wherever the sensors pin a joint only weakly; the turn takes it out, measured
+  by a first solve without the prior over every frame (noisy frame by frame, but its mean over
+  the recording is not).
 """
 
 from __future__ import annotations
@@ -40,8 +48,10 @@ import torch
 
 from wearpose.errors import ConfigError
 from wearpose.estimators.empose.model import NUM_PRED, PRED_JOINTS
-from wearpose.geometry import matrix_to_rot6d, skew
+from wearpose.geometry import matrix_to_rot6d, project_to_so3, skew
 
+#: Where the pose prior is centred (``EmposeConfig.refine_centre``; module doc).
+CENTRES = ("learned", "recording")
 #: L-BFGS memory (curvature pairs per frame).
 MEMORY = 5
 #: Backtracking halvings per iteration before a frame keeps its point.
@@ -330,6 +340,40 @@ def refine_frames(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, rec
     out_rot[idx] = root_from_source(ctx).to(local_rot.dtype)
     out_rec[idx] = rec_u.to(rec.dtype)
     return Refined(out_rot, out_rec, gated)
+
+
+def turn_sums(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, meas_p: torch.Tensor,
+              meas_R: torch.Tensor, off_R: torch.Tensor, off_t: torch.Tensor, *, steps: int,
+              rec_weights: tuple[float, float] = (1.0, 1.0)) -> torch.Tensor:
+    """One chunk's share of :func:`recording_turn`: ``sum_t R_learned[t, j]^T R_free[t, j]``
+    ``(NUM_PRED, 3, 3)`` float64 over ``N`` frames, with ``R_free`` the Gauss-Newton solve of
+    ``steps`` iterations without the prior (weight 0, every frame) from the learned pose
+    ``local_rot`` ``(N, 24, 3, 3)``; betas ``(N, 10)``, measurements and offsets as
+    :func:`refine_frames`. Frames whose solve is not finite are left out."""
+    n = local_rot.shape[0]
+    u0 = matrix_to_rot6d(local_rot[:, list(PRED_JOINTS)]).reshape(n, POSE_DIM)
+    _, _, ctx = gauss_newton(kernel, u0, betas, meas_p, meas_R, off_R, off_t, steps=steps, weight=0.0,
+                             rec_weights=rec_weights)
+    free = root_from_source(ctx)[:, list(PRED_JOINTS)].double()
+    learned = local_rot[:, list(PRED_JOINTS)].double()
+    ok = torch.isfinite(free).flatten(1).all(1)
+    return (learned[ok].transpose(-1, -2) @ free[ok]).sum(0)
+
+
+def recording_turn(sums: Sequence[torch.Tensor]) -> torch.Tensor:
+    """The prior centre's turn ``(NUM_PRED, 3, 3)`` from every chunk's :func:`turn_sums`: per
+    estimated joint the rotation ``C`` that brings the learned local rotation closest to the
+    prior-free solve over the recording, ``argmin_C sum_t ||R_learned C - R_free||_F^2``, i.e.
+    the nearest rotation to the summed ``R_learned^T R_free`` (its chordal mean)."""
+    return project_to_so3(torch.stack(list(sums)).sum(0))
+
+
+def turned(local_rot: torch.Tensor, turn: torch.Tensor) -> torch.Tensor:
+    """``local_rot`` ``(N, 24, 3, 3)`` with every estimated joint's rotation right-multiplied by
+    its turn ``(NUM_PRED, 3, 3)`` (:func:`recording_turn`); the other joints unchanged."""
+    out = local_rot.clone()
+    out[:, list(PRED_JOINTS)] = local_rot[:, list(PRED_JOINTS)] @ turn.to(local_rot)
+    return out
 
 
 def root_from_source(ctx: dict[str, torch.Tensor]) -> torch.Tensor:
