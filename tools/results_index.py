@@ -83,9 +83,8 @@ NOTES = {
                  "generalisation_empose12_unseen_lab_v6_bandai", "generalisation_empose12_unseen_lab_v6_cmu_daz",
                  "generalisation_empose12_unseen_lab_v6_bandai_refine_gn3",
                  "generalisation_empose12_unseen_lab_v6_cmu_daz_refine_gn3", "floor_contact_empose_val")},
-    **{k: "made with nbeats_cpu v1 (archive:nbeats_cpu_v1), shipped until v2 on 2026-12-05; not rerun with v2 "
-          "(docs/interference.md)"
-       for k in ("interference_correction", "interference_correction_windows")},
+    "interference_correction_nbeats_v1": "nbeats_cpu v1 (archive:nbeats_cpu_v1), shipped until v2 on 2026-12-05, on "
+                                         "the same simulated sessions as interference_correction (docs/interference.md)",
     "latency_empose6_cpu": "empose6_cpu v1 (archive:empose6_cpu_v1); v3 has the same architecture, so the same cost",
     "empose_table10_long": "Table 10 with 2-4 s removals (docs/empose.md, row 'miss., 2-4 s removals'), with the v1 "
                            "weights (archive:empose12_cpu_v1, archive:empose12_twostage_cpu_v1); not rerun",
