@@ -315,5 +315,5 @@ def reproduction(recipe: str | Path, rerun: str | Path, reference: str | Path, t
             "max_abs_weight_difference": diff, "same_data": fa == fb}
 
 
-__all__ = ["Recipe", "load_recipe", "shown_path", "find_recipe", "shipped_recipes", "recipe_dirs", "check_corpus", "check_seed",
-           "selection_metric", "reproduction", "training_for", "FORMAT", "VERSION"]
+__all__ = ["Recipe", "load_recipe", "shown_path", "find_recipe", "shipped_recipes", "recipe_dirs", "check_corpus",
+           "check_seed", "selection_metric", "reproduction", "training_for", "FORMAT", "VERSION"]

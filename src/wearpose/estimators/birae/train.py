@@ -14,7 +14,9 @@ best error on validation set was saved", ``last.pt`` for ``--resume``) twice:
    The mix teaches the mean motion the corpus lacks, but the sigma it leaves is the width of the
    mix's errors, not the corpus's (issue 24: the 3-parameter v2 covered 61 % of the test split
    inside +-1 sigma after calibration on validation); this phase gives the sigma back the corpus's
-   errors while the mean keeps what the mix taught.
+   errors while the mean keeps what the mix taught. Measured (recipe ``birae3_cpu_v3``,
+   docs/birae.md): it does not bring the test coverage back (59.8 %): the gap is between the
+   validation and test splits, not the mix.
 
 ``<out>/best.pt`` is the last phase's best checkpoint (the shipped model). Loss: Eq. 6 on
 the 45 exp-map components of every real frame, plus ``aux_weight`` x the MSE of the angular-rate

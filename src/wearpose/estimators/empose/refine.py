@@ -50,8 +50,6 @@ from wearpose.errors import ConfigError
 from wearpose.estimators.empose.model import NUM_PRED, PRED_JOINTS
 from wearpose.geometry import matrix_to_rot6d, project_to_so3, skew
 
-#: Where the pose prior is centred (``EmposeConfig.refine_centre``; module doc).
-CENTRES = ("learned", "recording")
 #: L-BFGS memory (curvature pairs per frame).
 MEMORY = 5
 #: Backtracking halvings per iteration before a frame keeps its point.
