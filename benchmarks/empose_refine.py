@@ -37,22 +37,27 @@ import torch
 COMPARE = "wearpose.estimators.empose.evaluate:evaluate_models"
 
 
-def _models(name: str, threshold: float, steps: list[int], gn_steps: list[int], weight: float | None = None
-            ) -> dict[str, Any]:
+def _models(name: str, threshold: float, steps: list[int], gn_steps: list[int], weight: float | None = None,
+            centres: tuple[str, ...] = ("learned",)) -> dict[str, Any]:
     """The learned model, then one row per L-BFGS iteration count (``refine K``) and per
-    Gauss-Newton iteration count (``gn K``), the same gate and prior weight for all."""
+    Gauss-Newton iteration count and prior centre (``gn K``; ``gn K, recording`` with
+    ``refine_centre="recording"``), the same gate and prior weight for all."""
     from wearpose.estimators.empose.baselines import load_any
     from wearpose.weights import weight_path
 
+    rows = [("lbfgs", 0, "learned"), *(("lbfgs", k, "learned") for k in steps),
+            *(("gn", k, c) for k in gn_steps for c in centres)]
     out = {}
-    for solver, k in [("lbfgs", 0), *(("lbfgs", k) for k in steps), *(("gn", k) for k in gn_steps)]:
+    for solver, k, centre in rows:
         est = load_any(weight_path(name))
         est.set_refine_threshold(threshold)
         est.set_refine_steps(k)
         est.set_refine_solver(solver)
+        est.set_refine_centre(centre)
         if weight is not None:
             est.set_refine_weight(weight)
-        out["learned" if k == 0 else (f"refine {k}" if solver == "lbfgs" else f"gn {k}")] = est
+        label = "learned" if k == 0 else (f"refine {k}" if solver == "lbfgs" else f"gn {k}")
+        out[label if centre == "learned" else f"{label}, {centre}"] = est
     return out
 
 
@@ -132,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="none: refine every frame (the default setting, threshold 0); val: frames over the "
                          "--percentile of the learned L_r on validation clips")
     ap.add_argument("--weight", type=float, default=None, help="the prior weight (default: the config's)")
+    ap.add_argument("--centre", nargs="+", choices=("learned", "recording"), default=["learned"],
+                    help="the Gauss-Newton rows' prior centres, one row each (recording: offline only, not timed)")
     ap.add_argument("--percentile", type=float, default=95.0)
     ap.add_argument("--val-clips", type=int, default=20)
     ap.add_argument("--test-clips", type=int, default=10)
@@ -157,13 +164,14 @@ def main(argv: list[str] | None = None) -> int:
     unseen = unseen_motion_store(a.per_family)
     results = {}
     for key, store, clips in (("test", corpus, a.test_clips), ("unseen_motion", unseen, None)):
-        models = _models(a.model, threshold, a.steps, a.gn_steps, a.weight)
+        models = _models(a.model, threshold, a.steps, a.gn_steps, a.weight, tuple(a.centre))
         results[key] = compare_models(COMPARE, models, "test", clips, store=store,
                                       calibration_error=tuple(a.calibration_error))
         for m in results[key]["models"].values():
             m["checkpoint"] = str(weight_path(a.model))
         print(key, {n: round(m["mpjpe_mm"], 2) for n, m in results[key]["models"].items()}, flush=True)
-    timing = _timing(_models(a.model, threshold, a.steps, a.gn_steps, a.weight), unseen, a.timing_clips)
+    online = _models(a.model, threshold, a.steps, a.gn_steps, a.weight)  # a step refuses the recording centre
+    timing = _timing(online, unseen, a.timing_clips)
     command = "python benchmarks/" + " ".join(shlex.quote(x) for x in [Path(__file__).name, *sys.argv[1:]])
     refined = results["unseen_motion"]["models"]
     weight = next(iter(refined.values()))["config"]["refine_weight"]
@@ -178,7 +186,9 @@ def main(argv: list[str] | None = None) -> int:
           + "Refinement: K iterations on L_r + "
           f"{weight:g} ||u - u_learned||² (6D pose of the 20 estimated joints; shape held), refined frames only, "
           "then the root from the EM source's skin site: `refine K` L-BFGS, `gn K` Levenberg-Marquardt "
-          "Gauss-Newton (`refine_solver=gn`).", "",
+          "Gauss-Newton (`refine_solver=gn`); `gn K, recording` the same with the prior centred on the learned pose "
+          "turned by the recording's per-joint turn (`refine_centre=recording`, offline only, so not in the online "
+          "cost table).", "",
           f"## Corpus test split, first {a.test_clips} clips (in-lab)", "", *_table(results["test"]), "",
           f"## Unseen motion ({a.per_family} clips per held-out procedural family)", "",
           *_table(results["unseen_motion"]), "", "By family (frame-weighted means of each clip's figures):", "",
