@@ -72,7 +72,7 @@ MIX_ADDED: dict[str, Any] = {"--seed": None, "--init-from": None, "--mirror": Fa
 #: Own options the methods gained since: --lr for EM-POSE and MI-Poser (fine-tuning recipes);
 #: EM-POSE's --lambda-shape (issue 24: with wearers of every size the shape loss outweighs the pose loss).
 OWN_ADDED: dict[str, dict[str, Any]] = {"empose": {"--lr": None, "--lambda-shape": None}, "miposer": {"--lr": None},
-                                        "nbeats": {"--notes": None}}
+                                        "nbeats": {"--notes": None}, "birae": {"--epochs-sigma": None}}
 #: The N-BEATS forecaster took the training mix with its recipe (issue 24.5), all of it but what
 #: has no meaning for wrist trajectories: --site-jitter (no simulated sensors) and --init-from.
 NBEATS_MIX = {k: v for k, v in MIX_ADDED.items() if k not in ("--site-jitter", "--init-from")}
