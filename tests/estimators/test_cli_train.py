@@ -94,7 +94,8 @@ def test_tiny_run_on_one_source_records_it(tmp_path: Path, corpus_store: Path) -
 
 
 @pytest.mark.parametrize("method, module, entry", [("empose", "wearpose.estimators.empose.train", "train_empose"),
-                                                   ("pip", "wearpose.estimators.pip.train", "train_pip")])
+                                                   ("pip", "wearpose.estimators.pip.train", "train_pip"),
+                                                   ("miposer", "wearpose.estimators.miposer.train", "train_miposer")])
 def test_epochs_reach_the_config_the_card_shows(method: str, module: str, entry: str, tmp_path: Path,
                                                monkeypatch: pytest.MonkeyPatch) -> None:
     """``--epochs`` is the config's ``epochs`` (a card said the preset's 20 for a 5-epoch run);

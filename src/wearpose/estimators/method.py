@@ -189,8 +189,14 @@ class TrainRun:
     recipe: Mapping[str, Any] | None = None
 
     def config_overrides(self) -> dict[str, Any]:
-        """The config fields the shared options set: ``seed`` and the training mix (None: the
-        preset's; ``config.override`` skips them)."""
+        """The config fields the shared options set: :meth:`mix_overrides` and ``epochs`` (so the
+        config a checkpoint and its card keep says how long the run was, not the preset; None:
+        the preset's, ``config.override`` skips them; a method without ``--epochs`` has None)."""
+        return {**self.mix_overrides(), "epochs": self.epochs}
+
+    def mix_overrides(self) -> dict[str, Any]:
+        """The config fields of ``seed`` and the training mix alone (None: the preset's), for a
+        config that is the mix's only (N-BEATS' :class:`~wearpose.estimators.trainconfig.TrainConfig`)."""
         return {"seed": self.seed, "aug_mirror": self.mirror or None, "aug_speed_copies": self.speed_copies,
                 "aug_heading_copies": self.heading_copies, "aug_mix_copies": self.mix_copies,
                 "aug_site_jitter_m": self.site_jitter, "aug_rest_offset_deg": self.rest_offset,

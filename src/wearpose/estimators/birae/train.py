@@ -97,14 +97,13 @@ class BiraeTask:
         self.model.eval()
         tot, nll, n, errs, z = 0.0, 0.0, 0, [], []
         for b in self.val_data.iter_batches(self.cfg, self.augmented, shuffle=False, batch_size=32):
-            loss, _, o = batch_loss(self.est, b, device, self.model)
-            tot, n = tot + float(loss), n + 1
+            loss, parts, o = batch_loss(self.est, b, device, self.model)
+            tot, nll, n = tot + float(loss), nll + parts["nll"], n + 1
             m = o["mask"]
             mu = o["mu"][m].reshape(-1, 15, 3).cpu()
             y = o["y"][m].reshape(-1, 15, 3).cpu()
             errs.append(mpjae(target_to_pose(mu), target_to_pose(y)))
             z.append(((o["y"] - o["mu"]).abs() <= torch.exp(0.5 * o["logvar"]))[m].float().mean().reshape(1).cpu())
-            nll = nll + float(nll_loss(o["mu"], o["logvar"], o["y"], o["mask"]))
         self.model.train(was)
         e = torch.cat(errs) if errs else torch.zeros(0)
         return {"val_loss": tot / max(n, 1), "val_nll": nll / max(n, 1),

@@ -31,9 +31,7 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     if opts["offsets"] not in (None, "random", "none"):
         raise OptionError("--offsets", f"expected random or none, got {opts['offsets']!r}")
     own = ("hidden", "width", "iterations", "batch_size", "offsets", "lr", "lambda_shape")
-    # epochs: the config the checkpoint and card keep says how long the run was, not the preset
-    cfg = baseline_config(run.config, sensors, model).override(**{k: opts[k] for k in own}, epochs=run.epochs,
-                                                               **run.config_overrides())
+    cfg = baseline_config(run.config, sensors, model).override(**{k: opts[k] for k in own}, **run.config_overrides())
     if ablation is not None:
         if model != "lgd":
             raise OptionError("--ablation", f"ablations are of the LGD-RNN; got --model {model}")

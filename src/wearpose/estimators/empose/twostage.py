@@ -520,7 +520,7 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
         mod.FK_JOINT_WEIGHT = opts["fk_weight"]  # read by the task's loss at every step; restored below
     try:
         cfg = twostage_config(run.config, opts["sensors"]).override(
-            ik=opts["ik"], mapper_input=opts["mapper_input"], lr=opts["lr"], epochs=run.epochs,
+            ik=opts["ik"], mapper_input=opts["mapper_input"], lr=opts["lr"],
             **run.config_overrides())
         est = TwoStageEstimator(cfg)
         est.meta["fk_joint_weight"] = mod.FK_JOINT_WEIGHT

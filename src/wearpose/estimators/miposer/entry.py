@@ -99,7 +99,7 @@ def _nbeats_train_source(store: Any, seed: int, run: TrainRun, limit: int | None
     # start-up: as above (with torch)
     from wearpose.interference.nbeats import spread
 
-    mix_cfg = TrainConfig().override(**{**run.config_overrides(), "seed": seed})
+    mix_cfg = TrainConfig().override(**{**run.mix_overrides(), "seed": seed})
     mix = TrainingMix.from_config(mix_cfg)
     ids = spread(sorted(store.clips(split="train")), limit)
     per_source = Counter(store.entry(c).get("source", "?") for c in ids)

@@ -32,7 +32,7 @@ def train_from_options(opts: Mapping[str, Any], run: TrainRun) -> dict[str, Any]
     from wearpose.estimators.pip.train import train_pip
 
     cfg = PipConfig.preset(run.config).override(
-        **{k: opts[k] for k in _SAME_NAME}, epochs=run.epochs, **run.config_overrides(),  # epochs: as EM-POSE's
+        **{k: opts[k] for k in _SAME_NAME}, **run.config_overrides(),
         sitting_stand_s=SIT_HOLD_S if opts["balanced_sitting"] else None)
     if opts["hidden"] is not None:
         cfg = cfg.override(init_widths=(opts["hidden"], 2 * opts["hidden"]))
