@@ -38,10 +38,11 @@ COMPARE = "wearpose.estimators.empose.evaluate:evaluate_models"
 
 
 def _models(name: str, threshold: float, steps: list[int], gn_steps: list[int], weight: float | None = None,
-            centres: tuple[str, ...] = ("learned",)) -> dict[str, Any]:
+            centres: tuple[str, ...] = ("learned",), centre_frames: int = 0) -> dict[str, Any]:
     """The learned model, then one row per L-BFGS iteration count (``refine K``) and per
     Gauss-Newton iteration count and prior centre (``gn K``; ``gn K, recording`` with
-    ``refine_centre="recording"``), the same gate and prior weight for all."""
+    ``refine_centre="recording"``, its turn measured on ``centre_frames`` frames: 0 = the whole
+    recording), the same gate and prior weight for all."""
     from wearpose.estimators.empose.baselines import load_any
     from wearpose.weights import weight_path
 
@@ -54,17 +55,20 @@ def _models(name: str, threshold: float, steps: list[int], gn_steps: list[int], 
         est.set_refine_steps(k)
         est.set_refine_solver(solver)
         est.set_refine_centre(centre)
+        est.set_refine_centre_frames(centre_frames)
         if weight is not None:
             est.set_refine_weight(weight)
         label = "learned" if k == 0 else (f"refine {k}" if solver == "lbfgs" else f"gn {k}")
-        out[label if centre == "learned" else f"{label}, {centre}"] = est
+        where = centre if centre == "learned" or not centre_frames else f"{centre}'s first {centre_frames}"
+        out[label if centre == "learned" else f"{label}, {where}"] = est
     return out
 
 
 def _timing(models: dict[str, Any], store: Any, clips: int) -> dict[str, Any]:
     """Online step times (ms) per model over the first ``clips`` test clips of ``store``, and
     for the refining models the extra on gated frames (median of per-frame differences to the
-    learned model on the same frames)."""
+    learned model on the same frames); with the prior on the recording's first frames also the
+    median over the frames that measured the turn and over those after it."""
     from wearpose.estimators import iter_frames
     from wearpose.estimators.empose.data import recording_from_clip
     from wearpose.estimators.empose.evaluate import simulate_eval_clip
@@ -76,8 +80,9 @@ def _timing(models: dict[str, Any], store: Any, clips: int) -> dict[str, Any]:
         recs.append((r, recording_from_clip(r, first.config)))
     times: dict[str, list[float]] = {}
     gated: dict[str, list[bool]] = {}
+    turned: dict[str, list[bool | None]] = {}
     for name, est in models.items():
-        times[name], gated[name] = [], []
+        times[name], gated[name], turned[name] = [], [], []
         for r, rec in recs:
             est.reset()
             est.set_offsets(r["off_R"], r["off_t"])
@@ -89,6 +94,7 @@ def _timing(models: dict[str, Any], store: Any, clips: int) -> dict[str, Any]:
                 out = est.step(f)
                 times[name].append((time.perf_counter() - t0) * 1000.0)
                 gated[name].append(bool(out.extras.get("refined", False)))
+                turned[name].append(out.extras.get("centre_turned"))
     base = times["learned"]
     res: dict[str, Any] = {"frames": len(base), "clips": len(recs), "models": {}}
     for name in models:
@@ -99,6 +105,11 @@ def _timing(models: dict[str, Any], store: Any, clips: int) -> dict[str, Any]:
             row["median_ms_refined_frames"] = statistics.median(times[name][i] for i in g)
             row["median_extra_ms_refined_frames"] = statistics.median(times[name][i] - base[i] for i in g)
             row["mean_extra_ms_per_frame"] = statistics.fmean(times[name]) - statistics.fmean(base)
+        before = [t for t, x in zip(times[name], turned[name]) if x is False]
+        after = [t for t, x in zip(times[name], turned[name]) if x is True]
+        if before or after:  # the prior on the recording's first frames: measuring the turn, then using it
+            row.update(frames_measuring_turn=len(before), median_ms_measuring_turn=statistics.median(before or [0.0]),
+                       median_ms_turned=statistics.median(after or [0.0]))
         res["models"][name] = row
     return res
 
@@ -138,7 +149,11 @@ def main(argv: list[str] | None = None) -> int:
                          "--percentile of the learned L_r on validation clips")
     ap.add_argument("--weight", type=float, default=None, help="the prior weight (default: the config's)")
     ap.add_argument("--centre", nargs="+", choices=("learned", "recording"), default=["learned"],
-                    help="the Gauss-Newton rows' prior centres, one row each (recording: offline only, not timed)")
+                    help="the Gauss-Newton rows' prior centres, one row each (recording: offline only and not "
+                         "timed unless --centre-frames)")
+    ap.add_argument("--centre-frames", type=int, default=0,
+                    help="recording centre: measure the turn on the first N valid frames (refine_centre_frames; "
+                         "online too, so those rows are timed); 0 = the whole recording")
     ap.add_argument("--percentile", type=float, default=95.0)
     ap.add_argument("--val-clips", type=int, default=20)
     ap.add_argument("--test-clips", type=int, default=10)
@@ -164,13 +179,15 @@ def main(argv: list[str] | None = None) -> int:
     unseen = unseen_motion_store(a.per_family)
     results = {}
     for key, store, clips in (("test", corpus, a.test_clips), ("unseen_motion", unseen, None)):
-        models = _models(a.model, threshold, a.steps, a.gn_steps, a.weight, tuple(a.centre))
+        models = _models(a.model, threshold, a.steps, a.gn_steps, a.weight, tuple(a.centre), a.centre_frames)
         results[key] = compare_models(COMPARE, models, "test", clips, store=store,
                                       calibration_error=tuple(a.calibration_error))
         for m in results[key]["models"].values():
             m["checkpoint"] = str(weight_path(a.model))
         print(key, {n: round(m["mpjpe_mm"], 2) for n, m in results[key]["models"].items()}, flush=True)
-    online = _models(a.model, threshold, a.steps, a.gn_steps, a.weight)  # a step refuses the recording centre
+    # A step refuses the prior on the whole recording; on its first frames it runs online.
+    online = _models(a.model, threshold, a.steps, a.gn_steps, a.weight,
+                     tuple(a.centre) if a.centre_frames else ("learned",), a.centre_frames)
     timing = _timing(online, unseen, a.timing_clips)
     command = "python benchmarks/" + " ".join(shlex.quote(x) for x in [Path(__file__).name, *sys.argv[1:]])
     refined = results["unseen_motion"]["models"]
@@ -187,8 +204,10 @@ def main(argv: list[str] | None = None) -> int:
           f"{weight:g} ||u - u_learned||² (6D pose of the 20 estimated joints; shape held), refined frames only, "
           "then the root from the EM source's skin site: `refine K` L-BFGS, `gn K` Levenberg-Marquardt "
           "Gauss-Newton (`refine_solver=gn`); `gn K, recording` the same with the prior centred on the learned pose "
-          "turned by the recording's per-joint turn (`refine_centre=recording`, offline only, so not in the online "
-          "cost table).", "",
+          "turned by the recording's per-joint turn (`refine_centre=recording`; "
+          + (f"measured on the first {a.centre_frames} valid frames, `refine_centre_frames={a.centre_frames}`, online "
+             "too: a step measures it on those frames and uses it from the last of them on, so its cost table splits "
+             "the two)." if a.centre_frames else "offline only, so not in the online cost table)."), "",
           f"## Corpus test split, first {a.test_clips} clips (in-lab)", "", *_table(results["test"]), "",
           f"## Unseen motion ({a.per_family} clips per held-out procedural family)", "",
           *_table(results["unseen_motion"]), "", "By family (frame-weighted means of each clip's figures):", "",
@@ -209,6 +228,13 @@ def main(argv: list[str] | None = None) -> int:
         md.append(f"| {name} | {r['median_ms']:.2f} | {r['mean_ms']:.2f} | {100 * r['refined_fraction']:.0f} % | "
                   f"{g('median_ms_refined_frames')} | {g('median_extra_ms_refined_frames')} | "
                   f"{g('mean_extra_ms_per_frame')} |")
+    turning = {n: r for n, r in timing["models"].items() if "frames_measuring_turn" in r}
+    if turning:
+        md += ["", "With the prior on the recording's first frames, the step while it measures the turn (one more "
+               "Gauss-Newton solve, without the prior, per frame) and after:", "",
+               "| model | frames measuring | median while measuring [ms] | median after [ms] |", "| --- | --- | --- | --- |",
+               *(f"| {n} | {r['frames_measuring_turn']} | {r['median_ms_measuring_turn']:.2f} | "
+                 f"{r['median_ms_turned']:.2f} |" for n, r in turning.items())]
     stem = Path(a.out)
     stem.parent.mkdir(parents=True, exist_ok=True)
     stem.with_suffix(".md").write_text("\n".join(md) + "\n")

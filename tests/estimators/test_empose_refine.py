@@ -426,10 +426,49 @@ def test_prior_centred_on_the_recording_runs_offline_and_is_refused_online(body:
     plain = est.estimate(rec)
     assert not torch.equal(plain.local_rot, track.local_rot)  # a different prior, a different answer
     est.set_refine_centre("recording")
-    with pytest.raises(ConfigError, match="refine_centre=learned"):
+    with pytest.raises(ConfigError, match="refine_centre_frames=60"):
         est.set_offsets(clip["off_R"], clip["off_t"])
     est.reset()
     with pytest.raises(ConfigError, match="offline"):
         est.step(next(iter(iter_frames(rec, est.sensor_names))))
     with pytest.raises(ConfigError, match="refine_centre"):
         EmposeConfig.preset("tiny", 12).override(refine_centre="median")
+    for bad in (-1, True, 2.5):
+        with pytest.raises(ConfigError, match="refine_centre_frames"):
+            EmposeConfig.preset("tiny", 12).override(refine_centre_frames=bad)
+
+
+def test_recording_centre_on_the_first_frames_is_the_same_offline_and_online(body: BodyModel) -> None:
+    """``refine_centre_frames = n``: offline the turn comes from the first n valid frames (not the
+    whole recording's) and turns every frame; online each of the first n valid frames adds its
+    solve, frames before the n-th keep the learned centre (the plain refinement's answer), and
+    from the n-th on a step gives what the offline estimate gives (so later frames never changed
+    the offline turn); a recording with fewer than n valid frames is never turned."""
+    est = EmposeEstimator(tiny_cfg(), body=body)
+    clip = _clip(body, T=14, noise="default")
+    rec = recording_from_clip(clip, est.config)
+    ok = clip["valid"].all(1)
+    n = 5
+    apply_settings(est, {"refine_steps": "3", "refine_centre": "recording", "refine_centre_frames": str(n)})
+    first = est.estimate(rec)
+    est.set_refine_centre_frames(0)
+    assert not torch.equal(first.local_rot, est.estimate(rec).local_rot)  # n frames, not the whole recording
+    est.set_refine_centre("learned")
+    plain = est.estimate(rec)
+    apply_settings(est, {"refine_centre": "recording", "refine_centre_frames": str(n)})
+    est.set_offsets(clip["off_R"], clip["off_t"])
+    online = [est.step(f) for f in iter_frames(rec, est.sensor_names)]
+    turned_at = (ok.cumsum(0) >= n).tolist()
+    assert [f.extras["centre_turned"] for f in online] == turned_at
+    rot = torch.stack([f.local_rot for f in online])
+    k = turned_at.index(True)
+    # The traced step's learned pose differs from the batched one by ~1e-5; the refinement of this
+    # untrained model on noisy frames (accepted or rejected LM steps) makes that up to ~6e-3. The
+    # turn itself changes the answer by 0.25-1.5.
+    assert torch.allclose(rot[:k], plain.local_rot[:k], atol=2e-2)
+    assert torch.allclose(rot[k:], first.local_rot[k:], atol=2e-2)
+    assert float((rot[k:] - plain.local_rot[k:]).abs().amax()) > 0.2  # the turn changed the answer
+    short = recording_from_clip(_clip(body, T=3, noise="none"), est.config)  # fewer than n valid frames
+    no_turn = est.estimate(short)
+    est.set_refine_centre("learned")
+    assert torch.equal(no_turn.local_rot, est.estimate(short).local_rot)  # as a stream this short: never turned

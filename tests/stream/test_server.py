@@ -366,3 +366,44 @@ def test_empose_with_refinement_and_no_offsets_is_refused_at_hello() -> None:
     assert "refine_steps=1" in msg and "offsets" in msg and "subject_info['offsets']" in msg and "refine_steps=0" in msg, msg
     assert refused["refused_total"] == 1 and "1" not in map(str, refused["subjects"])
     assert final["estimated"] == 3 and final.get("estimator_errors", 0) == 0 and stats["refused_total"] == 1
+
+
+def test_empose_prior_on_the_whole_recording_is_refused_at_hello_and_on_its_first_frames_served() -> None:
+    """EM-POSE's refinement with its prior on the whole recording (``refine_centre="recording"``,
+    ``refine_centre_frames=0``) needs the recording a stream does not have: the hello is refused
+    naming the online form; with the turn measured on the stream's first frames it is served, and
+    the frames after them are estimated too."""
+    from wearpose.body import BodyModel
+    from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
+
+    body = BodyModel()
+    names = EmposeEstimator(EmposeConfig.preset("tiny", 12), body=body).sensor_names
+    S = len(names)
+    offsets = {"sensors": list(names), "rotation": np.broadcast_to(np.eye(3), (S, 3, 3)).tolist(),
+               "translation_mean_m": np.zeros((S, 3)).tolist()}
+    rng = np.random.default_rng(1)
+
+    def serve(frames: int):  # noqa: ANN202
+        cfg = EmposeConfig.preset("tiny", 12).override(refine_steps=1, refine_centre="recording",
+                                                      refine_centre_frames=frames)
+        make = lambda: EmposeEstimator(cfg, body=body)  # noqa: E731
+
+        async def main():  # noqa: ANN202
+            async with StreamServer(make, port=0, warmup=0, limits=NO_SHEDDING) as srv, StreamClient(srv.url) as c:
+                try:
+                    await c.hello(Hello(1, names, ("position", "orientation"), 30.0, subject_info={"offsets": offsets}))
+                except StreamError as exc:
+                    return str(exc), None, srv.stats()
+                for k in range(4):
+                    data = np.concatenate([0.3 * rng.standard_normal((S, 3)),
+                                           np.broadcast_to(np.eye(3), (S, 3, 3)).reshape(S, 9)], 1).astype(np.float32)
+                    await c.send_frame(FramePacket(1, k, k / 30.0, np.ones(S, bool), data))
+                return None, await c.bye(1), srv.stats()
+
+        return _run(main())
+
+    msg, final, stats = serve(0)
+    assert msg is not None and "refine_centre_frames" in msg and stats["refused_total"] == 1, msg
+    msg, final, stats = serve(2)
+    assert msg is None and stats["refused_total"] == 0
+    assert final["estimated"] == 4 and final.get("estimator_errors", 0) == 0

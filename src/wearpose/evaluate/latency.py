@@ -124,11 +124,11 @@ def import_baseline(src: str | Path, module: str, package: str = "wearpose") -> 
 #: Config fields and estimator attributes that change what one online step costs (recorded beside
 #: every figure): EM-POSE's LGD iterations N, BiRAE's MC-dropout samples M, window and online
 #: mode, MI-Poser's window and metal-interference mitigation, the networks' widths, PIP's physics,
-#: EM-POSE's measurement-consistency refinement (iterations, gate, prior weight) and per-recording
+#: EM-POSE's measurement-consistency refinement (iterations, gate, prior weight and centre) and per-recording
 #: shape fit (frames, iterations, prior weight).
 COST_SETTINGS = ("iterations", "mc_samples", "window", "online", "physics", "dual_pd", "mim", "hidden", "width",
                  "d_model", "layers", "rnn_layers", "refine_steps", "refine_threshold", "refine_weight", "refine_solver",
-                 "refine_centre", "shape_fit_frames", "shape_fit_steps", "shape_fit_prior")
+                 "refine_centre", "refine_centre_frames", "shape_fit_frames", "shape_fit_steps", "shape_fit_prior")
 
 
 def cost_settings(est: Any) -> dict[str, Any]:

@@ -91,6 +91,8 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         self._traced: tuple[Any, Any] | None = None
         self._fit_buffer: list[dict[str, torch.Tensor]] = []  # online shape fit: the first valid frames
         self._shape: torch.Tensor | None = None  # online shape fit: the fitted shape, once fitted
+        self._turn_sums: list[torch.Tensor] = []  # online recording centre: the first valid frames' turn_sums
+        self._turn: torch.Tensor | None = None  # online recording centre: the prior's turn, once measured
 
     # ------------------------------------------------------------------ checkpoints
     def checkpoint(self, meta: dict[str, Any] | None = None, train_state: dict[str, Any] | None = None) -> Checkpoint:
@@ -187,19 +189,22 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         """Subject offsets for :meth:`step`: ``R`` ``(S, 3, 3)``, ``t`` ``(S, 3)`` m (kit order).
 
         Raises:
-            ConfigError: the refinement's prior is centred on the recording
-                (``refine_centre="recording"``), which an online step does not have.
+            ConfigError: the refinement's prior is centred on the whole recording
+                (``refine_centre="recording"`` with ``refine_centre_frames=0``), which an online
+                step does not have.
         """
         self._refuse_online_centre()
         self._offsets = (torch.as_tensor(R, dtype=torch.float32), torch.as_tensor(t, dtype=torch.float32))
 
     def _refuse_online_centre(self) -> None:
         """Online steps cannot centre the prior on the whole recording: refuse before the first
-        step (a server then refuses the subject at its hello), naming both ways out."""
-        if self.config.refine_steps > 0 and self.config.refine_centre == "recording":
-            raise ConfigError("online step: EM-POSE refine_centre='recording' turns the refinement's prior by the "
-                              "whole recording, which a step does not have; estimate the recording offline, or set "
-                              "refine_centre=learned (--set refine_centre=learned)")
+        step (a server then refuses the subject at its hello), naming the ways out."""
+        cfg = self.config
+        if cfg.refine_steps > 0 and cfg.refine_centre == "recording" and cfg.refine_centre_frames == 0:
+            raise ConfigError("online step: EM-POSE refine_centre='recording' with refine_centre_frames=0 turns the "
+                              "refinement's prior by the whole recording, which a step does not have; measure the turn "
+                              "on the stream's first frames (--set refine_centre_frames=60), estimate the recording "
+                              "offline, or set refine_centre=learned (--set refine_centre=learned)")
 
     @property
     def input_spec(self) -> InputSpec:
@@ -280,12 +285,19 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
                         fit: ShapeFit | None) -> torch.Tensor | None:
         """The prior centre's turn ``(NUM_PRED, 3, 3)`` when the refinement is on with
         ``refine_centre="recording"`` (:func:`~wearpose.estimators.empose.refine.recording_turn`
-        over the frames where ``ok`` ``(T,)``, every sensor valid, chunk by chunk as ``spans``;
+        over the frames where ``ok`` ``(T,)``, every sensor valid, or the first
+        ``refine_centre_frames`` of them (None when there are fewer), chunk by chunk as ``spans``;
         ``lasts`` the learned outputs, ``fit`` the shape fit if on); None otherwise or when no
         frame has every sensor."""
         cfg = self.config
         if cfg.refine_steps == 0 or cfg.refine_centre != "recording":
             return None
+        if cfg.refine_centre_frames > 0:  # the first n valid frames, as a stream has them (step)
+            first = fit_frames(ok, cfg.refine_centre_frames, spread=False)
+            if first.numel() < cfg.refine_centre_frames:
+                return None  # a stream this short never gets the turn either
+            ok = torch.zeros_like(ok)
+            ok[first] = True
         dev, sums = self.device, []
         for (a, b), last in zip(spans, lasts):
             keep = ok[a:b]
@@ -412,10 +424,16 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
 
     def set_refine_centre(self, centre: str) -> None:
         """Where the refinement's prior is centred: ``"learned"`` (each frame's learned estimate)
-        or ``"recording"`` (offline: turned by the recording's per-joint turn,
-        :func:`~wearpose.estimators.empose.refine.recording_turn`), e.g.
-        ``--set refine_centre=recording``."""
+        or ``"recording"`` (turned by the recording's per-joint turn,
+        :func:`~wearpose.estimators.empose.refine.recording_turn`, measured on
+        ``refine_centre_frames``), e.g. ``--set refine_centre=recording``."""
         self._set_config(refine_centre=centre)
+
+    def set_refine_centre_frames(self, n: int) -> None:
+        """The frames the recording centre's turn is measured on: 0 = every valid frame of the
+        recording (offline only), n > 0 = the first n valid ones (offline and online), e.g.
+        ``--set refine_centre_frames=60``."""
+        self._set_config(refine_centre_frames=n)
 
     def set_refine_solver(self, solver: str) -> None:
         """The refinement's solver: ``"lbfgs"`` or ``"gn"`` (Levenberg-Marquardt Gauss-Newton,
@@ -459,10 +477,32 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         offR, offt = self._offsets
         return self._shape, self._rec(rot[None], self._shape[None], p[None], R[None], offR, offt)[0]
 
+    def _online_turn(self, rot: torch.Tensor, b: torch.Tensor, rec: torch.Tensor, p: torch.Tensor, R: torch.Tensor,
+                     valid: bool) -> tuple[torch.Tensor, torch.Tensor]:
+        """The online recording centre for one frame (:meth:`step`, ``refine_centre="recording"``):
+        the learned pose ``rot`` ``(24, 3, 3)`` with shape ``b`` ``(10,)`` and L_r ``rec`` ``()``,
+        measurements ``p`` ``(S, 3)`` m and ``R`` ``(S, 3, 3)``. Each of the first
+        ``refine_centre_frames`` valid frames adds its prior-free solve
+        (:func:`~wearpose.estimators.empose.refine.turn_sums`, one per frame, so no frame pays
+        for the others), and the n-th fixes the turn; from then on the prior's centre (and the
+        pose of a frame the gate leaves) is the turned learned pose. Returns it and its L_r."""
+        cfg = self.config
+        offR, offt = self._offsets
+        if self._turn is None and valid:
+            self._turn_sums.append(turn_sums(self.sensors.lean(), rot[None], b[None], p[None], R[None], offR, offt,
+                                             steps=cfg.refine_steps, rec_weights=self.model.rec_weights))
+            if len(self._turn_sums) >= cfg.refine_centre_frames:
+                self._turn, self._turn_sums = recording_turn(self._turn_sums), []
+        if self._turn is None:
+            return rot, rec
+        rot = turned(rot[None], self._turn)[0]
+        return rot, self._rec(rot[None], b[None], p[None], R[None], offR, offt)[0]
+
     def reset(self) -> None:
         self._state = None
         self._input = OnlineInput(self.sensor_names, ("position", "orientation"), who=self.name)
         self._fit_buffer, self._shape = [], None
+        self._turn_sums, self._turn = [], None
 
     def _online_fn(self) -> Any:
         """The per-frame computation (LSTM step + N closed-form LGD updates) as a TorchScript trace
@@ -503,7 +543,10 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         every sensor valid are kept, and at the n-th the shape is fitted to them once
         (:meth:`_online_shape`; that frame costs the fit, see docs/empose.md); from then on every
         frame returns the fitted shape and is scored with it, before it the learned shape
-        (extras ``shape_fitted`` bool, ``rec_loss_learned``)."""
+        (extras ``shape_fitted`` bool, ``rec_loss_learned``). With the refinement's prior on the
+        recording (``refine_centre="recording"``, ``refine_centre_frames = n > 0``): the turn is
+        measured on the first n valid frames and used from the n-th on (:meth:`_online_turn`;
+        extras ``centre_turned`` bool); offline (:meth:`estimate`) every frame gets that turn."""
         if self._offsets is None:
             self._refuse_online_centre()
             self._offsets = self._offsets_from(None)
@@ -537,6 +580,9 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         if self.config.shape_fit_frames > 0:
             b, rec = self._online_shape(rot, b, rec, p, R, bool(v.all()))
             extras.update(rec_loss=float(rec), rec_loss_learned=float(learned_rec), shape_fitted=self._shape is not None)
+        if self.config.refine_steps > 0 and self.config.refine_centre == "recording":
+            rot, rec = self._online_turn(rot, b, rec, p, R, bool(v.all()))
+            extras["centre_turned"] = self._turn is not None
         if self.config.refine_steps > 0:
             ref = self._refine(rot[None], b[None], rec.reshape(1), p[None], R[None], offR, offt)
             rot = ref.local_rot[0]
