@@ -30,8 +30,9 @@ pull the pose towards the measurements, starting from the learned estimate ``u_0
   calibrated as a high percentile of L_r on validation clips of the training distribution
   (:func:`calibrate_threshold`). The other frames are returned untouched, bit for bit;
 - the prior's centre (``EmposeConfig.refine_centre``): ``"learned"``, the learned estimate of the
-  frame, or ``"recording"`` (offline), the learned estimate turned by one constant rotation per
-  estimated joint for the whole recording (:func:`recording_turn`, applied by :func:`turned`).
+  frame, or ``"recording"``, the learned estimate turned by one constant rotation per estimated
+  joint (:func:`recording_turn`, applied by :func:`turned`), measured on the whole recording
+  (offline) or on its first ``EmposeConfig.refine_centre_frames`` valid frames (offline and online).
   On motion from another lab the learned estimate is off by a part that stays constant over a
   recording (another capture chain's rest pose: docs/empose.md), and a prior centred on it
   keeps that part wherever the sensors pin a joint only weakly; the turn takes it out, measured
