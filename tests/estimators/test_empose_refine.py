@@ -439,11 +439,12 @@ def test_prior_centred_on_the_recording_runs_offline_and_is_refused_online(body:
 
 
 def test_recording_centre_on_the_first_frames_is_the_same_offline_and_online(body: BodyModel) -> None:
-    """``refine_centre_frames = n``: offline the turn comes from the first n valid frames (not the
-    whole recording's) and turns every frame; online each of the first n valid frames adds its
-    solve, frames before the n-th keep the learned centre (the plain refinement's answer), and
-    from the n-th on a step gives what the offline estimate gives (so later frames never changed
-    the offline turn); a recording with fewer than n valid frames is never turned."""
+    """``refine_centre_frames = n``: the turn comes from the first n valid frames (not the whole
+    recording's) and is used from the n-th on, online and offline alike: online each of the first
+    n valid frames adds its solve, frames before the n-th keep the learned centre (the plain
+    refinement's answer, offline too), and every step gives what the offline estimate gives (so
+    later frames never changed the offline turn); a recording with fewer than n valid frames is
+    never turned."""
     est = EmposeEstimator(tiny_cfg(), body=body)
     clip = _clip(body, T=14, noise="default")
     rec = recording_from_clip(clip, est.config)
@@ -462,6 +463,7 @@ def test_recording_centre_on_the_first_frames_is_the_same_offline_and_online(bod
     assert [f.extras["centre_turned"] for f in online] == turned_at
     rot = torch.stack([f.local_rot for f in online])
     k = turned_at.index(True)
+    assert torch.equal(first.local_rot[:k], plain.local_rot[:k])  # offline: not turned before the n-th either
     # The traced step's learned pose differs from the batched one by ~1e-5; the refinement of this
     # untrained model on noisy frames (accepted or rejected LM steps) makes that up to ~6e-3. The
     # turn itself changes the answer by 0.25-1.5.

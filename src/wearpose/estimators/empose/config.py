@@ -78,7 +78,8 @@ class EmposeConfig(SimulatedTrainConfig):
     default) or ``"recording"`` (the learned estimate turned by one rotation per joint for the
     recording, :func:`~wearpose.estimators.empose.refine.recording_turn`), measured on
     ``refine_centre_frames`` frames with every sensor valid: 0 = the whole recording (offline
-    only, the default), n > 0 = its first n (offline, and online from the n-th such frame on).
+    only, the default), n > 0 = its first n, used from the n-th such frame on (online, and
+    offline the same, so an offline figure is what a stream gets).
     Training ignores them, and a checkpoint does not restore them (:data:`INFERENCE_FIELDS`).
     Per-recording shape fit at inference (:mod:`wearpose.estimators.empose.shapefit`; issue
     24): ``shape_fit_frames`` frames with every sensor valid on which one body shape is fitted

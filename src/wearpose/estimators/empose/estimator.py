@@ -252,14 +252,15 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
                                            train=False)[-1])
         ok = valid.all(1)
         fit = self._fit_shape(lasts, ok, p, R, offR, offt) if self.config.shape_fit_frames > 0 else None
-        turn = self._recording_turn(spans, lasts, ok, p, R, offR, offt, fit)
+        turn, since = self._recording_turn(spans, lasts, ok, p, R, offR, offt, fit)
         rots, betas, rec, learned, gated = [], [], [], [], []
         for (a, b), last in zip(spans, lasts):
             lrot, lb, lrec = last["local_rot"].detach(), last["betas"].detach(), last["rec"].detach()
             if fit is not None:  # every frame's learned pose, scored with the fitted shape
                 lb = fit.betas.to(dev).expand(b - a, -1)
-            if turn is not None:  # the prior's centre: the learned pose turned by the recording's turn
-                lrot = turned(lrot, turn)
+            if turn is not None and since < b:  # the prior's centre: the learned pose turned, from frame `since` on
+                lrot = lrot.clone()
+                lrot[max(since - a, 0):] = turned(lrot[max(since - a, 0):], turn)
             if fit is not None or turn is not None:
                 lrec = self._rec(lrot, lb, p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
             ref = self._refine(lrot, lb, lrec, p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
@@ -282,22 +283,25 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
 
     def _recording_turn(self, spans: list[tuple[int, int]], lasts: list[dict[str, torch.Tensor]], ok: torch.Tensor,
                         p: torch.Tensor, R: torch.Tensor, offR: torch.Tensor, offt: torch.Tensor,
-                        fit: ShapeFit | None) -> torch.Tensor | None:
+                        fit: ShapeFit | None) -> tuple[torch.Tensor | None, int]:
         """The prior centre's turn ``(NUM_PRED, 3, 3)`` when the refinement is on with
         ``refine_centre="recording"`` (:func:`~wearpose.estimators.empose.refine.recording_turn`
-        over the frames where ``ok`` ``(T,)``, every sensor valid, or the first
-        ``refine_centre_frames`` of them (None when there are fewer), chunk by chunk as ``spans``;
-        ``lasts`` the learned outputs, ``fit`` the shape fit if on); None otherwise or when no
-        frame has every sensor."""
+        over the frames where ``ok`` ``(T,)``, every sensor valid, chunk by chunk as ``spans``;
+        ``lasts`` the learned outputs, ``fit`` the shape fit if on), and the first frame it is
+        used on: 0 for the whole recording; with ``refine_centre_frames = n > 0`` the turn of the
+        first n valid frames, used from the n-th on, as a stream (:meth:`step`) has it. None
+        (and 0) when off, when no frame has every sensor or there are fewer than n."""
         cfg = self.config
         if cfg.refine_steps == 0 or cfg.refine_centre != "recording":
-            return None
+            return None, 0
+        since = 0
         if cfg.refine_centre_frames > 0:  # the first n valid frames, as a stream has them (step)
             first = fit_frames(ok, cfg.refine_centre_frames, spread=False)
             if first.numel() < cfg.refine_centre_frames:
-                return None  # a stream this short never gets the turn either
+                return None, 0  # a stream this short never gets the turn either
             ok = torch.zeros_like(ok)
             ok[first] = True
+            since = int(first[-1])
         dev, sums = self.device, []
         for (a, b), last in zip(spans, lasts):
             keep = ok[a:b]
@@ -309,7 +313,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
             sums.append(turn_sums(self.sensors.lean(), last["local_rot"].detach()[k], lb, p[a:b][keep].to(dev),
                                   R[a:b][keep].to(dev), offR.to(dev), offt.to(dev), steps=cfg.refine_steps,
                                   rec_weights=self.model.rec_weights))
-        return recording_turn(sums) if sums else None
+        return (recording_turn(sums) if sums else None), since
 
     def _rec(self, local_rot: torch.Tensor, betas: torch.Tensor, p: torch.Tensor, R: torch.Tensor,
              offR: torch.Tensor, offt: torch.Tensor) -> torch.Tensor:
@@ -431,8 +435,8 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
 
     def set_refine_centre_frames(self, n: int) -> None:
         """The frames the recording centre's turn is measured on: 0 = every valid frame of the
-        recording (offline only), n > 0 = the first n valid ones (offline and online), e.g.
-        ``--set refine_centre_frames=60``."""
+        recording (offline only), n > 0 = the first n valid ones, the turn used from the n-th
+        on (online and offline alike), e.g. ``--set refine_centre_frames=60``."""
         self._set_config(refine_centre_frames=n)
 
     def set_refine_solver(self, solver: str) -> None:
@@ -546,7 +550,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         (extras ``shape_fitted`` bool, ``rec_loss_learned``). With the refinement's prior on the
         recording (``refine_centre="recording"``, ``refine_centre_frames = n > 0``): the turn is
         measured on the first n valid frames and used from the n-th on (:meth:`_online_turn`;
-        extras ``centre_turned`` bool); offline (:meth:`estimate`) every frame gets that turn."""
+        extras ``centre_turned`` bool), as :meth:`estimate` does."""
         if self._offsets is None:
             self._refuse_online_centre()
             self._offsets = self._offsets_from(None)

@@ -32,7 +32,8 @@ pull the pose towards the measurements, starting from the learned estimate ``u_0
 - the prior's centre (``EmposeConfig.refine_centre``): ``"learned"``, the learned estimate of the
   frame, or ``"recording"``, the learned estimate turned by one constant rotation per estimated
   joint (:func:`recording_turn`, applied by :func:`turned`), measured on the whole recording
-  (offline) or on its first ``EmposeConfig.refine_centre_frames`` valid frames (offline and online).
+  (offline) or on its first ``EmposeConfig.refine_centre_frames`` valid frames and used from the
+  last of them on (online, and offline the same way).
   On motion from another lab the learned estimate is off by a part that stays constant over a
   recording (another capture chain's rest pose: docs/empose.md), and a prior centred on it
   keeps that part wherever the sensors pin a joint only weakly; the turn takes it out, measured
