@@ -128,7 +128,8 @@ def import_baseline(src: str | Path, module: str, package: str = "wearpose") -> 
 #: shape fit (frames, iterations, prior weight).
 COST_SETTINGS = ("iterations", "mc_samples", "window", "online", "physics", "dual_pd", "mim", "hidden", "width",
                  "d_model", "layers", "rnn_layers", "refine_steps", "refine_threshold", "refine_weight", "refine_solver",
-                 "refine_centre", "refine_centre_frames", "shape_fit_frames", "shape_fit_steps", "shape_fit_prior")
+                 "refine_centre", "refine_centre_frames",
+                 "refine_centre_every", "shape_fit_frames", "shape_fit_steps", "shape_fit_prior")
 
 
 def cost_settings(est: Any) -> dict[str, Any]:

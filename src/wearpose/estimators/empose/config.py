@@ -28,7 +28,7 @@ from wearpose.estimators.trainconfig import SimulatedTrainConfig
 #: checkpoint gets today's defaults and ``--set`` / ``set_*`` change them (a checkpoint trained
 #: before a default changed kept the old one, e.g. the refinement's solver and weight).
 INFERENCE_FIELDS = ("refine_steps", "refine_threshold", "refine_weight", "refine_solver", "refine_centre",
-                    "refine_centre_frames", "shape_fit_frames", "shape_fit_steps", "shape_fit_prior")
+                    "refine_centre_frames", "refine_centre_every", "shape_fit_frames", "shape_fit_steps", "shape_fit_prior")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,7 +79,9 @@ class EmposeConfig(SimulatedTrainConfig):
     recording, :func:`~wearpose.estimators.empose.refine.recording_turn`), measured on
     ``refine_centre_frames`` frames with every sensor valid: 0 = the whole recording (offline
     only, the default), n > 0 = its first n, used from the n-th such frame on (online, and
-    offline the same, so an offline figure is what a stream gets).
+    offline the same, so an offline figure is what a stream gets); ``refine_centre_every`` k > 0
+    (with n > 0) adds every k-th valid frame after the n-th to the turn, which is then measured
+    again on every frame so far that was measured (0 = the first n only, the default).
     Training ignores them, and a checkpoint does not restore them (:data:`INFERENCE_FIELDS`).
     Per-recording shape fit at inference (:mod:`wearpose.estimators.empose.shapefit`; issue
     24): ``shape_fit_frames`` frames with every sensor valid on which one body shape is fitted
@@ -121,6 +123,7 @@ class EmposeConfig(SimulatedTrainConfig):
     refine_solver: str = "gn"
     refine_centre: str = "learned"
     refine_centre_frames: int = 0
+    refine_centre_every: int = 0
     shape_fit_frames: int = 0
     shape_fit_steps: int = 80
     shape_fit_prior: float = 1e-3
@@ -152,10 +155,10 @@ class EmposeConfig(SimulatedTrainConfig):
             raise ConfigError(f"EmposeConfig.refine_weight: expected a weight >= 0, got {self.refine_weight!r}")
         if self.refine_centre not in ("learned", "recording"):
             raise ConfigError(f"EmposeConfig.refine_centre: expected 'learned' or 'recording', got {self.refine_centre!r}")
-        if (isinstance(self.refine_centre_frames, bool) or not isinstance(self.refine_centre_frames, int)
-                or self.refine_centre_frames < 0):
-            raise ConfigError(f"EmposeConfig.refine_centre_frames: expected a whole number >= 0 (0 = the whole "
-                              f"recording), got {self.refine_centre_frames!r}")
+        for key, zero in (("refine_centre_frames", "the whole recording"), ("refine_centre_every", "the first frames only")):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ConfigError(f"EmposeConfig.{key}: expected a whole number >= 0 (0 = {zero}), got {v!r}")
         if self.refine_solver not in ("lbfgs", "gn"):
             raise ConfigError(f"EmposeConfig.refine_solver: expected 'lbfgs' or 'gn', got {self.refine_solver!r}")
         for key in ("shape_fit_frames", "shape_fit_steps"):

@@ -15,6 +15,7 @@ source frame (the source rides on the lower back); no translation is estimated (
 
 from __future__ import annotations
 
+import bisect
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -29,7 +30,7 @@ from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, 
 from wearpose.estimators.empose.config import INFERENCE_FIELDS, EmposeConfig
 from wearpose.estimators.empose.model import LGDRNN, PRED_JOINTS, VirtualSensors, module_version, sensor_features
 from wearpose.estimators.empose.refine import (
-    Refined, recording_turn, refine_frames, require_threshold, turn_sums, turned,
+    Refined, recording_turn, refine_frames, require_threshold, turn_sums, turn_terms, turned,
 )
 from wearpose.estimators.empose.shapefit import ShapeFit, fit_frames, fit_shape
 from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
@@ -91,7 +92,8 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         self._traced: tuple[Any, Any] | None = None
         self._fit_buffer: list[dict[str, torch.Tensor]] = []  # online shape fit: the first valid frames
         self._shape: torch.Tensor | None = None  # online shape fit: the fitted shape, once fitted
-        self._turn_sums: list[torch.Tensor] = []  # online recording centre: the first valid frames' turn_sums
+        self._turn_sum: torch.Tensor | None = None  # online recording centre: the measured frames' turn_terms summed
+        self._turn_count = 0  # online recording centre: valid frames seen
         self._turn: torch.Tensor | None = None  # online recording centre: the prior's turn, once measured
 
     # ------------------------------------------------------------------ checkpoints
@@ -252,16 +254,15 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
                                            train=False)[-1])
         ok = valid.all(1)
         fit = self._fit_shape(lasts, ok, p, R, offR, offt) if self.config.shape_fit_frames > 0 else None
-        turn, since = self._recording_turn(spans, lasts, ok, p, R, offR, offt, fit)
+        turns = self._recording_turn(spans, lasts, ok, p, R, offR, offt, fit)
         rots, betas, rec, learned, gated = [], [], [], [], []
         for (a, b), last in zip(spans, lasts):
             lrot, lb, lrec = last["local_rot"].detach(), last["betas"].detach(), last["rec"].detach()
             if fit is not None:  # every frame's learned pose, scored with the fitted shape
                 lb = fit.betas.to(dev).expand(b - a, -1)
-            if turn is not None and since < b:  # the prior's centre: the learned pose turned, from frame `since` on
-                lrot = lrot.clone()
-                lrot[max(since - a, 0):] = turned(lrot[max(since - a, 0):], turn)
-            if fit is not None or turn is not None:
+            if turns:  # the prior's centre: the learned pose turned where a turn is in force
+                lrot = self._turned_span(lrot, a, turns)
+            if fit is not None or turns:
                 lrec = self._rec(lrot, lb, p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
             ref = self._refine(lrot, lb, lrec, p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
             rots.append(ref.local_rot)
@@ -283,37 +284,73 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
 
     def _recording_turn(self, spans: list[tuple[int, int]], lasts: list[dict[str, torch.Tensor]], ok: torch.Tensor,
                         p: torch.Tensor, R: torch.Tensor, offR: torch.Tensor, offt: torch.Tensor,
-                        fit: ShapeFit | None) -> tuple[torch.Tensor | None, int]:
-        """The prior centre's turn ``(NUM_PRED, 3, 3)`` when the refinement is on with
-        ``refine_centre="recording"`` (:func:`~wearpose.estimators.empose.refine.recording_turn`
-        over the frames where ``ok`` ``(T,)``, every sensor valid, chunk by chunk as ``spans``;
-        ``lasts`` the learned outputs, ``fit`` the shape fit if on), and the first frame it is
-        used on: 0 for the whole recording; with ``refine_centre_frames = n > 0`` the turn of the
-        first n valid frames, used from the n-th on, as a stream (:meth:`step`) has it. None
-        (and 0) when off, when no frame has every sensor or there are fewer than n."""
+                        fit: ShapeFit | None) -> list[tuple[int, torch.Tensor]]:
+        """The prior centre's turns when the refinement is on with ``refine_centre="recording"``
+        (:func:`~wearpose.estimators.empose.refine.recording_turn`; ``ok`` ``(T,)`` the frames with
+        every sensor valid, ``spans`` the chunks, ``lasts`` their learned outputs, ``fit`` the
+        shape fit if on), as ``[(first frame, turn (NUM_PRED, 3, 3)), ...]`` in frame order, each
+        used until the next one starts: the whole recording's turn from frame 0; with
+        ``refine_centre_frames = n > 0`` the first n valid frames' turn from the n-th on, and with
+        ``refine_centre_every = k > 0`` a new turn at every k-th valid frame after it, over every
+        frame measured so far: what a stream (:meth:`step`) has. Empty when off, when no frame
+        has every sensor, or there are fewer than n."""
         cfg = self.config
         if cfg.refine_steps == 0 or cfg.refine_centre != "recording":
-            return None, 0
-        since = 0
-        if cfg.refine_centre_frames > 0:  # the first n valid frames, as a stream has them (step)
-            first = fit_frames(ok, cfg.refine_centre_frames, spread=False)
-            if first.numel() < cfg.refine_centre_frames:
-                return None, 0  # a stream this short never gets the turn either
-            ok = torch.zeros_like(ok)
-            ok[first] = True
-            since = int(first[-1])
-        dev, sums = self.device, []
+            return []
+        n, k = cfg.refine_centre_frames, cfg.refine_centre_every
+        if n == 0 and k > 0:
+            raise ConfigError(f"EM-POSE refine_centre_every={k} adds frames to the turn of the first "
+                              "refine_centre_frames, which is 0 (the whole recording); give it, e.g. "
+                              "--set refine_centre_frames=60, or set refine_centre_every=0")
+        if n and int(ok.sum()) < n:
+            return []  # a stream this short never gets the turn either
+        pos = ok.long().cumsum(0) - 1  # each frame's place among the valid ones
+        measured = ok
+        if n:  # the first n valid frames, then every k-th after the n-th
+            later = (pos >= n) & ((pos - (n - 1)) % k == 0) if k > 0 else torch.zeros_like(ok)
+            measured = ok & ((pos < n) | later)
+        dev, carry, out = self.device, None, []
         for (a, b), last in zip(spans, lasts):
-            keep = ok[a:b]
-            n = int(keep.sum())
-            if n == 0:
+            keep = measured[a:b]
+            m = int(keep.sum())
+            if m == 0:
                 continue
-            k = keep.to(dev)
-            lb = fit.betas.to(dev).expand(n, -1) if fit is not None else last["betas"].detach()[k]
-            sums.append(turn_sums(self.sensors.lean(), last["local_rot"].detach()[k], lb, p[a:b][keep].to(dev),
-                                  R[a:b][keep].to(dev), offR.to(dev), offt.to(dev), steps=cfg.refine_steps,
-                                  rec_weights=self.model.rec_weights))
-        return (recording_turn(sums) if sums else None), since
+            kd = keep.to(dev)
+            lb = fit.betas.to(dev).expand(m, -1) if fit is not None else last["betas"].detach()[kd]
+            args = (self.sensors.lean(), last["local_rot"].detach()[kd], lb, p[a:b][keep].to(dev), R[a:b][keep].to(dev),
+                    offR.to(dev), offt.to(dev))
+            if n == 0:  # one sum per chunk: no frame's share is kept
+                s = turn_sums(*args, steps=cfg.refine_steps, rec_weights=self.model.rec_weights)
+                carry = s if carry is None else carry + s
+                continue
+            cum = turn_terms(*args, steps=cfg.refine_steps, rec_weights=self.model.rec_weights).cumsum(0)
+            if carry is not None:
+                cum = cum + carry
+            carry = cum[-1]
+            for j, t in enumerate(keep.nonzero().squeeze(1).tolist()):
+                if int(pos[a + t]) >= n - 1:
+                    out.append((a + t, recording_turn([cum[j]])))
+        if n == 0:
+            return [(0, recording_turn([carry]))] if carry is not None else []
+        return out
+
+    @staticmethod
+    def _turned_span(lrot: torch.Tensor, a: int, turns: list[tuple[int, torch.Tensor]]) -> torch.Tensor:
+        """``lrot`` ``(N, 24, 3, 3)``, frames ``a .. a + N - 1`` of the recording, with each frame
+        turned by the turn in force there (:meth:`_recording_turn`'s list; frames before the
+        first keep the learned pose); ``lrot`` itself when no turn reaches these frames."""
+        starts = [t for t, _ in turns]
+        first = max(bisect.bisect_right(starts, a) - 1, 0)
+        out = lrot
+        for i in range(first, len(turns)):
+            lo = max(turns[i][0] - a, 0)
+            hi = min(turns[i + 1][0] - a, len(lrot)) if i + 1 < len(turns) else len(lrot)
+            if lo >= len(lrot):
+                break
+            if lo < hi:
+                out = out.clone() if out is lrot else out
+                out[lo:hi] = turned(out[lo:hi], turns[i][1])
+        return out
 
     def _rec(self, local_rot: torch.Tensor, betas: torch.Tensor, p: torch.Tensor, R: torch.Tensor,
              offR: torch.Tensor, offt: torch.Tensor) -> torch.Tensor:
@@ -439,6 +476,12 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         on (online and offline alike), e.g. ``--set refine_centre_frames=60``."""
         self._set_config(refine_centre_frames=n)
 
+    def set_refine_centre_every(self, k: int) -> None:
+        """With ``refine_centre_frames = n > 0``: every k-th valid frame after the n-th adds its
+        solve to the recording centre's turn, which is renewed there (0 = the first n frames
+        only), e.g. ``--set refine_centre_every=30``."""
+        self._set_config(refine_centre_every=k)
+
     def set_refine_solver(self, solver: str) -> None:
         """The refinement's solver: ``"lbfgs"`` or ``"gn"`` (Levenberg-Marquardt Gauss-Newton,
         :func:`~wearpose.estimators.empose.refine.gauss_newton`), e.g. ``--set refine_solver=gn``."""
@@ -486,17 +529,24 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         """The online recording centre for one frame (:meth:`step`, ``refine_centre="recording"``):
         the learned pose ``rot`` ``(24, 3, 3)`` with shape ``b`` ``(10,)`` and L_r ``rec`` ``()``,
         measurements ``p`` ``(S, 3)`` m and ``R`` ``(S, 3, 3)``. Each of the first
-        ``refine_centre_frames`` valid frames adds its prior-free solve
+        ``refine_centre_frames`` (n) valid frames adds its prior-free solve
         (:func:`~wearpose.estimators.empose.refine.turn_sums`, one per frame, so no frame pays
-        for the others), and the n-th fixes the turn; from then on the prior's centre (and the
-        pose of a frame the gate leaves) is the turned learned pose. Returns it and its L_r."""
+        for the others) and the n-th fixes the turn; with ``refine_centre_every = k > 0`` every
+        k-th valid frame after it adds its solve and renews the turn. From the n-th frame on the
+        prior's centre (and the pose of a frame the gate leaves) is the turned learned pose, as in
+        :meth:`estimate`. Returns it and its L_r."""
         cfg = self.config
+        n, k = cfg.refine_centre_frames, cfg.refine_centre_every
         offR, offt = self._offsets
-        if self._turn is None and valid:
-            self._turn_sums.append(turn_sums(self.sensors.lean(), rot[None], b[None], p[None], R[None], offR, offt,
-                                             steps=cfg.refine_steps, rec_weights=self.model.rec_weights))
-            if len(self._turn_sums) >= cfg.refine_centre_frames:
-                self._turn, self._turn_sums = recording_turn(self._turn_sums), []
+        if valid:
+            c = self._turn_count
+            self._turn_count += 1
+            if c < n or (k > 0 and c >= n and (c - (n - 1)) % k == 0):
+                term = turn_sums(self.sensors.lean(), rot[None], b[None], p[None], R[None], offR, offt,
+                                 steps=cfg.refine_steps, rec_weights=self.model.rec_weights)
+                self._turn_sum = term if self._turn_sum is None else self._turn_sum + term
+                if c >= n - 1:
+                    self._turn = recording_turn([self._turn_sum])
         if self._turn is None:
             return rot, rec
         rot = turned(rot[None], self._turn)[0]
@@ -506,7 +556,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         self._state = None
         self._input = OnlineInput(self.sensor_names, ("position", "orientation"), who=self.name)
         self._fit_buffer, self._shape = [], None
-        self._turn_sums, self._turn = [], None
+        self._turn_sum, self._turn_count, self._turn = None, 0, None
 
     def _online_fn(self) -> Any:
         """The per-frame computation (LSTM step + N closed-form LGD updates) as a TorchScript trace

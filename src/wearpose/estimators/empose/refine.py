@@ -342,14 +342,14 @@ def refine_frames(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, rec
     return Refined(out_rot, out_rec, gated)
 
 
-def turn_sums(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, meas_p: torch.Tensor,
-              meas_R: torch.Tensor, off_R: torch.Tensor, off_t: torch.Tensor, *, steps: int,
-              rec_weights: tuple[float, float] = (1.0, 1.0)) -> torch.Tensor:
-    """One chunk's share of :func:`recording_turn`: ``sum_t R_learned[t, j]^T R_free[t, j]``
-    ``(NUM_PRED, 3, 3)`` float64 over ``N`` frames, with ``R_free`` the Gauss-Newton solve of
-    ``steps`` iterations without the prior (weight 0, every frame) from the learned pose
-    ``local_rot`` ``(N, 24, 3, 3)``; betas ``(N, 10)``, measurements and offsets as
-    :func:`refine_frames`. Frames whose solve is not finite are left out."""
+def turn_terms(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, meas_p: torch.Tensor,
+               meas_R: torch.Tensor, off_R: torch.Tensor, off_t: torch.Tensor, *, steps: int,
+               rec_weights: tuple[float, float] = (1.0, 1.0)) -> torch.Tensor:
+    """Each frame's share of :func:`recording_turn`: ``R_learned[t, j]^T R_free[t, j]``
+    ``(N, NUM_PRED, 3, 3)`` float64, with ``R_free`` the Gauss-Newton solve of ``steps``
+    iterations without the prior (weight 0) from the learned pose ``local_rot`` ``(N, 24, 3, 3)``;
+    betas ``(N, 10)``, measurements and offsets as :func:`refine_frames`. A frame whose solve is
+    not finite gives zeros (it adds nothing to a sum)."""
     n = local_rot.shape[0]
     u0 = matrix_to_rot6d(local_rot[:, list(PRED_JOINTS)]).reshape(n, POSE_DIM)
     _, _, ctx = gauss_newton(kernel, u0, betas, meas_p, meas_R, off_R, off_t, steps=steps, weight=0.0,
@@ -357,7 +357,17 @@ def turn_sums(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, meas_p:
     free = root_from_source(ctx)[:, list(PRED_JOINTS)].double()
     learned = local_rot[:, list(PRED_JOINTS)].double()
     ok = torch.isfinite(free).flatten(1).all(1)
-    return (learned[ok].transpose(-1, -2) @ free[ok]).sum(0)
+    terms = learned.transpose(-1, -2) @ torch.where(ok[:, None, None, None], free, torch.zeros_like(free))
+    return torch.where(ok[:, None, None, None], terms, torch.zeros_like(terms))
+
+
+def turn_sums(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, meas_p: torch.Tensor,
+              meas_R: torch.Tensor, off_R: torch.Tensor, off_t: torch.Tensor, *, steps: int,
+              rec_weights: tuple[float, float] = (1.0, 1.0)) -> torch.Tensor:
+    """One chunk's share of :func:`recording_turn`: the sum over its ``N`` frames of
+    :func:`turn_terms` (same arguments), ``(NUM_PRED, 3, 3)`` float64."""
+    return turn_terms(kernel, local_rot, betas, meas_p, meas_R, off_R, off_t, steps=steps,
+                      rec_weights=rec_weights).sum(0)
 
 
 def recording_turn(sums: Sequence[torch.Tensor]) -> torch.Tensor:
