@@ -38,11 +38,11 @@ COMPARE = "wearpose.estimators.empose.evaluate:evaluate_models"
 
 
 def _models(name: str, threshold: float, steps: list[int], gn_steps: list[int], weight: float | None = None,
-            centres: tuple[str, ...] = ("learned",), centre_frames: int = 0) -> dict[str, Any]:
+            centres: tuple[str, ...] = ("learned",), centre_frames: int = 0, centre_every: int = 0) -> dict[str, Any]:
     """The learned model, then one row per L-BFGS iteration count (``refine K``) and per
     Gauss-Newton iteration count and prior centre (``gn K``; ``gn K, recording`` with
     ``refine_centre="recording"``, its turn measured on ``centre_frames`` frames: 0 = the whole
-    recording), the same gate and prior weight for all."""
+    recording; renewed every ``centre_every`` frames after them), the same gate and prior weight for all."""
     from wearpose.estimators.empose.baselines import load_any
     from wearpose.weights import weight_path
 
@@ -56,10 +56,12 @@ def _models(name: str, threshold: float, steps: list[int], gn_steps: list[int], 
         est.set_refine_solver(solver)
         est.set_refine_centre(centre)
         est.set_refine_centre_frames(centre_frames)
+        est.set_refine_centre_every(centre_every)
         if weight is not None:
             est.set_refine_weight(weight)
         label = "learned" if k == 0 else (f"refine {k}" if solver == "lbfgs" else f"gn {k}")
-        where = centre if centre == "learned" or not centre_frames else f"{centre}'s first {centre_frames}"
+        where = centre if centre == "learned" or not centre_frames else f"{centre}'s first {centre_frames}" + (
+            f", every {centre_every}" if centre_every else "")
         out[label if centre == "learned" else f"{label}, {where}"] = est
     return out
 
@@ -68,7 +70,7 @@ def _timing(models: dict[str, Any], store: Any, clips: int) -> dict[str, Any]:
     """Online step times (ms) per model over the first ``clips`` test clips of ``store``, and
     for the refining models the extra on gated frames (median of per-frame differences to the
     learned model on the same frames); with the prior on the recording's first frames also the
-    median over the frames that measured the turn and over those after it."""
+    median over the frames that added their solve to the turn and over the others."""
     from wearpose.estimators import iter_frames
     from wearpose.estimators.empose.data import recording_from_clip
     from wearpose.estimators.empose.evaluate import simulate_eval_clip
@@ -80,9 +82,9 @@ def _timing(models: dict[str, Any], store: Any, clips: int) -> dict[str, Any]:
         recs.append((r, recording_from_clip(r, first.config)))
     times: dict[str, list[float]] = {}
     gated: dict[str, list[bool]] = {}
-    turned: dict[str, list[bool | None]] = {}
+    measured: dict[str, list[bool | None]] = {}
     for name, est in models.items():
-        times[name], gated[name], turned[name] = [], [], []
+        times[name], gated[name], measured[name] = [], [], []
         for r, rec in recs:
             est.reset()
             est.set_offsets(r["off_R"], r["off_t"])
@@ -94,7 +96,7 @@ def _timing(models: dict[str, Any], store: Any, clips: int) -> dict[str, Any]:
                 out = est.step(f)
                 times[name].append((time.perf_counter() - t0) * 1000.0)
                 gated[name].append(bool(out.extras.get("refined", False)))
-                turned[name].append(out.extras.get("centre_turned"))
+                measured[name].append(out.extras.get("centre_measured"))
     base = times["learned"]
     res: dict[str, Any] = {"frames": len(base), "clips": len(recs), "models": {}}
     for name in models:
@@ -105,11 +107,11 @@ def _timing(models: dict[str, Any], store: Any, clips: int) -> dict[str, Any]:
             row["median_ms_refined_frames"] = statistics.median(times[name][i] for i in g)
             row["median_extra_ms_refined_frames"] = statistics.median(times[name][i] - base[i] for i in g)
             row["mean_extra_ms_per_frame"] = statistics.fmean(times[name]) - statistics.fmean(base)
-        before = [t for t, x in zip(times[name], turned[name]) if x is False]
-        after = [t for t, x in zip(times[name], turned[name]) if x is True]
-        if before or after:  # the prior on the recording's first frames: measuring the turn, then using it
-            row.update(frames_measuring_turn=len(before), median_ms_measuring_turn=statistics.median(before or [0.0]),
-                       median_ms_turned=statistics.median(after or [0.0]))
+        busy = [t for t, x in zip(times[name], measured[name]) if x is True]
+        idle = [t for t, x in zip(times[name], measured[name]) if x is False]
+        if busy or idle:  # the prior on the recording's first frames: frames adding their solve, the others
+            row.update(frames_measuring_turn=len(busy), median_ms_measuring_turn=statistics.median(busy or [0.0]),
+                       median_ms_turned=statistics.median(idle or [0.0]))
         res["models"][name] = row
     return res
 
@@ -154,6 +156,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--centre-frames", type=int, default=0,
                     help="recording centre: measure the turn on the first N valid frames (refine_centre_frames; "
                          "online too, so those rows are timed); 0 = the whole recording")
+    ap.add_argument("--centre-every", type=int, default=0,
+                    help="with --centre-frames: renew the turn at every K-th valid frame after them "
+                         "(refine_centre_every)")
     ap.add_argument("--percentile", type=float, default=95.0)
     ap.add_argument("--val-clips", type=int, default=20)
     ap.add_argument("--test-clips", type=int, default=10)
@@ -179,7 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     unseen = unseen_motion_store(a.per_family)
     results = {}
     for key, store, clips in (("test", corpus, a.test_clips), ("unseen_motion", unseen, None)):
-        models = _models(a.model, threshold, a.steps, a.gn_steps, a.weight, tuple(a.centre), a.centre_frames)
+        models = _models(a.model, threshold, a.steps, a.gn_steps, a.weight, tuple(a.centre), a.centre_frames,
+                         a.centre_every)
         results[key] = compare_models(COMPARE, models, "test", clips, store=store,
                                       calibration_error=tuple(a.calibration_error))
         for m in results[key]["models"].values():
@@ -187,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
         print(key, {n: round(m["mpjpe_mm"], 2) for n, m in results[key]["models"].items()}, flush=True)
     # A step refuses the prior on the whole recording; on its first frames it runs online.
     online = _models(a.model, threshold, a.steps, a.gn_steps, a.weight,
-                     tuple(a.centre) if a.centre_frames else ("learned",), a.centre_frames)
+                     tuple(a.centre) if a.centre_frames else ("learned",), a.centre_frames, a.centre_every)
     timing = _timing(online, unseen, a.timing_clips)
     command = "python benchmarks/" + " ".join(shlex.quote(x) for x in [Path(__file__).name, *sys.argv[1:]])
     refined = results["unseen_motion"]["models"]
@@ -230,9 +236,10 @@ def main(argv: list[str] | None = None) -> int:
                   f"{g('mean_extra_ms_per_frame')} |")
     turning = {n: r for n, r in timing["models"].items() if "frames_measuring_turn" in r}
     if turning:
-        md += ["", "With the prior on the recording's first frames, the step while it measures the turn (one more "
-               "Gauss-Newton solve, without the prior, per frame) and after:", "",
-               "| model | frames measuring | median while measuring [ms] | median after [ms] |", "| --- | --- | --- | --- |",
+        md += ["", "With the prior on the recording's first frames, the step on a frame that adds its solve to the turn "
+               "(one more Gauss-Newton solve, without the prior) and on the others:", "",
+               "| model | frames measuring | median while measuring [ms] | median on the others [ms] |",
+               "| --- | --- | --- | --- |",
                *(f"| {n} | {r['frames_measuring_turn']} | {r['median_ms_measuring_turn']:.2f} | "
                  f"{r['median_ms_turned']:.2f} |" for n, r in turning.items())]
     stem = Path(a.out)

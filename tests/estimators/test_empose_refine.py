@@ -461,6 +461,7 @@ def test_recording_centre_on_the_first_frames_is_the_same_offline_and_online(bod
     online = [est.step(f) for f in iter_frames(rec, est.sensor_names)]
     turned_at = (ok.cumsum(0) >= n).tolist()
     assert [f.extras["centre_turned"] for f in online] == turned_at
+    assert [f.extras["centre_measured"] for f in online] == (ok & (ok.cumsum(0) <= n)).tolist()
     rot = torch.stack([f.local_rot for f in online])
     k = turned_at.index(True)
     assert torch.equal(first.local_rot[:k], plain.local_rot[:k])  # offline: not turned before the n-th either

@@ -94,6 +94,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         self._shape: torch.Tensor | None = None  # online shape fit: the fitted shape, once fitted
         self._turn_sum: torch.Tensor | None = None  # online recording centre: the measured frames' turn_terms summed
         self._turn_count = 0  # online recording centre: valid frames seen
+        self._turn_measured = False  # online recording centre: the last step added its solve
         self._turn: torch.Tensor | None = None  # online recording centre: the prior's turn, once measured
 
     # ------------------------------------------------------------------ checkpoints
@@ -538,10 +539,12 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         cfg = self.config
         n, k = cfg.refine_centre_frames, cfg.refine_centre_every
         offR, offt = self._offsets
+        self._turn_measured = False
         if valid:
             c = self._turn_count
             self._turn_count += 1
             if c < n or (k > 0 and c >= n and (c - (n - 1)) % k == 0):
+                self._turn_measured = True
                 term = turn_sums(self.sensors.lean(), rot[None], b[None], p[None], R[None], offR, offt,
                                  steps=cfg.refine_steps, rec_weights=self.model.rec_weights)
                 self._turn_sum = term if self._turn_sum is None else self._turn_sum + term
@@ -599,8 +602,9 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         frame returns the fitted shape and is scored with it, before it the learned shape
         (extras ``shape_fitted`` bool, ``rec_loss_learned``). With the refinement's prior on the
         recording (``refine_centre="recording"``, ``refine_centre_frames = n > 0``): the turn is
-        measured on the first n valid frames and used from the n-th on (:meth:`_online_turn`;
-        extras ``centre_turned`` bool), as :meth:`estimate` does."""
+        measured on the first n valid frames (and every k-th after, ``refine_centre_every``) and
+        used from the n-th on (:meth:`_online_turn`; extras ``centre_turned`` bool, and
+        ``centre_measured`` bool: this frame added its solve), as :meth:`estimate` does."""
         if self._offsets is None:
             self._refuse_online_centre()
             self._offsets = self._offsets_from(None)
@@ -636,7 +640,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
             extras.update(rec_loss=float(rec), rec_loss_learned=float(learned_rec), shape_fitted=self._shape is not None)
         if self.config.refine_steps > 0 and self.config.refine_centre == "recording":
             rot, rec = self._online_turn(rot, b, rec, p, R, bool(v.all()))
-            extras["centre_turned"] = self._turn is not None
+            extras.update(centre_turned=self._turn is not None, centre_measured=self._turn_measured)
         if self.config.refine_steps > 0:
             ref = self._refine(rot[None], b[None], rec.reshape(1), p[None], R[None], offR, offt)
             rot = ref.local_rot[0]
