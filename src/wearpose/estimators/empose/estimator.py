@@ -30,7 +30,7 @@ from wearpose.estimators.checkpoint import Checkpoint, CheckpointMismatchError, 
 from wearpose.estimators.empose.config import INFERENCE_FIELDS, EmposeConfig
 from wearpose.estimators.empose.model import LGDRNN, PRED_JOINTS, VirtualSensors, module_version, sensor_features
 from wearpose.estimators.empose.refine import (
-    Refined, recording_turn, refine_frames, require_threshold, turn_sums, turn_terms, turned,
+    Refined, measures_turn, recording_turn, refine_frames, require_threshold, turn_sums, turn_terms, turned,
 )
 from wearpose.estimators.empose.shapefit import ShapeFit, fit_frames, fit_shape
 from wearpose.estimators.inputs import InputSpec, OnlineInput, prepare
@@ -306,10 +306,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         if n and int(ok.sum()) < n:
             return []  # a stream this short never gets the turn either
         pos = ok.long().cumsum(0) - 1  # each frame's place among the valid ones
-        measured = ok
-        if n:  # the first n valid frames, then every k-th after the n-th
-            later = (pos >= n) & ((pos - (n - 1)) % k == 0) if k > 0 else torch.zeros_like(ok)
-            measured = ok & ((pos < n) | later)
+        measured = ok & measures_turn(pos, n, k) if n else ok
         dev, carry, out = self.device, None, []
         for (a, b), last in zip(spans, lasts):
             keep = measured[a:b]
@@ -328,9 +325,9 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
             if carry is not None:
                 cum = cum + carry
             carry = cum[-1]
-            for j, t in enumerate(keep.nonzero().squeeze(1).tolist()):
-                if int(pos[a + t]) >= n - 1:
-                    out.append((a + t, recording_turn([cum[j]])))
+            frames = a + keep.nonzero().squeeze(1)
+            new = (pos[frames] >= n - 1).to(dev)  # from the n-th valid frame on, each measured frame renews the turn
+            out += zip(frames[new.cpu()].tolist(), recording_turn([cum[new]]).unbind(0))  # one turn per renewal
         if n == 0:
             return [(0, recording_turn([carry]))] if carry is not None else []
         return out
@@ -543,7 +540,7 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         if valid:
             c = self._turn_count
             self._turn_count += 1
-            if c < n or (k > 0 and c >= n and (c - (n - 1)) % k == 0):
+            if measures_turn(c, n, k):
                 self._turn_measured = True
                 term = turn_sums(self.sensors.lean(), rot[None], b[None], p[None], R[None], offR, offt,
                                  steps=cfg.refine_steps, rec_weights=self.model.rec_weights)

@@ -356,9 +356,19 @@ def turn_terms(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, meas_p
                              rec_weights=rec_weights)
     free = root_from_source(ctx)[:, list(PRED_JOINTS)].double()
     learned = local_rot[:, list(PRED_JOINTS)].double()
-    ok = torch.isfinite(free).flatten(1).all(1)
-    terms = learned.transpose(-1, -2) @ torch.where(ok[:, None, None, None], free, torch.zeros_like(free))
-    return torch.where(ok[:, None, None, None], terms, torch.zeros_like(terms))
+    ok = torch.isfinite(free).flatten(1).all(1)[:, None, None, None]
+    terms = learned.transpose(-1, -2) @ free
+    return torch.where(ok, terms, torch.zeros_like(terms))
+
+
+def measures_turn(place: Any, frames: int, every: int) -> Any:
+    """Whether the valid frame at ``place`` (its 0-based place among the frames with every sensor:
+    an int, or a long tensor of them) adds its solve to the turn, with
+    ``EmposeConfig.refine_centre_frames = frames > 0`` and ``refine_centre_every = every``: the
+    first ``frames`` of them, then every ``every``-th after the last of those (none with 0). A
+    bool, or a bool tensor of ``place``'s shape; the one schedule of ``estimate`` and ``step``."""
+    later = (place >= frames) & ((place - (frames - 1)) % max(every, 1) == 0) & (every > 0)
+    return (place < frames) | later
 
 
 def turn_sums(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, meas_p: torch.Tensor,
@@ -374,7 +384,8 @@ def recording_turn(sums: Sequence[torch.Tensor]) -> torch.Tensor:
     """The prior centre's turn ``(NUM_PRED, 3, 3)`` from every chunk's :func:`turn_sums`: per
     estimated joint the rotation ``C`` that brings the learned local rotation closest to the
     prior-free solve over the recording, ``argmin_C sum_t ||R_learned C - R_free||_F^2``, i.e.
-    the nearest rotation to the summed ``R_learned^T R_free`` (its chordal mean)."""
+    the nearest rotation to the summed ``R_learned^T R_free`` (its chordal mean). Sums with a
+    leading batch ``(B, NUM_PRED, 3, 3)`` give one turn per entry (the renewals of a stream)."""
     return project_to_so3(torch.stack(list(sums)).sum(0))
 
 
