@@ -371,8 +371,8 @@ def test_empose_with_refinement_and_no_offsets_is_refused_at_hello() -> None:
 def test_empose_prior_on_the_whole_recording_is_refused_at_hello_and_on_its_first_frames_served() -> None:
     """EM-POSE's refinement with its prior on the whole recording (``refine_centre="recording"``,
     ``refine_centre_frames=0``) needs the recording a stream does not have: the hello is refused
-    naming the online form; with the turn measured on the stream's first frames it is served, and
-    the frames after them are estimated too."""
+    naming the online form; with the turn measured on the stream's first frames, or renewed on
+    every frame, it is served, and the frames after them are estimated too."""
     from wearpose.body import BodyModel
     from wearpose.estimators.empose import EmposeConfig, EmposeEstimator
 
@@ -383,9 +383,9 @@ def test_empose_prior_on_the_whole_recording_is_refused_at_hello_and_on_its_firs
                "translation_mean_m": np.zeros((S, 3)).tolist()}
     rng = np.random.default_rng(1)
 
-    def serve(frames: int):  # noqa: ANN202
+    def serve(frames: int, every: int = 0):  # noqa: ANN202
         cfg = EmposeConfig.preset("tiny", 12).override(refine_steps=1, refine_centre="recording",
-                                                      refine_centre_frames=frames)
+                                                      refine_centre_frames=frames, refine_centre_every=every)
         make = lambda: EmposeEstimator(cfg, body=body)  # noqa: E731
 
         async def main():  # noqa: ANN202
@@ -404,6 +404,7 @@ def test_empose_prior_on_the_whole_recording_is_refused_at_hello_and_on_its_firs
 
     msg, final, stats = serve(0)
     assert msg is not None and "refine_centre_frames" in msg and stats["refused_total"] == 1, msg
-    msg, final, stats = serve(2)
-    assert msg is None and stats["refused_total"] == 0
-    assert final["estimated"] == 4 and final.get("estimator_errors", 0) == 0
+    for frames, every in ((2, 0), (1, 1)):  # the first frames' turn; the running turn
+        msg, final, stats = serve(frames, every)
+        assert msg is None and stats["refused_total"] == 0
+        assert final["estimated"] == 4 and final.get("estimator_errors", 0) == 0

@@ -205,8 +205,9 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         cfg = self.config
         if cfg.refine_steps > 0 and cfg.refine_centre == "recording" and cfg.refine_centre_frames == 0:
             raise ConfigError("online step: EM-POSE refine_centre='recording' with refine_centre_frames=0 turns the "
-                              "refinement's prior by the whole recording, which a step does not have; measure the turn "
-                              "on the stream's first frames (--set refine_centre_frames=60), estimate the recording "
+                              "refinement's prior by the whole recording, which a step does not have; measure it as "
+                              "the stream goes (--set refine_centre_frames=1 --set refine_centre_every=1: each frame "
+                              "turned by the turn over the frames so far), estimate the recording "
                               "offline, or set refine_centre=learned (--set refine_centre=learned)")
 
     @property
@@ -302,7 +303,8 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
         if n == 0 and k > 0:
             raise ConfigError(f"EM-POSE refine_centre_every={k} adds frames to the turn of the first "
                               "refine_centre_frames, which is 0 (the whole recording); give it, e.g. "
-                              "--set refine_centre_frames=60, or set refine_centre_every=0")
+                              "--set refine_centre_frames=1 (with every=1: the running turn), or set "
+                              "refine_centre_every=0")
         if n and int(ok.sum()) < n:
             return []  # a stream this short never gets the turn either
         pos = ok.long().cumsum(0) - 1  # each frame's place among the valid ones
@@ -471,13 +473,14 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
     def set_refine_centre_frames(self, n: int) -> None:
         """The frames the recording centre's turn is measured on: 0 = every valid frame of the
         recording (offline only), n > 0 = the first n valid ones, the turn used from the n-th
-        on (online and offline alike), e.g. ``--set refine_centre_frames=60``."""
+        on (online and offline alike), e.g. ``--set refine_centre_frames=1`` with
+        ``refine_centre_every=1``: the running turn over every frame so far (docs/empose.md)."""
         self._set_config(refine_centre_frames=n)
 
     def set_refine_centre_every(self, k: int) -> None:
         """With ``refine_centre_frames = n > 0``: every k-th valid frame after the n-th adds its
         solve to the recording centre's turn, which is renewed there (0 = the first n frames
-        only), e.g. ``--set refine_centre_every=30``."""
+        only), e.g. ``--set refine_centre_every=1``."""
         self._set_config(refine_centre_every=k)
 
     def set_refine_solver(self, solver: str) -> None:
