@@ -81,7 +81,9 @@ class EmposeConfig(SimulatedTrainConfig):
     only, the default), n > 0 = its first n, used from the n-th such frame on (online, and
     offline the same, so an offline figure is what a stream gets); ``refine_centre_every`` k > 0
     (with n > 0) adds every k-th valid frame after the n-th to the turn, which is then measured
-    again on every frame so far that was measured (0 = the first n only, the default).
+    again on every frame so far that was measured (0 = the first n only, the default); n = 1 with
+    k = 1 is the running turn, each frame turned by the turn over the valid frames up to it
+    (the online form chosen on validation: docs/empose.md, "The running turn").
     Training ignores them, and a checkpoint does not restore them (:data:`INFERENCE_FIELDS`).
     Per-recording shape fit at inference (:mod:`wearpose.estimators.empose.shapefit`; issue
     24): ``shape_fit_frames`` frames with every sensor valid on which one body shape is fitted

@@ -33,7 +33,8 @@ pull the pose towards the measurements, starting from the learned estimate ``u_0
   frame, or ``"recording"``, the learned estimate turned by one constant rotation per estimated
   joint (:func:`recording_turn`, applied by :func:`turned`), measured on the whole recording
   (offline) or on its first ``EmposeConfig.refine_centre_frames`` valid frames and used from the
-  last of them on (online, and offline the same way).
+  last of them on, renewed every ``refine_centre_every`` valid frames after them (online, and
+  offline the same way; 1 and 1: the running turn, each frame's over the frames up to it).
   On motion from another lab the learned estimate is off by a part that stays constant over a
   recording (another capture chain's rest pose: docs/empose.md), and a prior centred on it
   keeps that part wherever the sensors pin a joint only weakly; the turn takes it out, measured
