@@ -38,6 +38,34 @@ def test_estimate_writes_a_motion_that_reads_back(em12_30: Path, tmp_path: Path)
     assert seq.num_frames == 30 and seq.pose.shape == (30, 24, 3, 3)
 
 
+RUNNING_TURN = ["--set", "refine_steps=3", "--set", "refine_centre=recording", "--set", "refine_centre_frames=1",
+                "--set", "refine_centre_every=1"]
+
+
+def test_estimate_applies_inference_settings(em12_30: Path, tmp_path: Path) -> None:
+    """``--set``: EM-POSE's refinement with the running turn changes the estimate and is reported."""
+    plain, refined = tmp_path / "plain.npz", tmp_path / "refined.npz"
+    res = runner.invoke(app, ["estimate", str(em12_30), "--model", "empose12_cpu", "--out", str(plain), "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["settings"] == {}
+    res = runner.invoke(app, ["estimate", str(em12_30), "--model", "empose12_cpu", "--out", str(refined), "--json",
+                              *RUNNING_TURN])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["settings"] == {"refine_steps": "3", "refine_centre": "recording",
+                                                  "refine_centre_frames": "1", "refine_centre_every": "1"}
+    a, b = load_motion(str(plain)), load_motion(str(refined))
+    assert a.pose.shape == b.pose.shape and float((a.pose - b.pose).abs().amax()) > 1e-3
+
+
+def test_estimate_refuses_an_unknown_setting_naming_the_ones_it_has(em12_30: Path, tmp_path: Path) -> None:
+    out = tmp_path / "p.npz"
+    res = runner.invoke(app, ["estimate", str(em12_30), "--model", "empose12_cpu", "--out", str(out),
+                              "--set", "refine_stpes=3"])
+    text = flat(res.output)
+    assert res.exit_code == 2 and "refine_stpes" in text and "refine_steps" in text, text
+    assert not out.exists()
+
+
 def test_estimate_refuses_a_recording_of_another_kit(tmp_path: Path, capsys, monkeypatch) -> None:
     imu = tmp_path / "imu.npz"
     save_recording(_simulated("imu6", T=30, fps=60.0, rate=60.0), imu)

@@ -9,15 +9,15 @@ window, estimate, placed in the world) -> :meth:`PoseTrack.to_motion` ->
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, List, Optional
 
 import typer
 
 from rich.markup import escape
 
 from wearpose.cli.app import _emit, _kv_table, app, console, err_console
-from wearpose.cli.models import check_pose_weights, recording_mismatch
-from wearpose.errors import InputFileError, ShapeError
+from wearpose.cli.models import check_pose_weights, parse_settings, recording_mismatch
+from wearpose.errors import ConfigError, InputFileError, ShapeError
 
 
 @app.command()
@@ -32,6 +32,10 @@ def estimate(
                                                  "factor (e.g. 120 -> 30 Hz). Default: done when the rates differ by an "
                                                  "integer factor, with one warning line; --resample makes any other "
                                                  "ratio an error; --no-resample refuses another rate."),
+    settings: Optional[List[str]] = typer.Option(None, "--set", help="KEY=VALUE: an inference setting of the "
+                                                 "estimator (repeatable), as `wearpose evaluate --set`, e.g. "
+                                                 "refine_steps=3 (EM-POSE: trust the sensors on unfamiliar motion) or "
+                                                 "shape_fit_frames=30 (EM-POSE: fit the wearer's body)."),
     threads: int = typer.Option(1, min=1, help="torch CPU threads."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
@@ -48,11 +52,16 @@ def estimate(
     GLB asset.extras, an npz key, a BVH's sidecar OUT.json; docs/formats.md).
 
     Example: wearpose estimate out/demo-em12/recording.npz --model empose12_cpu --out out/estimate.bvh
+
+    Motion unlike the corpus's (another lab, floor work), EM-POSE (docs/empose.md): add
+    --set refine_steps=3 --set refine_centre=recording --set refine_centre_frames=1
+    --set refine_centre_every=1
     """
     import torch  # start-up: torch loads torch, +1.3 s to wearpose --help
 
     from wearpose.calibration import CalibrationError  # start-up: wearpose.calibration loads torch, +2.1 s to wearpose --help
     from wearpose.estimators.run import estimate_recording, open_model  # start-up: wearpose.estimators.run loads torch, +2.0 s to wearpose --help
+    from wearpose.evaluate.latency import apply_settings  # start-up: loads torch, +1.8 s to wearpose --help
     from wearpose.export import export_motion, sidecar_path  # start-up: wearpose.export loads torch, +1.6 s to wearpose --help
     from wearpose.recording import load_recording  # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
 
@@ -61,11 +70,17 @@ def estimate(
     torch.set_num_threads(threads)
     check_pose_weights(model)
     source = open_model(model)  # the checkpoint is read here, once
+    chosen = parse_settings(settings)
+    est = source.make()
+    try:
+        apply_settings(est, chosen)
+    except ConfigError as exc:
+        raise typer.BadParameter(f"{model}: {exc}", param_hint="--set") from None
     rec = load_recording(recording)
     try:
         # A spinner on stderr: an hour of IMU data through PIP's physics takes minutes.
         with err_console.status(f"estimating {rec.duration:.0f} s of {recording.name} with {model}"):
-            run = estimate_recording(source, rec, recording, resample=resample)
+            run = estimate_recording(source, rec, recording, resample=resample, estimator=est)
     except ShapeError as exc:  # the estimator's check of the recording: missing sensors, another rate
         raise recording_mismatch(recording, source, exc) from None
     except CalibrationError as exc:  # IMU methods calibrate an uncalibrated recording from a T-pose
@@ -85,7 +100,7 @@ def estimate(
                            "estimated_frame": run.estimated.extras.get("frame", "world"),
                            "translation": run.estimated.trans is not None,
                            "placement": track.extras.get("placement", "as estimated"),
-                           "floor": track.extras.get("floor"), "written": str(path),
+                           "floor": track.extras.get("floor"), "settings": chosen, "written": str(path),
                            "metadata": str(sidecar_path(path) if path.suffix == ".bvh" else path)}
     if run.note:
         res["resampled"] = run.recording.meta.get("resampled")
