@@ -16,8 +16,8 @@ import typer
 from rich.markup import escape
 
 from wearpose.cli.app import _emit, _kv_table, app, console, err_console
-from wearpose.cli.models import check_pose_weights, parse_settings, recording_mismatch
-from wearpose.errors import ConfigError, InputFileError, ShapeError
+from wearpose.cli.models import check_pose_weights, parse_settings, recording_mismatch, with_settings
+from wearpose.errors import InputFileError, ShapeError
 
 
 @app.command()
@@ -61,7 +61,6 @@ def estimate(
 
     from wearpose.calibration import CalibrationError  # start-up: wearpose.calibration loads torch, +2.1 s to wearpose --help
     from wearpose.estimators.run import estimate_recording, open_model  # start-up: wearpose.estimators.run loads torch, +2.0 s to wearpose --help
-    from wearpose.evaluate.latency import apply_settings  # start-up: loads torch, +1.8 s to wearpose --help
     from wearpose.export import export_motion, sidecar_path  # start-up: wearpose.export loads torch, +1.6 s to wearpose --help
     from wearpose.recording import load_recording  # start-up: wearpose.recording loads torch, +1.7 s to wearpose --help
 
@@ -71,11 +70,7 @@ def estimate(
     check_pose_weights(model)
     source = open_model(model)  # the checkpoint is read here, once
     chosen = parse_settings(settings)
-    est = source.make()
-    try:
-        apply_settings(est, chosen)
-    except ConfigError as exc:
-        raise typer.BadParameter(f"{model}: {exc}", param_hint="--set") from None
+    est = with_settings(source.make(), chosen, model)
     rec = load_recording(recording)
     try:
         # A spinner on stderr: an hour of IMU data through PIP's physics takes minutes.

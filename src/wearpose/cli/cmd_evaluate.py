@@ -23,7 +23,7 @@ from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from wearpose.cli.models import check_pose_weights, parse_settings
+from wearpose.cli.models import check_pose_weights, parse_settings, with_settings
 from wearpose.errors import ConfigError
 from wearpose.weights import weight_path
 
@@ -84,17 +84,8 @@ def _with_settings(ckpts: dict[str, Path], settings: dict[str, str]) -> dict[str
     """Every checkpoint loaded (:func:`~wearpose.estimators.empose.baselines.load_any`) with the
     ``--set`` settings applied (:func:`wearpose.evaluate.latency.apply_settings`)."""
     from wearpose.estimators.empose.baselines import load_any  # start-up: loads torch, +1.6 s to wearpose --help
-    from wearpose.evaluate.latency import apply_settings  # start-up: loads torch, +1.8 s to wearpose --help
 
-    ests = {}
-    for name, path in ckpts.items():
-        est = load_any(path)
-        try:
-            apply_settings(est, settings)
-        except ConfigError as exc:
-            raise typer.BadParameter(f"{name}: {exc}", param_hint="--set") from None
-        ests[name] = est
-    return ests
+    return {name: with_settings(load_any(path), settings, name) for name, path in ckpts.items()}
 
 
 def _store(cache: Path | None, protocol: str, source: str | None, per_family: int | None, split: str) -> Any:

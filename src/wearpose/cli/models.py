@@ -1,16 +1,16 @@
 """Model arguments shared by the commands that run an estimator (``estimate``, ``serve``,
 ``view-recording``, ``evaluate``): clear errors for names that are not pose-estimator weights,
 and for recordings that do not fit the weights (kit, rate), and the ``--set KEY=VALUE`` cost
-settings of ``bench latency`` and ``serve``. Resolving a model, fitting the rate and running it
+settings of ``bench latency``, ``serve``, ``estimate`` and ``evaluate``. Resolving a model, fitting the rate and running it
 is :mod:`wearpose.estimators.run`'s."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
-from wearpose.errors import InputFileError, RecordingInputError
+from wearpose.errors import ConfigError, InputFileError, RecordingInputError
 from wearpose.weights import card, list_weights
 
 if TYPE_CHECKING:
@@ -66,3 +66,16 @@ def parse_settings(values: list[str] | None) -> dict[str, str]:
         bad = [v for v in values or [] if "=" not in v]
         raise typer.BadParameter(f"{bad}: expected KEY=VALUE, e.g. online=stream", param_hint="--set")
     return pairs
+
+
+def with_settings(est: Any, settings: dict[str, str], name: str) -> Any:
+    """``est`` (an estimator) with the ``--set`` settings applied
+    (:func:`wearpose.evaluate.latency.apply_settings`); a setting it does not have is a
+    ``--set`` error naming the model ``name`` and the settings it has."""
+    from wearpose.evaluate.latency import apply_settings  # start-up: loads torch, +1.8 s to wearpose --help
+
+    try:
+        apply_settings(est, settings)
+    except ConfigError as exc:
+        raise typer.BadParameter(f"{name}: {exc}", param_hint="--set") from None
+    return est
