@@ -178,6 +178,31 @@ def test_view_recording_decimates_as_estimate_does(tmp_path: Path, capsys, monke
     assert "decimated by 4 to empose12_cpu's 30 Hz" in capsys.readouterr().out
 
 
+def test_view_recording_applies_settings_as_estimate_does(tmp_path: Path, monkeypatch) -> None:
+    """``view-recording --set``: the estimate shown is made with the settings (EM-POSE's
+    refinement: every frame refined); ``--set`` without ``--model`` is refused."""
+    import wearpose.viewer.live as live
+    from typer.testing import CliRunner
+
+    from wearpose.cli import app
+
+    rec = tmp_path / "em12.npz"
+    save_recording(_simulated("em12", T=20, rate=30.0), rec)
+    seen = {}
+
+    class Viewer:
+        def __init__(self, rec, track, **kw):
+            seen.update(refined=track.extras.get("refined"))
+            raise KeyboardInterrupt  # stop where the viewer would start serving
+
+    monkeypatch.setattr(live, "RecordingViewer", Viewer)
+    res = CliRunner().invoke(app, ["view-recording", str(rec), "--model", "empose12_cpu", "--port", "0",
+                                   "--set", "refine_steps=1"])
+    assert seen["refined"] is not None and bool(seen["refined"].all()), res.output
+    res = CliRunner().invoke(app, ["view-recording", str(rec), "--port", "0", "--set", "refine_steps=1"])
+    assert res.exit_code == 2 and "--model" in flat(res.output)
+
+
 @pytest.mark.parametrize("cmd", [["serve", "--port", "0"], ["view-recording", "x.npz"], ["evaluate"]])
 def test_weights_that_are_not_an_estimator_are_refused(cmd: list[str]) -> None:
     args = [*cmd, "nbeats_cpu"] if cmd == ["evaluate"] else [*cmd, "--model", "nbeats_cpu"]

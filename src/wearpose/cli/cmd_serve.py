@@ -17,8 +17,7 @@ from rich.table import Table
 
 from wearpose.cli.app import _emit, app, console, err_console
 from rich.progress import Progress
-from wearpose.cli.models import check_pose_weights, parse_settings
-from wearpose.cli.models import check_pose_weights, parse_settings, recording_mismatch
+from wearpose.cli.models import check_pose_weights, parse_settings, recording_mismatch, with_settings
 from wearpose.errors import ConfigError
 from wearpose.errors import ShapeError
 import tempfile
@@ -324,6 +323,8 @@ def view_recording(
                                             help="As for `wearpose estimate`: decimate the recording to the weights' "
                                                  "trained rate by an integer factor (default: when the rates differ "
                                                  "by one)."),
+    settings: Optional[List[str]] = typer.Option(None, "--set", help="KEY=VALUE: an inference setting of the "
+                                                 "estimator (repeatable), as `wearpose estimate --set`."),
 ) -> None:
     """Browser viewer of a recording (ground truth and/or an estimate) with a timeline.
 
@@ -335,13 +336,16 @@ def view_recording(
     from wearpose.estimators.run import open_model  # start-up: wearpose.estimators.run loads torch, +2.0 s to wearpose --help
     from wearpose.viewer.live import run_recording_viewer  # start-up: wearpose.viewer.live loads torch, +1.5 s to wearpose --help
 
-    source = None
+    source, est = None, None
     if model is not None:
         check_pose_weights(model)
         source = open_model(model)  # the checkpoint is read here, once
+        est = with_settings(source.make(), parse_settings(settings), model)
+    elif settings:
+        raise typer.BadParameter("settings change an estimator's; give one with --model", param_hint="--set")
     try:
         run_recording_viewer(recording, model=source, host=host, port=port, body=body,
-                             allow_origins=allow_origin or (), resample=resample)
+                             allow_origins=allow_origin or (), resample=resample, estimator=est)
     except ShapeError as exc:  # the estimator's check of the recording: missing sensors, another rate
         if source is None:
             raise

@@ -50,6 +50,7 @@ from wearpose.errors import ShapeError
 from wearpose.geometry import matrix_to_quat
 
 if TYPE_CHECKING:
+    from wearpose.estimators.base import Estimator
     from wearpose.estimators.run import ModelSource
 
 from wearpose.viewer.scene import ESTIMATE_COLOUR, TRUTH_COLOUR
@@ -732,10 +733,11 @@ def run_live_viewer(url: str, *, host: str = "127.0.0.1", port: int = 8080, subj
 
 def open_recording_viewer(path: str | Path, *, model: ModelSource | None = None, host: str = "127.0.0.1",
                           port: int = 8080, body: str | None = None, allow_origins: Sequence[str] = (),
-                          resample: bool | None = None) -> RecordingViewer:
+                          resample: bool | None = None, estimator: Estimator | None = None) -> RecordingViewer:
     """The offline viewer of a recording file (and ``model``'s estimate, made as ``wearpose
-    estimate`` makes it: :func:`wearpose.estimators.run.estimate_recording`), serving until
-    :meth:`RecordingViewer.close`."""
+    estimate`` makes it: :func:`wearpose.estimators.run.estimate_recording`; ``estimator``, one
+    made by ``model.make()`` with its settings changed, is used instead of a fresh one), serving
+    until :meth:`RecordingViewer.close`."""
     from wearpose.recording import load_recording  # start-up: wearpose.recording adds ~50 ms to import wearpose.viewer
 
     rec = load_recording(path)
@@ -745,7 +747,7 @@ def open_recording_viewer(path: str | Path, *, model: ModelSource | None = None,
         # start-up: wearpose.estimators.run adds ~70 ms to import wearpose.viewer
         from wearpose.estimators.run import estimate_recording
 
-        run = estimate_recording(model, rec, path, resample=resample)
+        run = estimate_recording(model, rec, path, resample=resample, estimator=estimator)
         if run.note:
             print(f"warning: {run.note}", flush=True)
         rec, track, bm = run.recording, run.track, run.body
@@ -758,10 +760,10 @@ def open_recording_viewer(path: str | Path, *, model: ModelSource | None = None,
 
 def run_recording_viewer(path: str | Path, *, model: ModelSource | None = None, host: str = "127.0.0.1",
                          port: int = 8080, body: str | None = None, allow_origins: Sequence[str] = (),
-                         resample: bool | None = None) -> None:
+                         resample: bool | None = None, estimator: Estimator | None = None) -> None:
     """Blocking: :func:`open_recording_viewer` (``wearpose view-recording``) until Ctrl-C / SIGTERM."""
     v = open_recording_viewer(path, model=model, host=host, port=port, body=body, allow_origins=allow_origins,
-                              resample=resample)
+                              resample=resample, estimator=estimator)
     print(f"viewer on {v.url}; Ctrl-C to stop", flush=True)
     try:
         with sigterm_as_interrupt():
