@@ -1,20 +1,23 @@
 """Model arguments shared by the commands that run an estimator (``estimate``, ``serve``,
 ``view-recording``, ``evaluate``): clear errors for names that are not pose-estimator weights,
 and for recordings that do not fit the weights (kit, rate), and the ``--set KEY=VALUE`` cost
-settings of ``bench latency``, ``serve``, ``estimate`` and ``evaluate``. Resolving a model, fitting the rate and running it
-is :mod:`wearpose.estimators.run`'s."""
+settings of ``bench latency``, ``serve``, ``estimate``, ``view-recording`` and ``evaluate``.
+Resolving a model, fitting the rate and running it is :mod:`wearpose.estimators.run`'s."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypeVar
 
 import typer
 from wearpose.errors import ConfigError, InputFileError, RecordingInputError
 from wearpose.weights import card, list_weights
 
 if TYPE_CHECKING:
+    from wearpose.estimators.base import Estimator
     from wearpose.estimators.run import ModelSource
+
+E = TypeVar("E", bound="Estimator")
 
 
 def pose_weights() -> list[str]:
@@ -68,7 +71,7 @@ def parse_settings(values: list[str] | None) -> dict[str, str]:
     return pairs
 
 
-def with_settings(est: Any, settings: dict[str, str], name: str) -> Any:
+def with_settings(est: E, settings: dict[str, str], name: str) -> E:
     """``est`` (an estimator) with the ``--set`` settings applied
     (:func:`wearpose.evaluate.latency.apply_settings`); a setting it does not have is a
     ``--set`` error naming the model ``name`` and the settings it has."""
