@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 
 from tests.cli.test_errors import _simulated, flat, run_main
 from wearpose.cli import app
+from wearpose.export import read_export_metadata
 from wearpose.motion import load_motion
 from wearpose.recording import Recording, save_recording
 
@@ -55,6 +56,8 @@ def test_estimate_applies_inference_settings(em12_30: Path, tmp_path: Path) -> N
                                                   "refine_centre_frames": "1", "refine_centre_every": "1"}
     a, b = load_motion(str(plain)), load_motion(str(refined))
     assert a.pose.shape == b.pose.shape and float((a.pose - b.pose).abs().amax()) > 1e-3
+    assert read_export_metadata(plain)["estimator"] == {"model": "empose12_cpu", "settings": {}}
+    assert read_export_metadata(refined)["estimator"]["settings"]["refine_centre_frames"] == "1"  # the file says how
 
 
 def test_estimate_refuses_an_unknown_setting_naming_the_ones_it_has(em12_30: Path, tmp_path: Path) -> None:

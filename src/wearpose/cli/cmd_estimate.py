@@ -87,7 +87,9 @@ def estimate(
     if run.note:
         err_console.print(f"[yellow]warning:[/] {escape(run.note)}", soft_wrap=True)
     track = run.track  # upright, feet on the floor (as a user expects a file)
-    path = export_motion(track.to_motion(), out, run.body)
+    motion = track.to_motion()
+    motion.meta["estimator"] = {"model": model, "settings": chosen}  # the file says what made it
+    path = export_motion(motion, out, run.body)
     valid = float(track.valid.float().mean()) * 100 if track.num_frames else 0.0
     res: dict[str, Any] = {"recording": str(recording), "model": model, "frames": track.num_frames,
                            "fps": track.fps, "valid_pct": round(valid, 2),

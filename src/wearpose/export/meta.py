@@ -40,16 +40,24 @@ def export_metadata(seq: MotionSequence, suffix: str) -> dict[str, Any]:
 
     ``placement`` and ``floor`` come from ``seq.meta`` (an estimate placed by
     :func:`wearpose.estimators.run.place_in_world` carries them); a motion without them is
-    exported as it was read (``"as in the source motion"``) or as estimated.
+    exported as it was read (``"as in the source motion"``) or as estimated. An estimate whose
+    ``seq.meta["estimator"]`` says what made it (``{"model": str, "settings": {str: str}}``, as
+    ``wearpose estimate`` sets it) carries that too, so a file says which weights and ``--set``
+    settings made it.
     """
     C, unit = _FORMAT_WORLD[suffix]
     estimated = bool(seq.meta.get("estimated", False))
     default = "as estimated" if estimated else "as in the source motion"
-    return {"wearpose_export": METADATA_VERSION, "generator": f"wearpose {__version__}",
-            "frame": world_frame_description(C, unit),
-            "placement": str(seq.meta.get("placement", default)),
-            "floor": str(seq.meta.get("floor", default)),
-            "estimated": estimated, "fps": float(seq.fps), "frames": int(seq.num_frames)}
+    out = {"wearpose_export": METADATA_VERSION, "generator": f"wearpose {__version__}",
+           "frame": world_frame_description(C, unit),
+           "placement": str(seq.meta.get("placement", default)),
+           "floor": str(seq.meta.get("floor", default)),
+           "estimated": estimated, "fps": float(seq.fps), "frames": int(seq.num_frames)}
+    made_by = seq.meta.get("estimator")
+    if isinstance(made_by, dict):
+        out["estimator"] = {"model": str(made_by.get("model", "?")),
+                            "settings": {str(k): str(v) for k, v in dict(made_by.get("settings", {})).items()}}
+    return out
 
 
 def sidecar_path(path: str | Path) -> Path:
