@@ -59,7 +59,8 @@ def serve(
     threads: int = typer.Option(1, min=1, help="torch CPU threads per step."),
     settings: Optional[List[str]] = typer.Option(None, "--set", help="KEY=VALUE: a cost setting of every subject's "
                                                  "estimator (repeatable), as in wearpose bench latency, e.g. "
-                                                 "--set online=stream (BiRAE), --set mim=true (MI-Poser)."),
+                                                 "--set online=stream (BiRAE), --set mim=true (MI-Poser), "
+                                                 "--set refine_steps=3 (EM-POSE's refinement on the sensors)."),
     warmup: int = typer.Option(30, min=0, help="Synthetic steps run on each new subject's estimator before it is ready "
                                         "(pays tracing / first-call costs before real frames; 0: none)."),
     token: Optional[str] = typer.Option(None, envvar="WEARPOSE_TOKEN",
@@ -129,6 +130,10 @@ def serve(
     Example: wearpose serve --model empose12_cpu --port 8765
 
     Example: wearpose serve --model birae6_cpu --set online=stream
+
+    Example (EM-POSE, motion unlike the corpus's; a 30 Hz model keeps up, docs/streaming.md):
+    wearpose serve --model empose12_cpu --set refine_steps=3 --set refine_centre=recording
+    --set refine_centre_frames=1 --set refine_centre_every=1
 
     Example: wearpose serve --model pip_cpu --input mvn --mvn-segments pelvis,head,left_forearm,right_forearm,left_lower_leg,right_lower_leg --output vmc
     """
