@@ -15,7 +15,6 @@ source frame (the source rides on the lower back); no translation is estimated (
 
 from __future__ import annotations
 
-import bisect
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -262,9 +261,9 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
             lrot, lb, lrec = last["local_rot"].detach(), last["betas"].detach(), last["rec"].detach()
             if fit is not None:  # every frame's learned pose, scored with the fitted shape
                 lb = fit.betas.to(dev).expand(b - a, -1)
-            if turns:  # the prior's centre: the learned pose turned where a turn is in force
-                lrot = self._turned_span(lrot, a, turns)
-            if fit is not None or turns:
+            if turns is not None:  # the prior's centre: the learned pose turned where a turn is in force
+                lrot = self._turned_span(lrot, a, *turns)
+            if fit is not None or turns is not None:
                 lrec = self._rec(lrot, lb, p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
             ref = self._refine(lrot, lb, lrec, p[a:b].to(dev), R[a:b].to(dev), offR.to(dev), offt.to(dev))
             rots.append(ref.local_rot)
@@ -286,19 +285,19 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
 
     def _recording_turn(self, spans: list[tuple[int, int]], lasts: list[dict[str, torch.Tensor]], ok: torch.Tensor,
                         p: torch.Tensor, R: torch.Tensor, offR: torch.Tensor, offt: torch.Tensor,
-                        fit: ShapeFit | None) -> list[tuple[int, torch.Tensor]]:
+                        fit: ShapeFit | None) -> tuple[torch.Tensor, torch.Tensor] | None:
         """The prior centre's turns when the refinement is on with ``refine_centre="recording"``
         (:func:`~wearpose.estimators.empose.refine.recording_turn`; ``ok`` ``(T,)`` the frames with
         every sensor valid, ``spans`` the chunks, ``lasts`` their learned outputs, ``fit`` the
-        shape fit if on), as ``[(first frame, turn (NUM_PRED, 3, 3)), ...]`` in frame order, each
-        used until the next one starts: the whole recording's turn from frame 0; with
-        ``refine_centre_frames = n > 0`` the first n valid frames' turn from the n-th on, and with
-        ``refine_centre_every = k > 0`` a new turn at every k-th valid frame after it, over every
-        frame measured so far: what a stream (:meth:`step`) has. Empty when off, when no frame
-        has every sensor, or there are fewer than n."""
+        shape fit if on), as ``(starts (M,) long, turns (M, NUM_PRED, 3, 3))`` in frame order, turn
+        i used from frame ``starts[i]`` until the next one starts: the whole recording's turn from
+        frame 0; with ``refine_centre_frames = n > 0`` the first n valid frames' turn from the n-th
+        on, and with ``refine_centre_every = k > 0`` a new turn at every k-th valid frame after it,
+        over every frame measured so far: what a stream (:meth:`step`) has. None when off, when no
+        frame has every sensor, or there are fewer than n."""
         cfg = self.config
         if cfg.refine_steps == 0 or cfg.refine_centre != "recording":
-            return []
+            return None
         n, k = cfg.refine_centre_frames, cfg.refine_centre_every
         if n == 0 and k > 0:
             raise ConfigError(f"EM-POSE refine_centre_every={k} adds frames to the turn of the first "
@@ -306,10 +305,10 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
                               "--set refine_centre_frames=1 (with every=1: the running turn), or set "
                               "refine_centre_every=0")
         if n and int(ok.sum()) < n:
-            return []  # a stream this short never gets the turn either
+            return None  # a stream this short never gets the turn either
         pos = ok.long().cumsum(0) - 1  # each frame's place among the valid ones
         measured = ok & measures_turn(pos, n, k) if n else ok
-        dev, carry, out = self.device, None, []
+        dev, carry, starts, turns = self.device, None, [], []
         for (a, b), last in zip(spans, lasts):
             keep = measured[a:b]
             m = int(keep.sum())
@@ -328,28 +327,28 @@ class EmposeEstimator(NetworkCheckpointing, Estimator):
                 cum = cum + carry
             carry = cum[-1]
             frames = a + keep.nonzero().squeeze(1)
-            new = (pos[frames] >= n - 1).to(dev)  # from the n-th valid frame on, each measured frame renews the turn
-            out += zip(frames[new.cpu()].tolist(), recording_turn([cum[new]]).unbind(0))  # one turn per renewal
+            new = pos[frames] >= n - 1  # from the n-th valid frame on, each measured frame renews the turn
+            starts.append(frames[new])
+            turns.append(recording_turn([cum[new.to(dev)]]))  # one turn per renewal
+        if carry is None:
+            return None
         if n == 0:
-            return [(0, recording_turn([carry]))] if carry is not None else []
-        return out
+            return torch.zeros(1, dtype=torch.long), recording_turn([carry])[None]
+        return torch.cat(starts), torch.cat(turns)
 
     @staticmethod
-    def _turned_span(lrot: torch.Tensor, a: int, turns: list[tuple[int, torch.Tensor]]) -> torch.Tensor:
+    def _turned_span(lrot: torch.Tensor, a: int, starts: torch.Tensor, turns: torch.Tensor) -> torch.Tensor:
         """``lrot`` ``(N, 24, 3, 3)``, frames ``a .. a + N - 1`` of the recording, with each frame
-        turned by the turn in force there (:meth:`_recording_turn`'s list; frames before the
-        first keep the learned pose); ``lrot`` itself when no turn reaches these frames."""
-        starts = [t for t, _ in turns]
-        first = max(bisect.bisect_right(starts, a) - 1, 0)
-        out = lrot
-        for i in range(first, len(turns)):
-            lo = max(turns[i][0] - a, 0)
-            hi = min(turns[i + 1][0] - a, len(lrot)) if i + 1 < len(turns) else len(lrot)
-            if lo >= len(lrot):
-                break
-            if lo < hi:
-                out = out.clone() if out is lrot else out
-                out[lo:hi] = turned(out[lo:hi], turns[i][1])
+        turned by the turn in force there (:meth:`_recording_turn`'s ``starts`` ``(M,)`` and
+        ``turns`` ``(M, NUM_PRED, 3, 3)``; frames before the first start keep the learned pose);
+        ``lrot`` itself when no turn reaches these frames."""
+        i = torch.searchsorted(starts, torch.arange(a, a + lrot.shape[0]), right=True) - 1  # -1: before the first
+        on = i >= 0
+        if not bool(on.any()):
+            return lrot
+        out = lrot.clone()
+        sel = on.to(lrot.device)
+        out[sel] = turned(lrot[sel], turns[i[on].to(turns.device)])
         return out
 
     def _rec(self, local_rot: torch.Tensor, betas: torch.Tensor, p: torch.Tensor, R: torch.Tensor,

@@ -362,7 +362,7 @@ def turn_terms(kernel: Any, local_rot: torch.Tensor, betas: torch.Tensor, meas_p
     return torch.where(ok, terms, torch.zeros_like(terms))
 
 
-def measures_turn(place: Any, frames: int, every: int) -> Any:
+def measures_turn(place: int | torch.Tensor, frames: int, every: int) -> bool | torch.Tensor:
     """Whether the valid frame at ``place`` (its 0-based place among the frames with every sensor:
     an int, or a long tensor of them) adds its solve to the turn, with
     ``EmposeConfig.refine_centre_frames = frames > 0`` and ``refine_centre_every = every``: the
@@ -392,7 +392,8 @@ def recording_turn(sums: Sequence[torch.Tensor]) -> torch.Tensor:
 
 def turned(local_rot: torch.Tensor, turn: torch.Tensor) -> torch.Tensor:
     """``local_rot`` ``(N, 24, 3, 3)`` with every estimated joint's rotation right-multiplied by
-    its turn ``(NUM_PRED, 3, 3)`` (:func:`recording_turn`); the other joints unchanged."""
+    its turn (:func:`recording_turn`): ``(NUM_PRED, 3, 3)`` for every frame, or
+    ``(N, NUM_PRED, 3, 3)`` one per frame; the other joints unchanged."""
     out = local_rot.clone()
     out[:, list(PRED_JOINTS)] = local_rot[:, list(PRED_JOINTS)] @ turn.to(local_rot)
     return out
